@@ -1,0 +1,6 @@
+"""File formats of the knit toolchain: yarn specs, yarn curves (HDF5 and BCC), asset packs; readers, writers,
+validators. Imports nothing else of ours (the dependency rule of DESIGN.md §2)."""
+
+from .errors import FormatError
+
+__all__ = ["FormatError"]
