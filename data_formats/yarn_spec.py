@@ -160,7 +160,10 @@ def _check_number(value, field, source):
     where = _where(source, field.section, field.key)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise FormatError(f"{where} = {value!r} is not a number")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:
+        v = math.inf
     if not math.isfinite(v):
         raise FormatError(f"{where} = {value!r} is not finite (allowed [{field.lo:g}, {field.hi:g}])")
     if not field.lo <= v <= field.hi:
@@ -215,9 +218,13 @@ def spec_from_dict(data: dict, source: str = "<yarn spec>") -> YarnSpec:
     if fmt != FORMAT_NAME:
         raise FormatError(f"{source}: format = {fmt!r}, expected {FORMAT_NAME!r}")
     version = str(data.get("version", FORMAT_VERSION))
-    if version.split(".")[0] != FORMAT_VERSION.split(".")[0]:
+    major, _, minor = version.partition(".")
+    if major != FORMAT_VERSION.split(".")[0] or not minor.isdigit():
         raise FormatError(f"{source}: version = {version!r} has an unknown major version (this reader knows "
                           f"{FORMAT_VERSION})")
+    # A newer minor version only adds optional keys: ignore the ones this reader does not know. Otherwise an
+    # unknown key is a typo and is refused.
+    newer_minor = int(minor) > int(FORMAT_VERSION.split(".")[1])
     name = data.get("name")
     if not isinstance(name, str) or not name.strip():
         raise FormatError(f"{source}: name = {name!r} must be a non-empty string")
@@ -226,7 +233,7 @@ def spec_from_dict(data: dict, source: str = "<yarn spec>") -> YarnSpec:
         raise FormatError(f"{source}: units = {units!r} is not one of {', '.join(UNITS)}")
     known_top = {"format", "version", "name", "units", "description", "provenance", *SECTIONS}
     for key in data:
-        if key not in known_top:
+        if key not in known_top and not newer_minor:
             raise FormatError(f"{source}: unknown top-level key {key!r} (known: {', '.join(sorted(known_top))})")
     provenance = data.get("provenance", {})
     if not isinstance(provenance, dict) or not all(isinstance(v, str) for v in provenance.values()):
@@ -239,7 +246,7 @@ def spec_from_dict(data: dict, source: str = "<yarn spec>") -> YarnSpec:
         fields = [f for f in FIELDS if f.section == section]
         known = {f.key for f in fields}
         for key in raw:
-            if key not in known:
+            if key not in known and not newer_minor:
                 raise FormatError(f"{source}: [{section}] unknown key {key!r} (known: {', '.join(sorted(known))})")
         values = {}
         for f in fields:

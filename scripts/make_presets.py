@@ -7,7 +7,7 @@ Conversions (each stated in the preset's provenance):
 * ``ply_distance = yarn_radius / 2`` — seed 002 §3.1 places ply centres at ½ R_ply from the yarn axis.
 * ``ply_semi_axes = [e_long / 2, e_short / 2]`` — the tables' ellipse values read as full axis lengths, consistent
   with the ½ on R_ply; with this reading the fiber packing fraction of every preset lies between 0.05 and 0.6, as
-  in real yarns (checked by tests/test_presets.py), while semi-axes = e would overlap the plies.
+  in real yarns (checked by tests/test_yarn_spec.py), while semi-axes = e would overlap the plies.
 * Gaussian draws are mu + 0.5·sigma·N(0, 1) in the source generator, so ``*_std = 0.5 · sigma``.
 * ``rho_max = 1`` (R_max = 1 in the source). Fiber radius is not in the tables: typical diameters per fiber family.
 * Optics by fiber family from Khungurn et al. 2015: cotton → cotton, polyester → polyester, silk → silk, rayon

@@ -1,0 +1,43 @@
+# knit — developer entry points. `make setup && make demo` on a fresh machine, `make test` for the tests.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+OUT    ?= out/demo
+
+.PHONY: setup demo test test-slow bench presets clean
+
+setup: $(BIN)/knitbake
+
+$(BIN)/knitbake: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@touch $@
+
+# What exists so far: list the presets, generate two yarns' fibers with preview images, inspect and validate them.
+demo: setup
+	@mkdir -p $(OUT)
+	$(BIN)/knitbake yarn list
+	$(BIN)/knitbake fibers cotton1 --periods 2 -o $(OUT)/cotton1_fibers.bcc --preview $(OUT)/cotton1_preview.png
+	$(BIN)/knitbake fibers rayon1 --periods 2 -o $(OUT)/rayon1_fibers.h5 --preview $(OUT)/rayon1_preview.png
+	$(BIN)/knitbake inspect $(OUT)/rayon1_fibers.h5
+	$(BIN)/knitbake validate $(OUT)/cotton1_fibers.bcc
+	@echo "demo outputs in $(OUT)/ (open the *_preview.png images)"
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+test-slow: setup
+	$(BIN)/python -m pytest -q -m slow
+
+bench: setup
+	$(BIN)/python benchmarks/bench_fibers.py
+	$(BIN)/python benchmarks/bench_ray_scene.py --preset cotton1
+	$(BIN)/python benchmarks/bench_ray_scene.py --preset rayon1
+
+# Regenerate data_formats/presets/ from ../shared/reference (the measured tables).
+presets: setup
+	$(BIN)/python scripts/make_presets.py
+
+clean:
+	rm -rf out .pytest_cache build *.egg-info

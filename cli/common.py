@@ -1,0 +1,95 @@
+"""Shared CLI plumbing: one-line errors instead of tracebacks, JSON output, and the file-kind registry.
+
+A user mistake (bad file, bad value, missing file) prints ``<prog>: error: <one line>`` on stderr and exits 1;
+click's own usage errors exit 2. Set ``KNIT_DEBUG=1`` to see the traceback instead.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import click
+import numpy as np
+
+from data_formats import FormatError, asset_pack, bcc, yarn_curves, yarn_spec
+from data_formats.yarn_curves import HDF5_MAGIC
+
+# Recognised by content, most specific first: (kind, module with sniff/describe/validate).
+FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("bcc", bcc), ("yarn-spec", yarn_spec))
+USER_ERRORS = (FormatError, ValueError, OSError)
+
+
+class FriendlyGroup(click.Group):
+    """A click group whose commands report user errors in one line on stderr."""
+
+    def invoke(self, ctx):
+        prog = ctx.find_root().info_name
+        try:
+            return super().invoke(ctx)
+        except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+            sys.stdout = open(os.devnull, "w")
+            sys.exit(0)
+        except USER_ERRORS as exc:
+            if os.environ.get("KNIT_DEBUG"):
+                raise
+            message = " ".join(str(exc).split()) or exc.__class__.__name__
+            click.echo(f"{prog}: error: {message}", err=True)
+            sys.exit(1)
+        except KeyboardInterrupt:
+            click.echo(f"{prog}: interrupted", err=True)
+            sys.exit(130)
+
+
+def file_kind(path):
+    """(kind, module) of a file the toolchain reads, recognised by its content; FormatError if none."""
+    if not os.path.isfile(path):
+        raise FormatError(f"{path}: no such file")
+    for kind, module in FILE_KINDS:
+        if module.sniff(path):
+            return kind, module
+    with open(path, "rb") as fh:
+        if fh.read(8) == HDF5_MAGIC:
+            raise FormatError(f"{path}: an HDF5 file that cannot be opened or is none of ours (truncated or corrupt?)")
+    raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5, BCC, yarn spec TOML)")
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def echo_json(obj):
+    click.echo(json.dumps(_jsonable(obj), indent=2, allow_nan=False))
+
+
+def echo_tree(obj, indent=0):
+    """Human-readable nested dict/list printing (one 'key: value' per line)."""
+    pad = "  " * indent
+    for key, value in obj.items():
+        if isinstance(value, dict) and value:
+            click.echo(f"{pad}{key}:")
+            echo_tree(value, indent + 1)
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            click.echo(f"{pad}{key}:")
+            for i, item in enumerate(value):
+                click.echo(f"{pad}  [{i}]")
+                echo_tree(item, indent + 2)
+        else:
+            click.echo(f"{pad}{key}: {_fmt(value)}")
+
+
+def _fmt(value):
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
+    return str(value)

@@ -1,0 +1,195 @@
+"""``knitbake``: the offline baker's command line (yarn presets, fibers, inspect, validate).
+
+Thin: parse, call ``data_formats``/``knitbake``, report. Errors are one line on stderr (see ``cli.common``).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from cli.common import FriendlyGroup, echo_json, echo_tree, file_kind
+from data_formats import FormatError
+from data_formats.yarn_spec import (FIELDS, SECTIONS, describe_spec, dumps_spec, load_preset, preset_names,
+                                    resolve_yarn)
+
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 110}
+
+
+@click.group(name="knitbake", cls=FriendlyGroup, context_settings=CONTEXT)
+@click.version_option(package_name="knit", prog_name="knitbake")
+def main():
+    """Offline baker of knit: yarn types in, asset packs out.
+
+    \b
+    Examples:
+      knitbake yarn list
+      knitbake yarn show cotton1
+      knitbake fibers cotton1 -o cotton1_fibers.bcc --preview cotton1.png
+      knitbake inspect cotton1_fibers.bcc
+      knitbake validate my_yarn.toml
+    """
+
+
+@main.group(cls=FriendlyGroup)
+def yarn():
+    """Yarn types: the built-in presets and yarn-spec TOML files.
+
+    Example: knitbake yarn show cotton1
+    """
+
+
+@yarn.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+def yarn_list(as_json):
+    """List the built-in presets (measured yarns of Zhao et al. 2016).
+
+    Example: knitbake yarn list --json
+    """
+    rows = [describe_spec(load_preset(name)) for name in preset_names()]
+    if as_json:
+        echo_json([{k: r[k] for k in ("name", "description", "plies", "fibers", "radius", "period", "units")}
+                   for r in rows])
+        return
+    click.echo(f"{'name':<12}{'plies':>6}{'fibers':>8}{'radius':>10}{'period':>10}  units  description")
+    for r in rows:
+        click.echo(f"{r['name']:<12}{r['plies']:>6}{r['fibers']:>8}{r['radius']:>10.4f}{r['period']:>10.4f}  "
+                   f"{r['units']:<5}  {r['description']}")
+
+
+@yarn.command("show")
+@click.argument("yarn_name", metavar="NAME|FILE")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@click.option("--toml", "as_toml", is_flag=True, help="Print the spec as TOML (a starting point for your own yarn).")
+def yarn_show(yarn_name, as_json, as_toml):
+    """Show every parameter of a preset or yarn-spec file, with units and provenance.
+
+    Example: knitbake yarn show cotton1 --toml > my_yarn.toml
+    """
+    spec = resolve_yarn(yarn_name)
+    if as_toml:
+        click.echo(dumps_spec(spec), nl=False)
+        return
+    summary = describe_spec(spec)
+    if as_json:
+        echo_json(summary)
+        return
+    click.echo(f"{spec.name}: {spec.description}")
+    click.echo(f"units: {spec.units}   outer radius: {spec.radius:.5g}   period (ply pitch): "
+               f"{spec.geometry.ply_pitch:.5g}   flyaways: {'yes' if spec.has_flyaways else 'no'}")
+    for section in SECTIONS:
+        click.echo(f"[{section}]")
+        obj = getattr(spec, section)
+        for f in FIELDS:
+            if f.section == section:
+                unit = spec.units if f.unit == "length" else ("1/" + spec.units if f.unit == "1/length" else f.unit)
+                value = getattr(obj, f.key)
+                text = ", ".join(f"{v:.6g}" for v in value) if isinstance(value, tuple) else f"{value:.6g}" \
+                    if isinstance(value, float) else str(value)
+                click.echo(f"  {f.key:<24}{text:<28}{unit:<8}{f.doc}")
+    click.echo("[provenance]")
+    for key, text in spec.provenance.items():
+        click.echo(f"  {key}: {text}")
+
+
+@main.command()
+@click.argument("path", type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+def inspect(path, as_json):
+    """Describe any file the toolchain reads, recognised by content: asset pack, yarn spec, yarn curves (HDF5 or
+    BCC) — kind, counts, bounds, provenance, and for packs every table's error estimate.
+
+    Example: knitbake inspect cotton1.h5 --json
+    """
+    kind, module = file_kind(path)
+    info = module.describe(path)
+    if as_json:
+        echo_json(info)
+        return
+    tables = info.pop("tables", None) if kind == "asset-pack" else None
+    info.pop("spec", None)
+    echo_tree(info)
+    if tables is not None:
+        click.echo(f"tables ({len(tables)}):")
+        for name, t in tables.items():
+            err = t.get("error_estimate")
+            err_text = "—" if err is None else f"{err:.3g} ({t.get('error_statistic') or t.get('error_kind')})"
+            click.echo(f"  {name:<36}{str(tuple(t['shape'])):<22}error {err_text}")
+
+
+@main.command()
+@click.argument("path", type=click.Path(dir_okay=False))
+def validate(path):
+    """Check a file's schema and numbers (no NaN/Inf, shapes, versions); exit 1 with the reasons.
+
+    Example: knitbake validate cotton1.h5
+    """
+    if not Path(path).is_file():
+        raise FormatError(f"{path}: no such file")
+    try:
+        kind, module = file_kind(path)
+        problems = module.validate(path)
+    except FormatError as exc:
+        kind, problems = "file", [str(exc)]
+    if problems:
+        click.echo(f"{path}: INVALID {kind} ({len(problems)} problem{'s' * (len(problems) != 1)})", err=True)
+        for p in problems:
+            click.echo(f"  - {p}", err=True)
+        sys.exit(1)
+    click.echo(f"{path}: valid {kind}")
+
+
+@main.command()
+@click.argument("yarn_name", metavar="YARN")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+              help="Fiber curves: .h5 (our yarn-curve HDF5) or .bcc (polylines).")
+@click.option("--periods", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
+              help="Length of yarn to generate, in ply-twist periods.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed → identical fibers).")
+@click.option("--segments-per-period", type=click.IntRange(min=4), default=None,
+              help="Polyline segments per period (default: 24 per turn).")
+@click.option("--no-flyaways", is_flag=True, help="Regular fibers only.")
+@click.option("--preview", type=click.Path(dir_okay=False), default=None,
+              help="Also write a PNG: cross-section and side view.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, preview, as_json):
+    """Generate the procedural fibers of a straight yarn and write them as curves.
+
+    Example: knitbake fibers cotton1 --periods 2 -o cotton1.bcc --preview cotton1.png
+    """
+    from data_formats.bcc import write_bcc
+    from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
+    from knitbake.fiber_set import KIND_NAMES
+    from knitbake.procedural_yarn import generate_fibers
+
+    suffix = Path(output).suffix.lower()
+    if suffix not in (".h5", ".hdf5", ".bcc"):
+        raise FormatError(f"{output}: output must end in .h5, .hdf5 or .bcc")
+    spec = resolve_yarn(yarn_name)
+    t0 = time.perf_counter()
+    fib = generate_fibers(spec, length=periods * spec.geometry.ply_pitch, seed=seed,
+                          segments_per_period=segments_per_period, flyaways=not no_flyaways)
+    t_gen = time.perf_counter() - t0
+    curves = make_yarn_curves(fib.points, fib.offsets, yarn_type=fib.kind.astype("int32"),
+                              yarn_types=[f"{spec.name}:{KIND_NAMES[k]}" for k in sorted(KIND_NAMES)],
+                              curve_type="PL", units=spec.units, where=output)
+    (write_bcc if suffix == ".bcc" else write_yarn_curves)(output, curves)
+    summary = {"yarn": spec.name, "output": output, "fibers": fib.n_fibers, "segments": fib.n_segments,
+               "regular": fib.info["regular"], "loops": fib.info["loops"], "hairs": fib.info["hairs"],
+               "length": fib.z_end - fib.z_start, "units": spec.units, "seed": seed, "generate_s": t_gen,
+               "fiber_pitch_change_mean": fib.info["fiber_pitch_change_mean"]}
+    if preview:
+        from knitbake.preview import preview as write_preview
+
+        summary["preview"] = {"path": preview, **write_preview(fib, spec.radius, preview)}
+    if as_json:
+        echo_json(summary)
+        return
+    click.echo(f"{spec.name}: {fib.n_fibers} fibers ({summary['regular']} regular, {summary['loops']} loops, "
+               f"{summary['hairs']} hairs), {fib.n_segments} segments over {summary['length']:.4g} {spec.units} "
+               f"in {t_gen * 1e3:.0f} ms → {output}")
+    if preview:
+        click.echo(f"preview → {preview}")
