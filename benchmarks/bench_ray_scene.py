@@ -7,7 +7,6 @@ outside it. Lengths in the yarn spec's unit (cm).
 
     .venv/bin/python benchmarks/bench_ray_scene.py                     # cotton1
     .venv/bin/python benchmarks/bench_ray_scene.py --preset rayon1
-    .venv/bin/python benchmarks/bench_ray_scene.py --synthetic         # helix bundle, no generator needed
 """
 
 import argparse
@@ -15,23 +14,8 @@ import time
 
 import numpy as np
 
-from knitbake.fiber_set import FiberSet
 from knitbake.ray_scene import RayScene
 from knitbake.tessellate import tessellate_fibers
-
-
-def synthetic_fibers(n_fibers=225, n_segments=64, yarn_radius=0.03, period=0.45, fiber_radius=8e-4, seed=0):
-    """Helical fibers of one twist period, uniformly spread over the yarn cross-section (cotton1-like sizes)."""
-    rng = np.random.default_rng(seed)
-    rho = yarn_radius * np.sqrt(rng.random(n_fibers))
-    phase = 2 * np.pi * rng.random(n_fibers)
-    s = np.linspace(0.0, 1.0, n_segments + 1)
-    angle = phase[:, None] + 2 * np.pi * s
-    points = np.stack([rho[:, None] * np.cos(angle), rho[:, None] * np.sin(angle),
-                       np.broadcast_to(period * s, angle.shape)], axis=-1).reshape(-1, 3)
-    offsets = np.arange(n_fibers + 1) * (n_segments + 1)
-    return FiberSet(points, offsets, np.full(n_fibers, fiber_radius), np.zeros(n_fibers, np.int8),
-                    np.zeros(n_fibers, np.int16), 0.0, period)
 
 
 def preset_fibers(name, seed):
@@ -63,15 +47,13 @@ def timed(f, *args, **kwargs):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--preset", default="cotton1", help="yarn preset (default cotton1; e.g. rayon1)")
-    parser.add_argument("--synthetic", action="store_true", help="225 helical fibers x 64 segments instead")
     parser.add_argument("--sides", type=int, default=6)
     parser.add_argument("--rays", type=int, default=1_000_000)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
 
-    fibers, t_gen = timed(synthetic_fibers if args.synthetic else preset_fibers,
-                          **({} if args.synthetic else {"name": args.preset, "seed": args.seed}))
-    print(f"yarn             {'synthetic helix bundle' if args.synthetic else args.preset}  "
+    fibers, t_gen = timed(preset_fibers, args.preset, args.seed)
+    print(f"yarn             {args.preset}  "
           f"({fibers.n_fibers} fibers, {fibers.n_segments} segments, generated in {t_gen:.2f} s)")
     tessellate_fibers(fibers, sides=args.sides)  # warm-up: Numba compile or cache load
     mesh, t_tess = timed(tessellate_fibers, fibers, sides=args.sides)
