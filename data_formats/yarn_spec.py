@@ -202,6 +202,12 @@ def _cross_checks(spec: YarnSpec, source: str):
     if g.plies > 1 and g.ply_distance <= 0.0:
         raise FormatError(f"{_where(source, 'geometry', 'ply_distance')} = {g.ply_distance} must be > 0 when "
                           f"plies = {g.plies} > 1")
+    o = spec.optics
+    albedo = [r + t + d for r, t, d in zip(o.r_color, o.tt_color, o.d_color)]
+    if max(albedo) > 1.0 + 1e-9:
+        raise FormatError(f"{source}: [optics] r_color + tt_color + d_color = {[round(a, 6) for a in albedo]} exceeds 1 "
+                          f"(the lobe colours are albedos of an energy-conserving fiber: their sum must be ≤ 1 per "
+                          f"channel)")
     if fl.hair_density > 0 and fl.hair_start_radius_mean <= 0:
         raise FormatError(f"{_where(source, 'flyaways', 'hair_start_radius_mean')} = {fl.hair_start_radius_mean} "
                           f"must be > 0 when hair_density > 0")

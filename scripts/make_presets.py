@@ -11,8 +11,10 @@ Conversions (each stated in the preset's provenance):
 * Gaussian draws are mu + 0.5·sigma·N(0, 1) in the source generator, so ``*_std = 0.5 · sigma``.
 * ``rho_max = 1`` (R_max = 1 in the source). Fiber radius is not in the tables: typical diameters per fiber family.
 * Optics by fiber family from Khungurn et al. 2015: cotton → cotton, polyester → polyester, silk → silk, rayon
-  (regenerated-cellulose filament, smooth and lustrous) → silk. The D lobe and the lobe shifts are not in the
-  source: D colour = 0 and shifts = 0 until the fiber-scattering issue fits them.
+  (regenerated-cellulose filament, smooth and lustrous) → silk. Our lobes are energy-normalised (the fiber albedo
+  is A_R + A_TT + A_D ≤ 1 per channel; knitrun/fiber_bcsdf.py), Khungurn's were not: R and TT colours are scaled
+  by one factor per material so that the brightest channel of R + TT is ``FIBER_ALBEDO`` — hue and the R:TT ratio
+  are kept. The D lobe and the lobe shifts are not in the source: D colour = 0 and shifts = 0.
 """
 
 import csv
@@ -28,6 +30,7 @@ FIBER_RADIUS_CM = {"cotton": 0.0008, "polyester": 0.0009, "rayon": 0.0007, "silk
 OPTICS_FAMILY = {"cotton": "cotton", "polyester": "polyester", "rayon": "silk", "silk": "silk"}
 HAIR_CURVATURE_ALPHA = 2.0  # seed 000 eq. 13; the paper shows α > 1 for realistic side views
 HAIR_DIRECTION_NOISE = 0.15  # rad per unit t; seed 000 §4.4 adds noise without a value
+FIBER_ALBEDO = 0.95  # brightest channel of A_R + A_TT after rescaling Khungurn's colours
 
 
 def read_csv(path):
@@ -44,6 +47,9 @@ def preset(name, y, f, optics_rows):
     fam = family(name)
     o = optics_rows[OPTICS_FAMILY[fam]]
     num = lambda d, k: float(d[k])  # noqa: E731
+    r_col = [num(o, "R_r"), num(o, "R_g"), num(o, "R_b")]
+    tt_col = [num(o, "TT_r"), num(o, "TT_g"), num(o, "TT_b")]
+    scale = FIBER_ALBEDO / max(r + t for r, t in zip(r_col, tt_col))
     data = {
         "name": name,
         "units": "cm",
@@ -57,7 +63,8 @@ def preset(name, y, f, optics_rows):
                         f"hair_curvature_alpha = {HAIR_CURVATURE_ALPHA} and hair_direction_noise = "
                         f"{HAIR_DIRECTION_NOISE} rad are our choices (seed 000 eq. 13 gives no values)",
             "optics": f"Khungurn et al. 2015 '{OPTICS_FAMILY[fam]}' via shared/reference/fiber_bcsdf_khungurn2015.csv; "
-                      "d_color and lobe shifts not in the source (0)",
+                      f"R and TT colours scaled by {scale:.4f} so the brightest channel of R+TT is {FIBER_ALBEDO} "
+                      "(our lobes are energy-normalised); d_color and lobe shifts not in the source (0)",
             "fiber_radius": f"typical {fam} fiber diameter {2e4 * FIBER_RADIUS_CM[fam]:.0f} um (textile handbooks); "
                             "not measured by Zhao et al.",
         },
@@ -89,8 +96,8 @@ def preset(name, y, f, optics_rows):
             "loop_radius_mean": num(f, "r1_mu"), "loop_radius_std": 0.5 * num(f, "r1_sigma"),
         },
         "optics": {
-            "r_color": [num(o, "R_r"), num(o, "R_g"), num(o, "R_b")],
-            "tt_color": [num(o, "TT_r"), num(o, "TT_g"), num(o, "TT_b")],
+            "r_color": [round(scale * v, 6) for v in r_col],
+            "tt_color": [round(scale * v, 6) for v in tt_col],
             "d_color": [0.0, 0.0, 0.0],
             "beta_r_deg": num(o, "beta_R"),
             "beta_tt_deg": num(o, "beta_TT"),

@@ -1,0 +1,316 @@
+"""The fiber BCSDF f = Σ_{p ∈ R, TT, D} A_p M_p N_p (seed 000 eq. 7): the one definition baker and renderer share.
+
+Angle conventions (the same as ``data_formats/ASSET_PACK.md`` §3)
+-----------------------------------------------------------------
+* Local frame of a fiber: x = the fiber tangent t; y, z span its normal plane (any orthonormal choice).
+* For a unit direction ω pointing away from the fiber: sin θ = ω·t (θ ∈ [−π/2, π/2], longitudinal) and
+  φ = atan2(ω_z, ω_y) (azimuth). ω_i points toward the light, ω_o toward the viewer; θ_h = (θ_i + θ_o)/2,
+  θ_d = (θ_o − θ_i)/2, φ = φ_o − φ_i.
+* Scattered radiance: L_o(ω_o) = ∫ f(ω_i, ω_o) L_i(ω_i) cos θ_i dω_i, with dω = cos θ dθ dφ.
+
+Lobes
+-----
+* M_R, M_TT: Gaussians in θ_h with shift α_p and width β_p, i.e. exp(−(θ_i − μ_p)² / (2σ_p²)) with
+  μ_p = 2α_p − θ_o and σ_p = 2β_p, divided by Z_p(θ_o) = ∫ exp(−(θ_i − μ_p)²/(2σ_p²)) cos² θ_i dθ_i over
+  [−π/2, π/2]. This normalisation makes ∫ A_p M_p N_p cos θ_i dω_i = A_p exactly for every ω_o, so with
+  A_R + A_TT + A_D = 1 (no absorption) the white furnace returns 1. The lobe centre is clamped to at most 4σ_p
+  beyond ±π/2 (only reached at grazing θ_o with a shift), which keeps Z_p well conditioned.
+* N_R = 1/(2π) (reflection from the whole fiber width spreads over all azimuths); N_TT: a logistic lobe around
+  φ = π, trimmed to [−π, π] and renormalised, whose standard deviation is γ_TT.
+* D: A_D/π² for every pair of directions (isotropic in-fiber multiple scattering; ∫ cos θ_i dω_i = π²).
+* A_p are RGB lobe albedos in [0, 1]; A_R + A_TT + A_D is the fiber's albedo (1 − absorption).
+
+The BCSDF is not exactly reciprocal: Z_p depends on θ_o, so f(ω_i, ω_o)/f(ω_o, ω_i) = Z_p(θ_i)/Z_p(θ_o), which
+is 1 wherever the lobe lies inside (−π/2, π/2) and drifts only at grazing angles.
+
+Sampling picks a lobe with probability ∝ mean(A_p), then θ_i from the truncated Gaussian exp(−(θ_i − μ_p)²/(2σ_p²))
+on [−π/2, π/2] (inverse CDF), φ from N_p exactly; D samples the sphere uniformly. ``pdf`` is the mixture density
+over solid angle, so weight = f cos θ_i / pdf. Parameters are a float64 vector (``N_PARAMS``, layout ``P_*``) and
+a per-ω_o context (``context``), so kernels pay for Z_p once per shading point.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# Parameter vector layout (radians).
+P_A_R, P_A_TT, P_A_D = 0, 3, 6
+P_BETA_R, P_BETA_TT, P_GAMMA_TT, P_ALPHA_R, P_ALPHA_TT = 9, 10, 11, 12, 13
+N_PARAMS = 14
+# Context layout: per outgoing direction.
+C_SIN_O, C_COS_O, C_PHI_O = 0, 1, 2
+C_MU, C_SIGMA, C_Z, C_MASS = 3, 5, 7, 9  # two entries each: [R, TT]
+C_PROB = 11  # three entries: R, TT, D
+N_CONTEXT = 14
+
+HALF_PI = 0.5 * math.pi
+INV_PI2 = 1.0 / (math.pi * math.pi)
+SQRT2 = math.sqrt(2.0)
+COS_FLOOR = 1e-12  # cos θ_i floor in the solid-angle pdf (θ_i = ±π/2 exactly)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(48)
+
+
+def params_from_optics(optics) -> np.ndarray:
+    """Parameter vector from a yarn spec's ``Optics`` (angles in degrees there)."""
+    return params_from_values(optics.r_color, optics.tt_color, optics.d_color, math.radians(optics.beta_r_deg),
+                              math.radians(optics.beta_tt_deg), math.radians(optics.gamma_tt_deg),
+                              math.radians(optics.alpha_r_deg), math.radians(optics.alpha_tt_deg))
+
+
+def params_from_pack(fiber_bcsdf: dict) -> np.ndarray:
+    """Parameter vector from an asset pack's ``/fiber_bcsdf`` attributes (radians there)."""
+    b = fiber_bcsdf
+    return params_from_values(b["r_color"], b["tt_color"], b["d_color"], b["beta_r"], b["beta_tt"], b["gamma_tt"],
+                              b["alpha_r"], b["alpha_tt"])
+
+
+def params_from_values(a_r, a_tt, a_d, beta_r, beta_tt, gamma_tt, alpha_r=0.0, alpha_tt=0.0) -> np.ndarray:
+    p = np.zeros(N_PARAMS)
+    p[P_A_R:P_A_R + 3], p[P_A_TT:P_A_TT + 3], p[P_A_D:P_A_D + 3] = a_r, a_tt, a_d
+    p[P_BETA_R], p[P_BETA_TT], p[P_GAMMA_TT] = beta_r, beta_tt, gamma_tt
+    p[P_ALPHA_R], p[P_ALPHA_TT] = alpha_r, alpha_tt
+    if not np.all(np.isfinite(p)) or min(beta_r, beta_tt, gamma_tt) <= 0 or np.any(p[:9] < 0):
+        raise ValueError(f"fiber BCSDF parameters must be finite, widths > 0 and colours ≥ 0: {p.tolist()}")
+    return p
+
+
+# --- special functions -------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _erfcinv(y):
+    """Inverse complementary error function for y in (0, 2): Giles' single-precision start, Newton to convergence."""
+    if y >= 2.0:
+        return -30.0
+    if y <= 0.0:
+        return 30.0
+    if y > 1.0:
+        return -_erfcinv(2.0 - y)
+    w = -math.log(y * (2.0 - y))
+    x = 1.0 - y
+    if w < 5.0:
+        w -= 2.5
+        p = 2.81022636e-08
+        p = 3.43273939e-07 + p * w
+        p = -3.5233877e-06 + p * w
+        p = -4.39150654e-06 + p * w
+        p = 0.00021858087 + p * w
+        p = -0.00125372503 + p * w
+        p = -0.00417768164 + p * w
+        p = 0.246640727 + p * w
+        p = 1.50140941 + p * w
+    else:
+        w = math.sqrt(w) - 3.0
+        p = -0.000200214257
+        p = 0.000100950558 + p * w
+        p = 0.00134934322 + p * w
+        p = -0.00367342844 + p * w
+        p = 0.00573950773 + p * w
+        p = -0.0076224613 + p * w
+        p = 0.00943887047 + p * w
+        p = 1.00167406 + p * w
+        p = 2.83297682 + p * w
+    x = p * x
+    for _ in range(8):
+        d = 1.1283791670955126 * math.exp(-x * x)
+        if d <= 0.0:
+            break
+        step = (math.erfc(x) - y) / d
+        x += step
+        if abs(step) <= 1e-15 * max(1.0, abs(x)):
+            break
+    return x
+
+
+@njit(cache=True)
+def _normal_mass(a, b):
+    """Φ(b) − Φ(a) for standard normal Φ, accurate when both bounds lie in the same tail."""
+    if a >= 0.0:
+        return 0.5 * (math.erfc(a / SQRT2) - math.erfc(b / SQRT2))
+    if b <= 0.0:
+        return 0.5 * (math.erfc(-b / SQRT2) - math.erfc(-a / SQRT2))
+    return 0.5 * (math.erf(b / SQRT2) - math.erf(a / SQRT2))
+
+
+@njit(cache=True)
+def _normal_sample(a, b, u):
+    """Standard normal restricted to [a, b], by inverse CDF with u in [0, 1)."""
+    if a >= 0.0:  # upper tail: mirror into the lower tail, where Φ is accurate
+        return -_normal_sample(-b, -a, 1.0 - u)
+    lo = 0.5 * math.erfc(-a / SQRT2)  # Φ(a)
+    p = lo + u * _normal_mass(a, b)
+    if p <= 0.5:
+        x = -SQRT2 * _erfcinv(2.0 * p)
+    else:  # 1 − p from the upper side to keep precision
+        q = 0.5 * math.erfc(a / SQRT2) - u * _normal_mass(a, b)
+        x = SQRT2 * _erfcinv(2.0 * q)
+    return min(max(x, a), b)
+
+
+@njit(cache=True)
+def _lobe_centre(alpha, sigma, sin_o):
+    mu = 2.0 * alpha - math.asin(min(max(sin_o, -1.0), 1.0))
+    return min(max(mu, -HALF_PI - 4.0 * sigma), HALF_PI + 4.0 * sigma)
+
+
+@njit(cache=True)
+def _cos2_normaliser(mu, sigma):
+    """Z = ∫_{−π/2}^{π/2} exp(−(θ − μ)²/(2σ²)) cos²θ dθ by Gauss–Legendre over the lobe's ±9σ window."""
+    lo = max(-HALF_PI, mu - 9.0 * sigma)
+    hi = min(HALF_PI, mu + 9.0 * sigma)
+    half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
+    z = 0.0
+    for k in range(_GL_X.shape[0]):
+        t = mid + half * _GL_X[k]
+        c = math.cos(t)
+        z += _GL_W[k] * math.exp(-0.5 * ((t - mu) / sigma) ** 2) * c * c
+    return z * half
+
+
+@njit(cache=True)
+def _logistic_trimmed(x, s):
+    """Logistic density of scale s on [−π, π], renormalised."""
+    ax = abs(x)
+    e = math.exp(-ax / s)
+    norm = 1.0 - 2.0 / (1.0 + math.exp(math.pi / s))
+    return e / (s * (1.0 + e) ** 2) / norm
+
+
+@njit(cache=True)
+def _logistic_sample(u, s):
+    lo = 1.0 / (1.0 + math.exp(math.pi / s))
+    v = lo + u * (1.0 - 2.0 * lo)
+    v = min(max(v, 1e-300), 1.0 - 1e-16)
+    return min(max(-s * math.log(1.0 / v - 1.0), -math.pi), math.pi)
+
+
+@njit(cache=True)
+def _wrap(x):
+    """Angle to [−π, π)."""
+    return (x + math.pi) % (2.0 * math.pi) - math.pi
+
+
+# --- the BCSDF ---------------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def context(p, wo):
+    """Per-ω_o quantities (local frame, unit wo): angles, lobe centres, widths, normalisers, lobe probabilities."""
+    c = np.empty(N_CONTEXT)
+    s = min(max(wo[0], -1.0), 1.0)
+    c[C_SIN_O] = s
+    c[C_COS_O] = math.sqrt(max(0.0, 1.0 - s * s))
+    c[C_PHI_O] = math.atan2(wo[2], wo[1])
+    for k in range(2):
+        sigma = 2.0 * (p[P_BETA_R] if k == 0 else p[P_BETA_TT])
+        mu = _lobe_centre(p[P_ALPHA_R] if k == 0 else p[P_ALPHA_TT], sigma, s)
+        c[C_MU + k] = mu
+        c[C_SIGMA + k] = sigma
+        c[C_Z + k] = _cos2_normaliser(mu, sigma)
+        c[C_MASS + k] = sigma * math.sqrt(2.0 * math.pi) * _normal_mass((-HALF_PI - mu) / sigma,
+                                                                        (HALF_PI - mu) / sigma)
+    w_r = (p[P_A_R] + p[P_A_R + 1] + p[P_A_R + 2]) / 3.0
+    w_tt = (p[P_A_TT] + p[P_A_TT + 1] + p[P_A_TT + 2]) / 3.0
+    w_d = (p[P_A_D] + p[P_A_D + 1] + p[P_A_D + 2]) / 3.0
+    total = w_r + w_tt + w_d
+    if total <= 0.0:
+        w_r, total = 1.0, 1.0
+    c[C_PROB], c[C_PROB + 1], c[C_PROB + 2] = w_r / total, w_tt / total, w_d / total
+    return c
+
+
+@njit(cache=True)
+def _gauss(theta, mu, sigma):
+    return math.exp(-0.5 * ((theta - mu) / sigma) ** 2)
+
+
+@njit(cache=True)
+def evaluate(p, c, wi, out):
+    """out[:] = f(ω_i, ω_o) in RGB (1/sr), ω_o given through its context ``c``; wi unit, local frame."""
+    theta_i = math.asin(min(max(wi[0], -1.0), 1.0))
+    phi = _wrap(c[C_PHI_O] - math.atan2(wi[2], wi[1]))
+    m_r = _gauss(theta_i, c[C_MU], c[C_SIGMA]) / c[C_Z]
+    m_tt = _gauss(theta_i, c[C_MU + 1], c[C_SIGMA + 1]) / c[C_Z + 1]
+    n_r = 0.5 / math.pi
+    n_tt = _logistic_trimmed(_wrap(phi - math.pi), p[P_GAMMA_TT] * math.sqrt(3.0) / math.pi)
+    for ch in range(3):
+        out[ch] = p[P_A_R + ch] * m_r * n_r + p[P_A_TT + ch] * m_tt * n_tt + p[P_A_D + ch] * INV_PI2
+
+
+@njit(cache=True)
+def pdf(p, c, wi):
+    """Solid-angle density of ``sample`` for ω_o's context ``c`` (1/sr)."""
+    theta_i = math.asin(min(max(wi[0], -1.0), 1.0))
+    cos_i = max(math.cos(theta_i), COS_FLOOR)
+    phi = _wrap(c[C_PHI_O] - math.atan2(wi[2], wi[1]))
+    q_r = _gauss(theta_i, c[C_MU], c[C_SIGMA]) / c[C_MASS]
+    q_tt = _gauss(theta_i, c[C_MU + 1], c[C_SIGMA + 1]) / c[C_MASS + 1]
+    n_tt = _logistic_trimmed(_wrap(phi - math.pi), p[P_GAMMA_TT] * math.sqrt(3.0) / math.pi)
+    return (c[C_PROB] * q_r * 0.5 / math.pi + c[C_PROB + 1] * q_tt * n_tt) / cos_i + c[C_PROB + 2] / (4.0 * math.pi)
+
+
+@njit(cache=True)
+def sample(p, c, u0, u1, u2, wi):
+    """Draw ω_i into ``wi`` (local frame) from three uniforms; returns its pdf (solid angle)."""
+    if u0 < c[C_PROB + 2] and c[C_PROB + 2] > 0.0:  # D: uniform sphere
+        s = 1.0 - 2.0 * u1
+        phi_i = 2.0 * math.pi * u2
+    else:
+        k = 0 if u0 < c[C_PROB + 2] + c[C_PROB] else 1
+        mu, sigma = c[C_MU + k], c[C_SIGMA + k]
+        theta = mu + sigma * _normal_sample((-HALF_PI - mu) / sigma, (HALF_PI - mu) / sigma, u1)
+        s = math.sin(min(max(theta, -HALF_PI), HALF_PI))
+        if k == 0:
+            phi = 2.0 * math.pi * u2 - math.pi
+        else:
+            phi = math.pi + _logistic_sample(u2, p[P_GAMMA_TT] * math.sqrt(3.0) / math.pi)
+        phi_i = c[C_PHI_O] - phi
+    cos_t = math.sqrt(max(0.0, 1.0 - s * s))
+    wi[0] = s
+    wi[1] = cos_t * math.cos(phi_i)
+    wi[2] = cos_t * math.sin(phi_i)
+    return pdf(p, c, wi)
+
+
+# --- batch wrappers (tests, tables, Python callers) --------------------------------------------------------------
+
+@njit(parallel=True, cache=True)
+def eval_batch(p, wo, wi):
+    """f for rows of unit local directions wo, wi (N, 3) → (N, 3)."""
+    out = np.empty((wo.shape[0], 3))
+    for n in prange(wo.shape[0]):
+        evaluate(p, context(p, wo[n]), wi[n], out[n])
+    return out
+
+
+@njit(parallel=True, cache=True)
+def pdf_batch(p, wo, wi):
+    out = np.empty(wo.shape[0])
+    for n in prange(wo.shape[0]):
+        out[n] = pdf(p, context(p, wo[n]), wi[n])
+    return out
+
+
+@njit(parallel=True, cache=True)
+def sample_batch(p, wo, u):
+    """For each row: ω_i, its pdf, and the weight f cos θ_i / pdf (RGB). u: (N, 3) uniforms."""
+    n_rows = wo.shape[0]
+    wi = np.empty((n_rows, 3))
+    pdfs = np.empty(n_rows)
+    weight = np.empty((n_rows, 3))
+    for n in prange(n_rows):
+        f = np.empty(3)
+        c = context(p, wo[n])
+        pdfs[n] = sample(p, c, u[n, 0], u[n, 1], u[n, 2], wi[n])
+        evaluate(p, c, wi[n], f)
+        cos_i = math.sqrt(max(0.0, 1.0 - wi[n, 0] ** 2))
+        for ch in range(3):
+            weight[n, ch] = f[ch] * cos_i / pdfs[n] if pdfs[n] > 0.0 else 0.0
+    return wi, pdfs, weight
+
+
+def direction(theta, phi) -> np.ndarray:
+    """Unit local direction(s) from longitudinal θ and azimuth φ (radians); broadcasting."""
+    theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
+    return np.stack([np.sin(theta), np.cos(theta) * np.cos(phi), np.cos(theta) * np.sin(phi)], axis=-1)

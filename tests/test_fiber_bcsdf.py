@@ -1,0 +1,186 @@
+"""Fiber BCSDF invariants in the manner of pbrt-v4 and Mitsuba 3: white furnace, χ² sampling test, sample weights
+consistent with eval/pdf, and finite values at the extremes."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import special, stats
+
+from knitrun import fiber_bcsdf as fb
+
+DEG = math.pi / 180
+THETA_O = [0.0, 30 * DEG, -60 * DEG, 85 * DEG, -89.9 * DEG]
+
+
+def lossless(beta_r, beta_tt, gamma_tt, alpha_r=-3 * DEG, alpha_tt=1.5 * DEG):
+    """No absorption: the three lobe albedos sum to 1 in every channel."""
+    return fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, beta_r, beta_tt, gamma_tt, alpha_r, alpha_tt)
+
+
+ROUGHNESS = [(1 * DEG, 2 * DEG, 5 * DEG), (3 * DEG, 10 * DEG, 25 * DEG), (10 * DEG, 27 * DEG, 38 * DEG),
+             (30 * DEG, 45 * DEG, 90 * DEG)]
+
+
+def stratified_sphere(n_side, rng):
+    """n_side² uniformly distributed directions, one jittered sample per (cos, φ) stratum."""
+    i, j = np.meshgrid(np.arange(n_side), np.arange(n_side), indexing="ij")
+    z = -1 + 2 * (i.ravel() + rng.random(i.size)) / n_side
+    phi = 2 * np.pi * (j.ravel() + rng.random(i.size)) / n_side
+    r = np.sqrt(1 - z * z)
+    return np.stack([z, r * np.cos(phi), r * np.sin(phi)], axis=1)
+
+
+@pytest.mark.parametrize("rough", ROUGHNESS)
+def test_white_furnace_uniform_and_importance_sampling(rough):
+    p = lossless(*rough)
+    rng = np.random.default_rng(1)
+    wi_uniform = stratified_sphere(1024, rng)
+    for theta_o in THETA_O:
+        wo = np.tile(fb.direction(theta_o, 0.7), (wi_uniform.shape[0], 1))
+        f = fb.eval_batch(p, wo, wi_uniform)
+        uniform = (f * np.sqrt(1 - wi_uniform[:, :1] ** 2) * 4 * np.pi).mean(axis=0)
+        assert np.all((uniform > 0.95) & (uniform < 1.05)), (rough, theta_o, uniform)
+        wo_is = wo[:300_000]
+        _, _, weight = fb.sample_batch(p, wo_is, rng.random((wo_is.shape[0], 3)))
+        importance = weight.mean(axis=0)
+        assert np.all((importance > 0.99) & (importance < 1.01)), (rough, theta_o, importance)
+
+
+def test_absorbing_fiber_returns_its_albedo():
+    p = fb.params_from_values([0.05, 0.1, 0.2], [0.3, 0.5, 0.7], [0.0, 0.1, 0.05], 5 * DEG, 10 * DEG, 25 * DEG)
+    wo = np.tile(fb.direction(0.4, 0.0), (200_000, 1))
+    _, _, weight = fb.sample_batch(p, wo, np.random.default_rng(2).random((wo.shape[0], 3)))
+    np.testing.assert_allclose(weight.mean(axis=0), [0.35, 0.7, 0.95], rtol=0.01)
+
+
+def chi2_bins(p, theta_o, n_samples, rng, n_theta=24, n_phi=48, sub=12):
+    """Observed and expected counts over a (θ_i, φ_i) grid; expected by midpoint integration of the pdf."""
+    wo_dir = fb.direction(theta_o, 0.4)
+    wo = np.tile(wo_dir, (n_samples, 1))
+    wi, _, _ = fb.sample_batch(p, wo, rng.random((n_samples, 3)))
+    theta = np.arcsin(np.clip(wi[:, 0], -1, 1))
+    phi = np.mod(np.arctan2(wi[:, 2], wi[:, 1]), 2 * np.pi)
+    observed, _, _ = np.histogram2d(theta, phi, bins=[n_theta, n_phi], range=[[-np.pi / 2, np.pi / 2], [0, 2 * np.pi]])
+    dt, dp = np.pi / (n_theta * sub), 2 * np.pi / (n_phi * sub)
+    t = -np.pi / 2 + dt * (np.arange(n_theta * sub) + 0.5)
+    ph = dp * (np.arange(n_phi * sub) + 0.5)
+    tt, pp = np.meshgrid(t, ph, indexing="ij")
+    dirs = fb.direction(tt.ravel(), pp.ravel())
+    dens = fb.pdf_batch(p, np.tile(wo_dir, (dirs.shape[0], 1)), dirs) * np.cos(tt.ravel())
+    expected = dens.reshape(n_theta, sub, n_phi, sub).sum(axis=(1, 3)) * dt * dp * n_samples
+    return observed.ravel(), expected.ravel()
+
+
+def pooled_chi2_pvalue(observed, expected, min_expected=5.0):
+    """χ² p-value with cells of expected count < min_expected pooled into one cell (Mitsuba's rule)."""
+    small = expected < min_expected
+    obs = np.append(observed[~small], observed[small].sum())
+    exp = np.append(expected[~small], expected[small].sum())
+    keep = exp > 0
+    obs, exp = obs[keep], exp[keep]
+    exp *= obs.sum() / exp.sum()  # the pdf integrates to 1 up to quadrature error
+    chi2 = ((obs - exp) ** 2 / exp).sum()
+    return stats.chi2.sf(chi2, obs.size - 1)
+
+
+CHI2_CASES = [(lossless(5 * DEG, 10 * DEG, 25 * DEG), t) for t in (0.0, 45 * DEG, -80 * DEG, 89 * DEG)] + \
+    [(lossless(15 * DEG, 25 * DEG, 60 * DEG), t) for t in (20 * DEG, -87 * DEG)] + \
+    [(fb.params_from_values([0.8] * 3, [0.1] * 3, [0.1] * 3, 8 * DEG, 8 * DEG, 15 * DEG, -6 * DEG, 3 * DEG), 70 * DEG)]
+
+
+def test_chi2_sampling_matches_pdf():
+    alpha = 1 - (1 - 0.01) ** (1 / len(CHI2_CASES))  # Šidák correction over all cases
+    rng = np.random.default_rng(3)
+    for p, theta_o in CHI2_CASES:
+        observed, expected = chi2_bins(p, theta_o, 400_000, rng)
+        assert pooled_chi2_pvalue(observed, expected) > alpha, theta_o
+
+
+def test_chi2_detects_a_wrong_pdf():
+    """The test has power: sampling a 10 % wider TT lobe than the pdf describes is rejected."""
+    p = lossless(5 * DEG, 10 * DEG, 25 * DEG)
+    wide = p.copy()
+    wide[fb.P_BETA_TT] *= 1.1
+    rng = np.random.default_rng(4)
+    wo = np.tile(fb.direction(0.3, 0.4), (400_000, 1))
+    wi, _, _ = fb.sample_batch(wide, wo, rng.random((wo.shape[0], 3)))
+    theta = np.arcsin(np.clip(wi[:, 0], -1, 1))
+    phi = np.mod(np.arctan2(wi[:, 2], wi[:, 1]), 2 * np.pi)
+    observed, _, _ = np.histogram2d(theta, phi, bins=[24, 48], range=[[-np.pi / 2, np.pi / 2], [0, 2 * np.pi]])
+    _, expected = chi2_bins(p, 0.3, 400_000, rng)
+    assert pooled_chi2_pvalue(observed.ravel(), expected) < 1e-6
+
+
+def test_sample_weight_equals_eval_cos_over_pdf():
+    p = lossless(4 * DEG, 12 * DEG, 30 * DEG)
+    rng = np.random.default_rng(5)
+    theta_o = rng.uniform(-np.pi / 2, np.pi / 2, 20_000)
+    wo = fb.direction(theta_o, rng.uniform(0, 2 * np.pi, theta_o.size))
+    wi, pdfs, weight = fb.sample_batch(p, wo, rng.random((theta_o.size, 3)))
+    np.testing.assert_allclose(pdfs, fb.pdf_batch(p, wo, wi), rtol=1e-12)
+    expected = fb.eval_batch(p, wo, wi) * np.sqrt(1 - wi[:, :1] ** 2) / pdfs[:, None]
+    np.testing.assert_allclose(weight, expected, rtol=1e-12)
+    assert np.all(pdfs > 0)
+
+
+def test_lobes_peak_where_the_model_says():
+    theta_o, phi_o = 0.5, 0.0
+    theta = np.linspace(-np.pi / 2, np.pi / 2, 20001)
+    # R lobe alone at φ = 0: peak at θ_i = 2α_R − θ_o; TT alone at φ = π: peak at θ_i = 2α_TT − θ_o
+    for a_r, a_tt, phi_i, alpha in ((1, 0, 0.0, -4 * DEG), (0, 1, np.pi, 2 * DEG)):
+        p = fb.params_from_values([a_r] * 3, [a_tt] * 3, [0, 0, 0], 3 * DEG, 3 * DEG, 10 * DEG, -4 * DEG, 2 * DEG)
+        wi = fb.direction(theta, phi_o - phi_i)
+        f = fb.eval_batch(p, np.tile(fb.direction(theta_o, phi_o), (theta.size, 1)), wi)[:, 0]
+        assert theta[np.argmax(f)] == pytest.approx(2 * alpha - theta_o, abs=2e-4)
+    # N_TT: normalised, standard deviation γ_TT
+    p = fb.params_from_values([1, 1, 1], [1, 1, 1], [0, 0, 0], 3 * DEG, 3 * DEG, 10 * DEG)
+    phi = np.linspace(-np.pi, np.pi, 200001)
+    s = p[fb.P_GAMMA_TT] * math.sqrt(3) / math.pi
+    dens = np.array([fb._logistic_trimmed(x, s) for x in phi[::10]])
+    assert np.trapezoid(dens, phi[::10]) == pytest.approx(1.0, abs=1e-6)
+    assert math.sqrt(np.trapezoid(dens * phi[::10] ** 2, phi[::10])) == pytest.approx(p[fb.P_GAMMA_TT], rel=1e-3)
+
+
+def test_extremes_are_finite():
+    """Roughness → 0, θ = ±π/2, φ = 0 and π, maximal shifts: f, pdf and weights stay finite."""
+    params = [fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, 1e-3 * DEG, 1e-3 * DEG, 1e-3 * DEG),
+              fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, 90 * DEG, 90 * DEG, 180 * DEG, 45 * DEG, -45 * DEG),
+              fb.params_from_values([0, 0, 0], [0, 0, 0], [0, 0, 0], 5 * DEG, 5 * DEG, 5 * DEG)]
+    thetas = [-np.pi / 2, -np.pi / 2 + 1e-9, 0.0, np.pi / 2 - 1e-9, np.pi / 2]
+    phis = [0.0, np.pi, -np.pi]
+    dirs = np.array([fb.direction(t, f) for t in thetas for f in phis])
+    wo = np.repeat(dirs, len(dirs), axis=0)
+    wi = np.tile(dirs, (len(dirs), 1))
+    rng = np.random.default_rng(6)
+    for p in params:
+        assert np.all(np.isfinite(fb.eval_batch(p, wo, wi)))
+        assert np.all(np.isfinite(fb.pdf_batch(p, wo, wi)))
+        _, pdfs, weight = fb.sample_batch(p, wo, rng.random((wo.shape[0], 3)))
+        assert np.all(np.isfinite(weight)) and np.all(np.isfinite(pdfs)) and np.all(pdfs > 0)
+
+
+def test_erfcinv_against_scipy():
+    y = np.concatenate([np.logspace(-15, 0, 60), 2 - np.logspace(-12, 0, 30)])
+    ours = np.array([fb._erfcinv(v) for v in y])
+    np.testing.assert_allclose(ours, special.erfcinv(y), rtol=1e-10, atol=1e-12)
+
+
+def test_truncated_normal_sampler_matches_its_cdf():
+    rng = np.random.default_rng(7)
+    for a, b in ((-1.0, 2.0), (3.0, 6.0), (-7.0, -4.0), (-0.2, 0.1)):
+        x = np.array([fb._normal_sample(a, b, u) for u in rng.random(20000)])
+        assert np.all((x >= a) & (x <= b))
+        cdf = lambda v, a=a, b=b: (stats.norm.cdf(v) - stats.norm.cdf(a)) / (stats.norm.cdf(b) - stats.norm.cdf(a))  # noqa
+        if b <= 0:
+            cdf = lambda v, a=a, b=b: (stats.norm.sf(-v) - stats.norm.sf(-a)) / (stats.norm.sf(-b) - stats.norm.sf(-a))  # noqa
+        elif a >= 0:
+            cdf = lambda v, a=a, b=b: (stats.norm.sf(a) - stats.norm.sf(v)) / (stats.norm.sf(a) - stats.norm.sf(b))  # noqa
+        assert stats.kstest(x, cdf).pvalue > 0.001, (a, b)
+
+
+def test_params_are_checked():
+    with pytest.raises(ValueError, match="BCSDF"):
+        fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, 0.0, 0.1, 0.1)
+    with pytest.raises(ValueError, match="BCSDF"):
+        fb.params_from_values([0.3] * 3, [np.nan] * 3, [0.1] * 3, 0.1, 0.1, 0.1)
