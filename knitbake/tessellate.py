@@ -23,7 +23,8 @@ Conventions
 * Consecutive points closer than ``MERGE_TOL * r`` are merged before tessellation (zero-length segments would give
   degenerate triangles and undefined tangents); the fiber's last point is kept exactly.
 * Triangle order: fiber by fiber; within a fiber the walls segment by segment (``2 * sides`` each, side by side),
-  then the start cap and the end cap. Triangles wind counter-clockwise seen from outside (outward normals).
+  then the caps, alternating start and end cap triangles. ``tri_segment`` names each triangle's axis segment
+  (caps: the first and last segment). Triangles wind counter-clockwise seen from outside (outward normals).
 """
 
 from dataclasses import dataclass
@@ -45,6 +46,9 @@ class TubeMesh:
     vertices: np.ndarray  # (V, 3) float32
     triangles: np.ndarray  # (T, 3) int32
     tri_fiber: np.ndarray  # (T,) int32, fiber index of each triangle
+    axis_points: np.ndarray  # (P', 3) float64, the fiber polylines after merging close points
+    tri_segment: np.ndarray  # (T,) int32, axis_points[s], axis_points[s + 1] is the segment a triangle belongs to
+    tube_radius: np.ndarray  # (F,) float64, ring vertex radius: no wall point is farther from its axis
 
 
 def ring_radius_factor(sides: int, fit: str) -> float:
@@ -87,9 +91,11 @@ def tessellate_fibers(fibers: FiberSet, sides: int = 6, caps: bool = True, fit: 
     vertices = np.empty((vert_start[-1], 3), np.float32)
     triangles = np.empty((tri_start[-1], 3), np.int32)
     tri_fiber = np.empty(tri_start[-1], np.int32)
-    _tessellate(np.ascontiguousarray(points[keep]), new_offsets, radius * ring_factor, int(sides), bool(caps),
-                vert_start, tri_start, vertices, triangles, tri_fiber)
-    return TubeMesh(vertices, triangles, tri_fiber)
+    tri_segment = np.empty(tri_start[-1], np.int32)
+    axis_points = np.ascontiguousarray(points[keep])
+    _tessellate(axis_points, new_offsets, radius * ring_factor, int(sides), bool(caps),
+                vert_start, tri_start, vertices, triangles, tri_fiber, tri_segment)
+    return TubeMesh(vertices, triangles, tri_fiber, axis_points, tri_segment, radius * ring_factor)
 
 
 def _validated(fibers: FiberSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -171,7 +177,8 @@ def _write_ring(out, base, centre, u, v, d, t, radius, cos_phi, sin_phi):
 
 
 @njit(cache=True, parallel=True)
-def _tessellate(points, offsets, ring_radius, sides, caps, vert_start, tri_start, vertices, triangles, tri_fiber):
+def _tessellate(points, offsets, ring_radius, sides, caps, vert_start, tri_start, vertices, triangles, tri_fiber,
+                tri_segment):
     phi = 2.0 * np.pi * np.arange(sides) / sides
     cos_phi, sin_phi = np.cos(phi), np.sin(phi)
     for f in prange(offsets.size - 1):
@@ -195,8 +202,12 @@ def _tessellate(points, offsets, ring_radius, sides, caps, vert_start, tri_start
             u = _unit(u - np.dot(u, d_next) * d_next)
             d = d_next
         n_tri = _write_walls(triangles, tb, vb, b - a, sides)
+        for k in range(b - a - 1):
+            tri_segment[tb + 2 * sides * k:tb + 2 * sides * (k + 1)] = a + k
         if caps:
             _write_caps(triangles, tb + n_tri, vb, b - a, sides)
+            tri_segment[tb + n_tri:tri_start[f + 1]:2] = a  # caps alternate: start, end, start, ...
+            tri_segment[tb + n_tri + 1:tri_start[f + 1]:2] = b - 2
         tri_fiber[tb:tri_start[f + 1]] = f
 
 

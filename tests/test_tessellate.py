@@ -145,3 +145,19 @@ def test_bad_input():
         tessellate_fibers(fiber_set([ok[0], [[0, 0, 0]]], 1e-3))
     with pytest.raises(ValueError, match="fiber 0 has zero length"):
         tessellate_fibers(fiber_set([[[0, 0, 0], [0, 0, 0.1 * MERGE_TOL * 1e-3]], ok[1]], 1e-3))
+
+
+def test_tri_segment_names_the_nearest_axis_segment():
+    """Every triangle's centroid lies within the tube radius of the axis segment tri_segment names."""
+    t = np.linspace(0, 4 * np.pi, 40)
+    helix = np.c_[0.3 * np.cos(t), 0.3 * np.sin(t), 0.1 * t]
+    fibers = FiberSet(np.r_[helix, helix + [1.0, 0, 0]], np.array([0, 40, 80]), np.array([0.02, 0.03]),
+                      np.zeros(2, np.int8), np.zeros(2, np.int16))
+    mesh = tessellate_fibers(fibers, sides=8)
+    centroid = mesh.vertices[mesh.triangles].astype(np.float64).mean(axis=1)
+    a = mesh.axis_points[mesh.tri_segment]
+    b = mesh.axis_points[mesh.tri_segment + 1]
+    s = np.clip(((centroid - a) * (b - a)).sum(1) / ((b - a) ** 2).sum(1), 0, 1)
+    dist = np.linalg.norm(centroid - (a + s[:, None] * (b - a)), axis=1)
+    assert np.all(dist <= mesh.tube_radius[mesh.tri_fiber] * 1.001)
+    assert np.all(np.isin(mesh.tri_segment[mesh.tri_fiber == 1], np.arange(40, 79)))
