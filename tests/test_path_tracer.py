@@ -1,0 +1,142 @@
+"""Path tracer against analytic answers: furnace, a single fiber under directional and uniform light, 1/√spp
+convergence, determinism across thread counts and batching."""
+
+import math
+
+import numba
+import numpy as np
+import pytest
+
+from data_formats.yarn_spec import load_preset
+from knitbake.env_light import env_from_image, env_pdf, env_sample, uniform_env
+from knitbake.fiber_set import FiberSet
+from knitbake.path_tracer import Camera, TracerScene, render
+from knitbake.procedural_yarn import generate_fibers
+from knitbake.tessellate import tessellate_fibers
+from knitrun import fiber_bcsdf as fb
+
+DEG = math.pi / 180
+LOSSLESS = fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, 5 * DEG, 10 * DEG, 25 * DEG, -3 * DEG, 1.5 * DEG)
+ABSORBING = fb.params_from_values([0.05, 0.1, 0.2], [0.3, 0.5, 0.6], [0.05, 0.05, 0.1], 4 * DEG, 12 * DEG,
+                                  30 * DEG)
+
+
+def straight_fiber(radius=0.1, length=4.0, sides=32):
+    pts = np.array([[-length / 2, 0, 0], [length / 2, 0, 0.0]])
+    fibers = FiberSet(pts, np.array([0, 2]), np.array([radius]), np.zeros(1, np.int8), np.zeros(1, np.int16))
+    return tessellate_fibers(fibers, sides=sides)
+
+
+def top_camera(width=64, height=32, ortho=1.0):
+    return Camera(np.array([0, 0, 5.0]), np.zeros(3), np.array([0, 1, 0.0]), width, height, ortho_height=ortho)
+
+
+def yarn_scene(params=LOSSLESS, **lights):
+    spec = load_preset("cotton1")
+    mesh = tessellate_fibers(generate_fibers(spec, seed=0, flyaways=False), sides=6)
+    return TracerScene(mesh, np.zeros(mesh.tube_radius.size, np.int32), params[None], **lights)
+
+
+def yarn_camera(spec_radius=0.03, period=0.45, size=32):
+    """Side view of the cotton1 period (yarn along z), orthographic, framing the middle of the yarn."""
+    return Camera(np.array([1.0, 0.0, period / 2]), np.array([0.0, 0.0, period / 2]), np.array([0, 0, 1.0]), size,
+                  size, ortho_height=2.4 * spec_radius)
+
+
+def test_furnace_yarn_in_uniform_environment():
+    """Non-absorbing fibers under a uniform environment return its radiance (multiple scattering included)."""
+    scene = yarn_scene(env=uniform_env([1.0, 1.0, 1.0]))
+    img, _ = render(scene, yarn_camera(), spp=64, max_depth=64, seed=1)
+    assert abs(img.mean() - 1.0) < 0.025
+    assert np.all(np.isfinite(img))
+
+
+def test_single_fiber_uniform_environment_returns_albedo():
+    """A convex fiber under a uniform environment: every pixel on it is albedo × L exactly (one scattering)."""
+    scene = TracerScene(straight_fiber(), np.zeros(1, np.int32), ABSORBING[None], env=uniform_env([2.0, 2.0, 2.0]),
+                        background=np.zeros(3))
+    img, _ = render(scene, top_camera(), spp=256, seed=2)
+    on_fiber = img[13:19]  # rows entirely inside the fiber (|y| < 0.094 for radius 0.1)
+    albedo = np.array([0.4, 0.65, 0.9])
+    np.testing.assert_allclose(on_fiber.mean(axis=(0, 1)), 2.0 * albedo, rtol=0.02)
+
+
+@pytest.mark.parametrize("light_deg", [20.0, 60.0, 85.0])
+def test_single_fiber_directional_light_against_direct_integration(light_deg):
+    """Image integral of a fiber lit by a directional light = f(ω_i, ω_o) cos θ_i E × projected area."""
+    radius = 0.1
+    light = np.array([math.sin(light_deg * DEG) * 0.6, math.sin(light_deg * DEG) * 0.8, math.cos(light_deg * DEG)])
+    light_local = np.array([light[0], light[1], light[2]])  # fiber frame: x tangent; (y, z) normal plane
+    irradiance = np.array([1.0, 2.0, 3.0])
+    scene = TracerScene(straight_fiber(radius), np.zeros(1, np.int32), ABSORBING[None], light_dirs=light[None],
+                        light_irradiance=irradiance[None])
+    cam = top_camera(width=64, height=32, ortho=1.0)
+    img, _ = render(scene, cam, spp=64, seed=3)
+    pixel_area = (1.0 / 32) ** 2
+    visible_length = 2.0  # the camera sees x in [−1, 1]
+    measured = img.sum(axis=(0, 1)) * pixel_area
+    f = fb.eval_batch(ABSORBING, np.array([[0.0, 0.0, 1.0]]), light_local[None])[0]
+    cos_i = math.sqrt(1 - light_local[0] ** 2)
+    expected = f * cos_i * irradiance * 2 * radius * visible_length
+    np.testing.assert_allclose(measured, expected, rtol=0.01)
+
+
+def test_error_falls_like_inverse_sqrt_spp():
+    env_img = np.ones((16, 32, 3)) * 0.2
+    env_img[2:5, 10:14] = 40.0  # a small bright "sun": noisy NEE and BCSDF sampling
+    scene = yarn_scene(ABSORBING, env=env_from_image(env_img))
+    cam = yarn_camera(size=24)
+    reference, _ = render(scene, cam, spp=1024, seed=100)
+    spps = [4, 16, 64, 256]
+    errors = []
+    for spp in spps:
+        rmse = [np.sqrt(((render(scene, cam, spp=spp, seed=s)[0] - reference) ** 2).mean()) for s in (1, 2)]
+        errors.append(np.mean(rmse))
+    slope = np.polyfit(np.log(spps), np.log(errors), 1)[0]
+    assert -0.62 < slope < -0.38, (errors, slope)
+
+
+def test_deterministic_across_threads_and_batching():
+    scene = yarn_scene(ABSORBING, env=uniform_env([1.0, 0.5, 0.2]), light_dirs=np.array([[1.0, 0.3, 0.2]]),
+                       light_irradiance=np.array([[2.0, 2.0, 2.0]]))
+    cam = yarn_camera(size=16)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        scene.ray_scene.threads = 1
+        a, _ = render(scene, cam, spp=8, seed=5, samples_per_pass=8)
+        numba.set_num_threads(before)
+        scene.ray_scene.threads = 2
+        b, _ = render(scene, cam, spp=8, seed=5, samples_per_pass=3)
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(a, b)
+    c, _ = render(scene, cam, spp=8, seed=6)
+    assert not np.array_equal(a, c)
+
+
+def test_environment_sampling_pdf_is_consistent():
+    rng = np.random.default_rng(0)
+    img = rng.random((8, 16, 3)) ** 4 * 10
+    env = env_from_image(img)
+    out = np.empty(3)
+    for _ in range(200):
+        pdf = env_sample(env.radiance, env.row_cdf, env.col_cdf, env.pixel_prob, *rng.random(4), out)
+        assert pdf == pytest.approx(env_pdf(env.radiance, env.pixel_prob, out), rel=1e-9)
+    # the pdf integrates to 1 over the sphere
+    n = 400
+    theta = (np.arange(n) + 0.5) * np.pi / n
+    phi = (np.arange(2 * n) + 0.5) * np.pi / n - np.pi
+    total = sum(env_pdf(env.radiance, env.pixel_prob, np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p),
+                                                                math.cos(t)])) * math.sin(t)
+                for t in theta for p in phi[::8]) * (np.pi / n) * (np.pi / n * 8)
+    assert total == pytest.approx(1.0, rel=0.01)
+
+
+def test_bad_render_settings():
+    scene = TracerScene(straight_fiber(), np.zeros(1, np.int32), LOSSLESS[None])
+    with pytest.raises(ValueError, match="spp"):
+        render(scene, top_camera(), spp=0)
+    with pytest.raises(ValueError, match="direction"):
+        TracerScene(straight_fiber(), np.zeros(1, np.int32), LOSSLESS[None], light_dirs=np.zeros((1, 3)),
+                    light_irradiance=np.ones((1, 3)))
