@@ -1,0 +1,99 @@
+"""Yarn curves (PL, C0, BS, BZ control points) as dense polylines carrying a rest arc-length coordinate.
+
+Conventions (curve types as in ``data_formats/YARN_CURVES.md``)
+-----------------------------------------------------------------
+* A curve of n control points has S segments, segment j spanning the curve parameter u ∈ [j, j + 1]:
+  PL, C0, BS: S = n − 1 open, n closed (the last segment runs from point n − 1 back to point 0);
+  BZ: S = (n − 1)/3 open, n/3 closed.
+* PL, C0, BS evaluate segment j from the window P_{j−1}, P_j, P_{j+1}, P_{j+2} (indices wrap on a closed curve). An open
+  curve gets phantom end points P_{−1} = 2P_0 − P_1 and P_n = 2P_{n−1} − P_{n−2}: Catmull-Rom then starts with the
+  end chord's direction and the B-spline interpolates both end points. BZ segment j uses P_{3j} … P_{3j+3}.
+* Rest arc length σ (length units): control point k sits at ``rest[k]`` (BZ: only the on-curve points 3j count).
+  A closed curve's rest length L adds the closing segment (``rest_length``). Inside a segment σ runs linearly with
+  the *current* arc length of the dense samples, so a segment stretched between frames stretches the rest
+  coordinate uniformly and the control points keep their rest coordinates.
+* A dense polyline of a closed curve repeats its first point at the end (σ = L there).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from data_formats.yarn_curves import YarnCurves
+
+
+def _basis(curve_type: str, u: np.ndarray) -> np.ndarray:
+    """(len(u), 4) weights of the four window points for parameters u ∈ [0, 1)."""
+    u = u[:, None] ** np.arange(4)  # 1, u, u², u³
+    mats = {  # rows: weight of window point i as coefficients of 1, u, u², u³
+        "PL": [[0, 0, 0, 0], [1, -1, 0, 0], [0, 1, 0, 0], [0, 0, 0, 0]],
+        "C0": [[0, -0.5, 1, -0.5], [1, 0, -2.5, 1.5], [0, 0.5, 2, -1.5], [0, 0, -0.5, 0.5]],
+        "BS": [[1 / 6, -0.5, 0.5, -1 / 6], [2 / 3, 0, -1, 0.5], [1 / 6, 0.5, 0.5, -0.5], [0, 0, 0, 1 / 6]],
+        "BZ": [[1, -3, 3, -1], [0, 3, -6, 3], [0, 0, 3, -3], [0, 0, 0, 1]],
+    }
+    return u @ np.asarray(mats[curve_type], dtype=float).T
+
+
+def _windows(n: int, closed: bool, curve_type: str) -> np.ndarray:
+    """(S, 4) indices of each segment's window into the control points padded by one phantom point per end
+    (padded index i is control point i − 1)."""
+    if curve_type == "BZ":
+        starts = 3 * np.arange(n // 3 if closed else (n - 1) // 3)
+        idx = starts[:, None] + np.arange(4)
+        return (idx % n if closed else idx) + 1
+    segs = np.arange(n if closed else n - 1)
+    idx = segs[:, None] + np.arange(-1, 3)
+    return (idx % n) + 1 if closed else idx + 1
+
+
+def evaluate(points: np.ndarray, closed: bool, curve_type: str, samples_per_segment: int) -> np.ndarray:
+    """Dense points (S·samples_per_segment + 1, 3) of one curve: each segment sampled at u = i/samples_per_segment,
+    i = 0 … samples_per_segment − 1, then the curve's end (for a closed curve: its start again)."""
+    points = np.asarray(points, dtype=float)
+    n = len(points)
+    if n < 2 or (curve_type == "BZ" and (n % 3 if closed else (n - 1) % 3)):
+        raise ValueError(f"{n} control points do not make a {'closed' if closed else 'open'} {curve_type} curve")
+    padded = np.concatenate([2 * points[:1] - points[1:2], points, 2 * points[-1:] - points[-2:-1]])
+    win = padded[_windows(n, closed, curve_type)]  # (S, 4, 3)
+    u = np.arange(samples_per_segment + 1) / samples_per_segment
+    dense = np.einsum("mk,skd->smd", _basis(curve_type, u), win)  # (S, M + 1, 3); u = 1 is the next segment's start
+    out = np.concatenate([dense[:, :-1].reshape(-1, 3), dense[-1:, -1]])
+    if closed:
+        out[-1] = out[0]  # exactly, not to rounding
+    return out
+
+
+def rest_length(curves: YarnCurves, c: int) -> float:
+    """Rest length of curve c: its last rest arc length, plus for a closed curve the closing segment — the frame-0
+    distance from the last control point back to the first, in the rest scale of the curve's control polygon
+    (rest arc length ÷ frame-0 polygon length)."""
+    a, b = curves.offsets[c], curves.offsets[c + 1]
+    total = float(curves.rest_arclength[b - 1])
+    if not curves.closed[c]:
+        return total
+    p0 = curves.points[0, a:b]
+    polygon = float(np.linalg.norm(np.diff(p0, axis=0), axis=1).sum())
+    scale = total / polygon if polygon > 0 and total > 0 else 1.0
+    return total + scale * float(np.linalg.norm(p0[0] - p0[-1]))
+
+
+def dense_curve(curves: YarnCurves, c: int, frame: int, samples_per_segment: int | None = None):
+    """(xyz (m, 3), sigma (m,)): curve c at ``frame`` as a dense polyline with the rest arc length of every sample.
+
+    ``samples_per_segment`` defaults to 1 for PL (the control polygon itself) and 8 for the smooth types."""
+    if samples_per_segment is None:
+        samples_per_segment = 1 if curves.curve_type == "PL" else 8
+    a, b = curves.offsets[c], curves.offsets[c + 1]
+    closed = bool(curves.closed[c])
+    xyz = evaluate(curves.points[frame, a:b], closed, curves.curve_type, samples_per_segment)
+    rest = np.append(curves.rest_arclength[a:b], rest_length(curves, c))  # rest[n] = L closes the loop
+    on_curve = rest[::3] if curves.curve_type == "BZ" else rest
+    n_seg = (len(xyz) - 1) // samples_per_segment
+    s0, s1 = on_curve[:n_seg], on_curve[1:n_seg + 1]
+    chords = np.linalg.norm(np.diff(xyz, axis=0), axis=1).reshape(n_seg, samples_per_segment)
+    seg_len = chords.sum(axis=1, keepdims=True)
+    uniform = np.broadcast_to(np.arange(samples_per_segment) / samples_per_segment, chords.shape)
+    cum = np.concatenate([np.zeros((n_seg, 1)), np.cumsum(chords, axis=1)[:, :-1]], axis=1)
+    frac = np.where(seg_len > 0, cum / np.where(seg_len > 0, seg_len, 1.0), uniform)
+    sigma = np.append((s0[:, None] + frac * (s1 - s0)[:, None]).ravel(), on_curve[n_seg])
+    return xyz, sigma
