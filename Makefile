@@ -14,7 +14,8 @@ $(BIN)/knitbake: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	@touch $@
 
-# What exists so far: list the presets, generate two yarns' fibers with preview images, inspect and validate them.
+# What exists so far: list the presets, generate two yarns' fibers with preview images, inspect and validate them,
+# path-trace the example straight yarn under the built-in sky.
 demo: setup
 	@mkdir -p $(OUT)
 	$(BIN)/knitbake yarn list
@@ -22,6 +23,7 @@ demo: setup
 	$(BIN)/knitbake fibers rayon1 --periods 2 -o $(OUT)/rayon1_fibers.h5 --preview $(OUT)/rayon1_preview.png
 	$(BIN)/knitbake inspect $(OUT)/rayon1_fibers.h5
 	$(BIN)/knitbake validate $(OUT)/cotton1_fibers.bcc
+	$(BIN)/knitbake reference examples/scenes/straight_yarn_sky.toml -o $(OUT)/straight_yarn_sky.exr --spp 16
 	@echo "demo outputs in $(OUT)/ (open the *_preview.png images)"
 
 test: setup
@@ -34,6 +36,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_fibers.py
 	$(BIN)/python benchmarks/bench_ray_scene.py --preset cotton1
 	$(BIN)/python benchmarks/bench_ray_scene.py --preset rayon1
+	$(BIN)/python benchmarks/bench_reference.py
 
 # Regenerate data_formats/presets/ from ../shared/reference (the measured tables).
 presets: setup

@@ -13,11 +13,12 @@ import sys
 import click
 import numpy as np
 
-from data_formats import FormatError, asset_pack, bcc, yarn_curves, yarn_spec
+from data_formats import FormatError, asset_pack, bcc, scene, stitch_mesh, yarn_curves, yarn_spec
 from data_formats.yarn_curves import HDF5_MAGIC
 
 # Recognised by content, most specific first: (kind, module with sniff/describe/validate).
-FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("bcc", bcc), ("yarn-spec", yarn_spec))
+FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),
+              ("scene", scene), ("yarn-spec", yarn_spec))
 USER_ERRORS = (FormatError, ValueError, OSError)
 
 
@@ -52,7 +53,7 @@ def file_kind(path):
     with open(path, "rb") as fh:
         if fh.read(8) == HDF5_MAGIC:
             raise FormatError(f"{path}: an HDF5 file that cannot be opened or is none of ours (truncated or corrupt?)")
-    raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5, BCC, yarn spec TOML)")
+    raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5, BCC, stitch mesh, scene or yarn spec TOML)")
 
 
 def _jsonable(obj):

@@ -1,13 +1,9 @@
 """Environment light from an equirectangular HDR image, importance sampled (piecewise-constant 2-D distribution).
 
-Conventions: world z is up. A unit direction d has polar angle θ = acos(d_z) ∈ [0, π] (0 = zenith) and azimuth
-φ = atan2(d_y, d_x) ∈ (−π, π]. Pixel (row, column) of an H×W image covers θ ∈ [row·π/H, (row+1)·π/H] and
-φ ∈ [−π + column·2π/W, −π + (column+1)·2π/W]: row 0 is the zenith, column 0 starts at φ = −π (the −x direction),
-and φ grows with the column. Radiance is the pixel value times ``scale`` (linear RGB, W/(m² sr) or arbitrary
-consistent units). Lookups are nearest-texel (the distribution sampled is exactly the one evaluated).
-
-Sampling density ∝ luminance(pixel)·sin θ over the image; the solid-angle pdf of a direction in pixel (r, c) is
-p(r, c) / (Δθ Δφ sin θ), with p the discrete probability of that pixel (uniform within the pixel in θ and φ).
+The direction ↔ texel mapping is ``knitrun.equirect`` (+y up). Radiance is the texel value times ``scale``
+(linear RGB); lookups are nearest-texel, so the distribution sampled is exactly the one evaluated.
+Sampling density ∝ luminance(texel)·sin θ; the solid-angle pdf of a direction in texel (r, c) is
+p(r, c) / (Δθ Δφ sin θ), p the discrete probability of that texel (uniform within it in θ and φ).
 """
 
 from __future__ import annotations
@@ -17,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+
+from knitrun import equirect
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -54,12 +52,7 @@ def uniform_env(radiance, height=8, width=16) -> EnvLight:
 
 @njit(cache=True)
 def env_pixel(radiance, d):
-    h, w = radiance.shape[0], radiance.shape[1]
-    theta = math.acos(min(max(d[2], -1.0), 1.0))
-    phi = math.atan2(d[1], d[0])
-    r = min(int(theta / math.pi * h), h - 1)
-    c = min(int((phi + math.pi) / (2.0 * math.pi) * w), w - 1)
-    return r, c
+    return equirect.pixel(radiance.shape[0], radiance.shape[1], d)
 
 
 @njit(cache=True)
@@ -67,7 +60,7 @@ def env_pdf(radiance, pixel_prob, d):
     """Solid-angle pdf (1/sr) of direction d under the environment's sampling distribution."""
     h, w = radiance.shape[0], radiance.shape[1]
     r, c = env_pixel(radiance, d)
-    sin_t = math.sqrt(max(0.0, 1.0 - d[2] * d[2]))
+    sin_t = math.sqrt(max(0.0, 1.0 - d[1] * d[1]))
     if sin_t <= 1e-12:
         sin_t = 1e-12
     return pixel_prob[r, c] / ((math.pi / h) * (2.0 * math.pi / w) * sin_t)
@@ -82,8 +75,5 @@ def env_sample(radiance, row_cdf, col_cdf, pixel_prob, u1, u2, u3, u4, out):
     # uniform in θ and φ inside the pixel (the pdf formula above assumes exactly this)
     theta = (r + u3) * math.pi / h
     phi = -math.pi + (c + u4) * 2.0 * math.pi / w
-    s = math.sin(theta)
-    out[0] = s * math.cos(phi)
-    out[1] = s * math.sin(phi)
-    out[2] = math.cos(theta)
-    return pixel_prob[r, c] / ((math.pi / h) * (2.0 * math.pi / w) * max(s, 1e-12))
+    equirect.direction(theta, phi, out)
+    return pixel_prob[r, c] / ((math.pi / h) * (2.0 * math.pi / w) * max(math.sin(theta), 1e-12))

@@ -16,8 +16,9 @@ Design
 * Camera rays that miss see ``background`` (if None: the environment, else black). Paths that escape after a
   bounce see the environment (black without one).
 * ``max_depth`` counts scattering events; Russian roulette from ``rr_depth`` on, survival probability
-  min(0.95, max throughput). ``yarn_only=True`` is the bake's "no global scattering" mode: a path that leaves the
-  bounding cylinder of its yarn (``yarn_only_radius`` around the z axis) after a bounce is dropped.
+  min(0.95, max throughput). ``yarn_only_radius`` > 0 is the bake's "no global scattering" mode for a yarn along
+  the z axis: a path that reaches geometry outside that cylinder ends there without scattering (no light it would
+  bring back is counted; escaping to the environment is still counted).
 * Determinism: every random number is a hash of (seed, path id, depth, dimension), path id = sample·pixels +
   pixel; results do not depend on thread count or batching.
 
@@ -223,6 +224,8 @@ def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput
         for k in range(3):
             hit[k] = org[n, k] + hit_t[n] * d[k]
             wo[k] = -d[k]
+        if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
+            continue  # scattering outside the yarn's cylinder is global scattering: the path ends
         wo_l = np.empty(3)
         _to_local(wo, t, e1, e2, wo_l)
         p = params[fiber_type[f]]
@@ -277,8 +280,6 @@ def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput
         for k in range(3):
             wi[k] = wi_l[0] * t[k] + wi_l[1] * e1[k] + wi_l[2] * e2[k]
         _leave_point(a, t, rad, hit, wi, new_org[n])
-        if yarn_only_r2 > 0.0 and new_org[n, 0] ** 2 + new_org[n, 1] ** 2 > yarn_only_r2:
-            continue
         for k in range(3):
             new_dirs[n, k] = wi[k]
         prev_pdf[n] = pb

@@ -1,7 +1,9 @@
 """The command-line contract: examples in --help, JSON output, one-line errors and exit codes, no partial files."""
 
 import json
+from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -39,7 +41,7 @@ def test_knitrun_help_has_an_example():
 def test_yarn_list_and_json():
     result = run(knitbake, "yarn", "list")
     assert result.exit_code == 0 and all(name in result.output for name in preset_names())
-    rows = json.loads(run(knitbake, "yarn", "list", "--json").output)
+    rows = json.loads(run(knitbake, "yarn", "list", "--json").stdout)
     assert [r["name"] for r in rows] == preset_names()
 
 
@@ -50,7 +52,7 @@ def test_yarn_show_preset_file_and_toml(tmp_path):
     assert loads_spec(toml_text) == load_preset("rayon1")
     path = tmp_path / "mine.toml"
     path.write_text(toml_text.replace('name = "rayon1"', 'name = "mine"'))
-    assert json.loads(run(knitbake, "yarn", "show", path, "--json").output)["name"] == "mine"
+    assert json.loads(run(knitbake, "yarn", "show", path, "--json").stdout)["name"] == "mine"
 
 
 def test_yarn_show_unknown_and_bad_spec(tmp_path):
@@ -67,9 +69,9 @@ def test_fibers_inspect_validate(tmp_path, suffix, kind):
     png = tmp_path / "p.png"
     result = run(knitbake, "fibers", "cotton1", "-o", out, "--preview", png, "--json")
     assert result.exit_code == 0, result.output
-    summary = json.loads(result.output)
+    summary = json.loads(result.stdout)
     assert summary["regular"] == 225 and png.stat().st_size > 1000 and summary["preview"]["coverage"] > 0.1
-    info = json.loads(run(knitbake, "inspect", out, "--json").output)
+    info = json.loads(run(knitbake, "inspect", out, "--json").stdout)
     assert info["kind"] == kind and info["curves"] == summary["fibers"]
     valid = run(knitbake, "validate", out)
     assert valid.exit_code == 0 and "valid" in valid.output
@@ -100,13 +102,13 @@ def test_inspect_and_validate_pack(tmp_path):
     write_full(pack)
     result = run(knitbake, "inspect", pack)
     assert result.exit_code == 0 and "error" in result.output and "correction/xi_M" in result.output
-    info = json.loads(run(knitbake, "inspect", pack, "--json").output)
+    info = json.loads(run(knitbake, "inspect", pack, "--json").stdout)
     assert info["kind"] == "asset-pack" and all("error_estimate" in t for t in info["tables"].values())
     assert run(knitbake, "validate", pack).exit_code == 0
 
 
 def test_inspect_spec_and_unknown_files(tmp_path):
-    spec_info = json.loads(run(knitbake, "inspect", "data_formats/presets/silk2.toml", "--json").output)
+    spec_info = json.loads(run(knitbake, "inspect", "data_formats/presets/silk2.toml", "--json").stdout)
     assert spec_info["kind"] == "yarn-spec" and spec_info["name"] == "silk2"
     junk = tmp_path / "junk.bin"
     junk.write_bytes(b"\x00\x01 not a knit file")
@@ -119,6 +121,42 @@ def test_knitrun_convert_round_trip(tmp_path):
     assert run(knitbake, "fibers", "rayon2", "-o", bcc, "--no-flyaways").exit_code == 0
     assert run(knitrun, "convert", bcc, h5).exit_code == 0
     assert run(knitrun, "convert", h5, back).exit_code == 0
-    assert json.loads(run(knitbake, "inspect", back, "--json").output)["points"] == \
-        json.loads(run(knitbake, "inspect", bcc, "--json").output)["points"]
+    assert json.loads(run(knitbake, "inspect", back, "--json").stdout)["points"] == \
+        json.loads(run(knitbake, "inspect", bcc, "--json").stdout)["points"]
     assert_one_line_error(run(knitrun, "convert", "data_formats/presets/silk2.toml", tmp_path / "c.bcc"), "yarn-spec")
+
+
+def test_reference_renders_exr_png_and_json(tmp_path):
+    from data_formats.images import read_exr
+
+    scene = tmp_path / "s.toml"
+    curves = (Path("examples/scenes/straight_yarn.h5")).resolve()
+    scene.write_text(f'''format = "knit-scene"
+version = "1.0"
+units = "cm"
+[[yarns]]
+curves = "{curves}"
+yarn = "silk1"
+[camera]
+position = [0.0, 0.0, 1.0]
+look_at = [0.0, 0.0, 0.0]
+ortho_height = 0.12
+width = 48
+height = 16
+[[lights]]
+type = "directional"
+direction = [0.3, 1.0, 0.5]
+irradiance = [2.0, 2.0, 2.0]
+[[lights]]
+type = "environment"
+builtin = "sky"
+''')
+    out = tmp_path / "r.exr"
+    result = run(knitbake, "reference", scene, "-o", out, "--spp", 2, "--json")
+    assert result.exit_code == 0, result.output + result.stderr
+    summary = json.loads(result.stdout)
+    image = read_exr(out)
+    assert image.shape == (16, 48, 3) and np.all(np.isfinite(image)) and image.max() > 0
+    assert (tmp_path / "r.png").stat().st_size > 100 and summary["rays_per_s"] > 0 and summary["triangles"] > 0
+    assert_one_line_error(run(knitbake, "reference", scene, "-o", tmp_path / "r.png"), ".exr")
+    assert_one_line_error(run(knitbake, "reference", tmp_path / "none.toml", "-o", out), "none.toml")

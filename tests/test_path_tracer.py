@@ -13,6 +13,7 @@ from knitbake.fiber_set import FiberSet
 from knitbake.path_tracer import Camera, TracerScene, render
 from knitbake.procedural_yarn import generate_fibers
 from knitbake.tessellate import tessellate_fibers
+from knitrun import equirect
 from knitrun import fiber_bcsdf as fb
 
 DEG = math.pi / 180
@@ -127,9 +128,13 @@ def test_environment_sampling_pdf_is_consistent():
     n = 400
     theta = (np.arange(n) + 0.5) * np.pi / n
     phi = (np.arange(2 * n) + 0.5) * np.pi / n - np.pi
-    total = sum(env_pdf(env.radiance, env.pixel_prob, np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p),
-                                                                math.cos(t)])) * math.sin(t)
-                for t in theta for p in phi[::8]) * (np.pi / n) * (np.pi / n * 8)
+    d = np.empty(3)
+    total = 0.0
+    for t in theta:
+        for p in phi[::8]:
+            equirect.direction(t, p, d)
+            total += env_pdf(env.radiance, env.pixel_prob, d) * math.sin(t)
+    total *= (np.pi / n) * (np.pi / n * 8)
     assert total == pytest.approx(1.0, rel=0.01)
 
 
@@ -140,3 +145,23 @@ def test_bad_render_settings():
     with pytest.raises(ValueError, match="direction"):
         TracerScene(straight_fiber(), np.zeros(1, np.int32), LOSSLESS[None], light_dirs=np.zeros((1, 3)),
                     light_irradiance=np.ones((1, 3)))
+
+
+def test_yarn_only_mode_drops_scattering_off_other_yarns():
+    """With yarn_only_radius, a neighbour outside the cylinder adds no light: the image equals the image of the yarn
+    alone (same seeds); without the mode the neighbour's bounce light shows."""
+    def fiber(x):
+        return FiberSet(np.array([[x, 0, -2.0], [x, 0, 2.0]]), np.array([0, 2]), np.array([0.1]),
+                        np.zeros(1, np.int8), np.zeros(1, np.int16))
+
+    two = FiberSet(np.r_[fiber(0.0).points, fiber(0.5).points], np.array([0, 2, 4]), np.array([0.1, 0.1]),
+                   np.zeros(2, np.int8), np.zeros(2, np.int16))
+    light = dict(light_dirs=np.array([[0.0, 1.0, 0.0]]), light_irradiance=np.array([[1.0, 1.0, 1.0]]))
+    cam = Camera(np.array([0.0, 3.0, 0.0]), np.zeros(3), np.array([0, 0, 1.0]), 24, 24, ortho_height=0.4)
+    alone = TracerScene(tessellate_fibers(fiber(0.0), sides=12), np.zeros(1, np.int32), LOSSLESS[None], **light)
+    pair = TracerScene(tessellate_fibers(two, sides=12), np.zeros(2, np.int32), LOSSLESS[None], **light)
+    a, _ = render(alone, cam, spp=16, seed=9, yarn_only_radius=0.2)
+    b, _ = render(pair, cam, spp=16, seed=9, yarn_only_radius=0.2)
+    c, _ = render(pair, cam, spp=16, seed=9)
+    assert np.array_equal(a, b)
+    assert c.sum() > a.sum() * 1.01
