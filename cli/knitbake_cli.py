@@ -247,3 +247,90 @@ def reference(scene_path, output, spp, seed, max_depth, exposure, as_json):
         return
     click.echo(f"{output}: {stats.seconds:.1f} s, {stats.rays / 1e6:.1f} M rays, "
                f"{stats.rays_per_second / 1e6:.2f} M rays/s; preview {preview}")
+
+
+@main.command("bake")
+@click.argument("yarn_name", metavar="YARN")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True, help="The asset pack (.h5).")
+@click.option("--quality", type=click.Choice(["draft", "standard", "final"]), default="draft", show_default=True,
+              help="Resolution and sample counts of every table (the speed/accuracy trade: see BENCHMARKS.md).")
+@click.option("--only", default=None, help="Comma-separated table groups to bake (dual_scattering, correction, "
+                                           "shadowing, textures, flyaway, environment).")
+@click.option("--scene", "scene_path", type=click.Path(dir_okay=False), default=None,
+              help="Bake only what this scene needs (no I_M without environment light; texture size from the "
+                   "largest on-screen yarn width).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Same seed and settings → identical pack.")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="Worker threads (default: all cores).")
+@click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
+def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no_cache, as_json):
+    """Bake one yarn type into an asset pack: stage by stage, cached, with an error estimate for every table.
+
+    Example: knitbake bake cotton1 -o cotton1.h5 --quality draft
+    """
+    import numba
+
+    from knitbake.bake import bake, cache_dir, scene_needs
+
+    if not output.lower().endswith((".h5", ".hdf5")):
+        raise FormatError(f"{output}: output must end in .h5 or .hdf5")
+    spec = resolve_yarn(yarn_name)
+    needs = None
+    if scene_path:
+        from data_formats.scene import load_scene
+
+        scene = load_scene(scene_path)
+        if not any(e.spec.name == spec.name for e in scene.yarns):
+            raise FormatError(f"{scene_path}: no yarn of the scene is {spec.name!r}")
+        needs = scene_needs(scene, spec)
+    if threads:
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    bars = {}
+
+    def progress_factory(stage):
+        bar = click.progressbar(length=1, label=f"  {stage:<16}", file=sys.stderr, show_eta=True, show_percent=True)
+        bar.__enter__()
+        bars[stage] = bar
+
+        def progress(done, total):
+            bar.length = total
+            bar.update(done - bar.pos)
+            if done >= total:
+                bar.__exit__(None, None, None)
+        return progress
+
+    def on_stage(stage, index, count):
+        click.echo(f"[{index + 1}/{count}] {stage}", err=True)
+
+    t0 = time.perf_counter()
+    only_list = [o.strip() for o in only.split(",")] if only else None
+    summary = bake(spec, output, quality=quality, only=only_list, needs=needs, seed=seed, use_cache=not no_cache,
+                   on_stage=on_stage, progress_factory=progress_factory)
+    for bar in bars.values():
+        if not bar.finished:
+            bar.__exit__(None, None, None)
+    total = time.perf_counter() - t0
+    if as_json:
+        echo_json({"yarn": spec.name, "output": output, "quality": quality, "seed": seed, "seconds": total,
+                   "stages": summary, "needs": needs, "cache": str(cache_dir())})
+        return
+    click.echo(f"{'stage':<18}{'seconds':>9}  {'cached':<7}{'tables':>7}  error estimate (max)")
+    for stage, row in summary.items():
+        click.echo(f"{stage:<18}{row['seconds']:>9.2f}  {'yes' if row['cached'] else 'no':<7}{row['tables']:>7}  "
+                   f"{row['error_estimate']:.3g}")
+    click.echo(f"{spec.name} → {output} ({quality}, {total:.1f} s)")
+
+
+@main.command("export")
+@click.argument("pack", type=click.Path(dir_okay=False))
+@click.argument("out_dir", metavar="DIR", type=click.Path(file_okay=False))
+def export_command(pack, out_dir):
+    """Write a pack's textures as PNG/EXR and its tables as CSV (with axis values and errors) for other engines.
+
+    Example: knitbake export cotton1.h5 cotton1_export/
+    """
+    from data_formats.pack_export import export_pack
+
+    manifest = export_pack(pack, out_dir)
+    n_files = sum(len(f["files"]) for f in manifest["files"])
+    click.echo(f"{pack} → {out_dir}: {len(manifest['files'])} datasets, {n_files} files (manifest.json)")

@@ -183,6 +183,18 @@ def _leave_point(axis_pt, t, radius, hit, w, out):
 
 
 @njit(parallel=True, cache=True)
+def leave_points(prims, hits, dirs, tri_fiber, tri_segment, axis_points, tube_radius, out):
+    """Batch form of the leave-point rule: out[n] is where a ray in direction dirs[n] leaves the fiber hit at
+    hits[n] (triangle prims[n])."""
+    for n in prange(prims.shape[0]):
+        s = tri_segment[prims[n]]
+        a = axis_points[s]
+        t = axis_points[s + 1] - a
+        t /= math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+        _leave_point(a, t, tube_radius[tri_fiber[prims[n]]] * 1.0001, hits[n], dirs[n], out[n])
+
+
+@njit(parallel=True, cache=True)
 def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput, radiance, prev_pdf, tri_fiber, tri_segment,
            axis_points, tube_radius, fiber_type, params, light_dirs, light_irr, has_env, env_rad, env_row, env_col,
            env_prob, background, camera_background, rr_depth, yarn_only_r2, new_org, new_dirs, alive,

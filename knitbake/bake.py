@@ -1,0 +1,207 @@
+"""The bake: one yarn type → one asset pack, in cached stages.
+
+Stages (each a function ``(spec, settings, seed, progress) -> StageResult``; ``progress(done, total)``):
+
+| stage | tables | baked when |
+|---|---|---|
+| dual_scattering | ``dual_scattering/*`` | always |
+| correction | ``correction/*`` (ξ_M, ξ_N, residuals) | always |
+| shadowing | ``shadowing/*`` (Ψ^Fiber_{G,M}, Ψ^Fiber_{G,N}, residuals) | always |
+| textures | ``textures/{normal,tangent,ao,coverage}/mip*`` | always |
+| flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
+| environment | ``environment/I_M`` | no scene given, or the scene has an environment light |
+
+Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
+stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
+is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed), so an
+interrupted or partial re-bake reuses finished stages. Same seed and settings → identical pack contents whatever
+the thread count (every stage is deterministic for a seed).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from data_formats.asset_pack import write_pack
+from data_formats.yarn_spec import YarnSpec, dumps_spec
+
+CODE_VERSION = "0.1.0"
+STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment")
+
+QUALITY = {
+    "draft": {
+        "dual_scattering": {"n_theta": 32},
+        "correction": {"n_v": 8, "n_theta": 4, "n_phi": 4, "image": (32, 16), "spp": 8, "batches": 4},
+        "shadowing": {"n_v": 8, "n_theta": 6, "n_phi": 6, "rows": 32, "spp": 2, "batches": 3},
+        "textures": {"width": 128, "height": 32, "samples": 2, "ao_rays": 8},
+        "flyaway": {"width": 128, "height": 32, "samples": 2},
+        "environment": {"shape": (8, 8, 12, 8)},
+    },
+    "standard": {
+        "dual_scattering": {"n_theta": 64},
+        "correction": {"n_v": 16, "n_theta": 8, "n_phi": 8, "image": (64, 32), "spp": 16, "batches": 4},
+        "shadowing": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 64, "spp": 4, "batches": 4},
+        "textures": {"width": 256, "height": 64, "samples": 4, "ao_rays": 16},
+        "flyaway": {"width": 256, "height": 64, "samples": 4},
+        "environment": {"shape": (16, 16, 24, 12)},
+    },
+    "final": {
+        "dual_scattering": {"n_theta": 128},
+        "correction": {"n_v": 32, "n_theta": 8, "n_phi": 8, "image": (128, 64), "spp": 64, "batches": 8},
+        "shadowing": {"n_v": 32, "n_theta": 16, "n_phi": 16, "rows": 128, "spp": 8, "batches": 8},
+        "textures": {"width": 512, "height": 128, "samples": 6, "ao_rays": 32},
+        "flyaway": {"width": 512, "height": 128, "samples": 6},
+        "environment": {"shape": (24, 24, 32, 16)},
+    },
+}
+# Bump a stage's version when its code changes what it computes: old cache entries stop matching.
+STAGE_VERSION = {name: 1 for name in STAGE_ORDER}
+
+
+@dataclass
+class StageResult:
+    """Tables of one stage: arrays, their error (per-entry array or scalar), extra attributes, sample counts."""
+
+    tables: dict
+    errors: dict
+    attrs: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=dict)
+
+
+def cache_dir() -> Path:
+    root = os.environ.get("KNIT_CACHE_DIR") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "knit"
+    return Path(root) / "bake"
+
+
+def stage_key(stage: str, spec: YarnSpec, settings: dict, seed: int) -> str:
+    text = json.dumps({"stage": stage, "version": STAGE_VERSION[stage], "spec": dumps_spec(spec),
+                       "settings": settings, "seed": seed}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def _save_stage(path: Path, result: StageResult) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays = {f"t:{k}": v for k, v in result.tables.items()}
+    arrays.update({f"e:{k}": np.asarray(v) for k, v in result.errors.items()})
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, **arrays, meta=np.array(json.dumps({"attrs": result.attrs, "counts": result.counts})))
+    os.replace(tmp, path)
+
+
+def _load_stage(path: Path) -> StageResult | None:
+    try:
+        with np.load(path) as data:
+            meta = json.loads(str(data["meta"]))
+            tables = {k[2:]: data[k] for k in data.files if k.startswith("t:")}
+            errors = {k[2:]: (data[k] if data[k].ndim else float(data[k])) for k in data.files if k.startswith("e:")}
+    except (OSError, ValueError, KeyError):
+        return None  # unreadable cache entry: bake the stage again
+    return StageResult(tables, errors, meta["attrs"], meta["counts"])
+
+
+def _bake_shadowing(spec, settings, seed, progress) -> StageResult:
+    from knitbake.correction_bake import bake_shadowing
+
+    tables, errors = bake_shadowing(spec, seed=seed, progress=progress, **settings)
+    attrs = {name: {"error_kind": f"standard error of the mean over {settings['batches']} independent batches "
+                                  f"(fiber geometry and pixel jitter reseeded)"} for name in tables}
+    n_dirs = settings["n_theta"] * settings["n_phi"]
+    return StageResult(tables, errors, attrs, {"batches": settings["batches"], "directions": n_dirs,
+                                               "camera_samples_per_pixel": settings["spp"]})
+
+
+STAGES = {"shadowing": _bake_shadowing}
+
+
+def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None = None) -> list[str]:
+    """Stages to bake: all that apply to the yarn, narrowed by ``only`` (stage or table-group names) and by what a
+    scene needs (``scene_needs``)."""
+    stages = [s for s in STAGE_ORDER if s in STAGES and (s != "flyaway" or spec.has_flyaways)]
+    if needs is not None and not needs["environment"]:
+        stages.remove("environment")
+    if only:
+        unknown = [o for o in only if o not in STAGE_ORDER]
+        if unknown:
+            raise ValueError(f"--only {','.join(unknown)}: unknown table group (known: {', '.join(STAGE_ORDER)})")
+        stages = [s for s in stages if s in only]
+    return stages
+
+
+def scene_needs(scene, spec: YarnSpec) -> dict:
+    """What a scene needs of a yarn's pack: environment light or not, and the texture height in texels for the
+    largest on-screen yarn width (power of two, 8–512), width from the period/diameter aspect."""
+    from data_formats.scene import EnvironmentLight
+
+    cam = scene.camera
+    widths = []
+    for entry in scene.yarns:
+        if entry.spec.name != spec.name:
+            continue
+        if cam.ortho_height:
+            pixel = cam.ortho_height / cam.height
+        else:  # nearest plausible distance: the camera's distance to its look-at point
+            dist = float(np.linalg.norm(np.subtract(cam.look_at, cam.position)))
+            pixel = 2 * dist * math.tan(math.radians(cam.fov_deg) / 2) / cam.height
+        widths.append(2 * entry.radius / pixel)
+    height = int(min(512, max(8, 2 ** math.ceil(math.log2(max(widths or [8.0]))))))
+    width = int(min(4096, 2 ** math.ceil(math.log2(height * spec.geometry.ply_pitch / (2 * spec.radius)))))
+    return {"environment": any(isinstance(light, EnvironmentLight) for light in scene.lights),
+            "texture_height": height, "texture_width": width, "on_screen_width_px": max(widths or [0.0])}
+
+
+def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, seed: int = 0, use_cache=True,
+         on_stage=None, progress_factory=None) -> dict:
+    """Bake ``spec`` into the asset pack ``output``; returns the summary (per stage: seconds, cached, error).
+
+    ``on_stage(stage, index, count)`` is called as a stage starts; ``progress_factory(stage)`` returns the
+    ``progress(done, total)`` callback for that stage (both optional, for the CLI)."""
+    if quality not in QUALITY:
+        raise ValueError(f"quality {quality!r} is not one of {', '.join(QUALITY)}")
+    settings = {k: dict(v) for k, v in QUALITY[quality].items()}
+    if needs is not None:
+        for stage in ("textures", "flyaway"):
+            settings[stage]["height"] = needs["texture_height"]
+            settings[stage]["width"] = needs["texture_width"]
+    stages = stages_for(spec, only, needs)
+    tables, errors, attrs, counts, summary = {}, {}, {}, {}, {}
+    for i, stage in enumerate(stages):
+        if on_stage:
+            on_stage(stage, i, len(stages))
+        key = stage_key(stage, spec, settings[stage], seed)
+        path = cache_dir() / f"{stage}-{key}.npz"
+        t0 = time.perf_counter()
+        result = _load_stage(path) if use_cache and path.exists() else None
+        cached = result is not None
+        if result is None:
+            progress = progress_factory(stage) if progress_factory else None
+            result = STAGES[stage](spec, settings[stage], seed, progress)
+            if use_cache:
+                _save_stage(path, result)
+        tables.update(result.tables)
+        errors.update(result.errors)
+        attrs.update(result.attrs)
+        counts[stage] = result.counts
+        worst = max((float(np.max(e)) if np.ndim(e) else float(e)) for e in result.errors.values())
+        summary[stage] = {"seconds": time.perf_counter() - t0, "cached": cached, "tables": len(result.tables),
+                          "error_estimate": worst}
+    yarn = {"name": spec.name, "units": spec.units, "radius": spec.radius, "period": spec.geometry.ply_pitch,
+            "plies": spec.geometry.plies}
+    o = spec.optics
+    bcsdf = {"r_color": list(o.r_color), "tt_color": list(o.tt_color), "d_color": list(o.d_color),
+             "beta_r": math.radians(o.beta_r_deg), "beta_tt": math.radians(o.beta_tt_deg),
+             "gamma_tt": math.radians(o.gamma_tt_deg), "alpha_r": math.radians(o.alpha_r_deg),
+             "alpha_tt": math.radians(o.alpha_tt_deg)}
+    provenance = {"yarn_spec_toml": dumps_spec(spec),
+                  "bake_settings": {"quality": quality, "stages": stages, "settings": settings, "needs": needs},
+                  "seed": int(seed), "code_version": CODE_VERSION,
+                  "timings": {s: round(v["seconds"], 4) for s, v in summary.items()}, "sample_counts": counts}
+    write_pack(output, yarn, provenance, bcsdf, tables, errors, attrs)
+    return summary

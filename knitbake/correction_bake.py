@@ -1,0 +1,176 @@
+"""Bake the per-yarn corrections of seed 000 §4.3: the DS correction ξ ≈ ξ_M(v, θ_d) ξ_N(v, φ) and the fiber-level
+shadowing Ψ^Fiber_G ≈ Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ), each with a rank-1 factorization residual and per-entry
+standard errors from independent sample batches.
+
+Set-up (the conventions of ``data_formats/ASSET_PACK.md`` §3): one straight yarn of the spec, regular fibers only,
+along t = +z over three periods; the strip normal n = +x (toward the camera at θ_o = 0), b = n × t = −y, v = w/h
+with w the coordinate along b and h = spec.radius. A direction with longitudinal angle θ and azimuth φ (from n
+toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell (θ-index k, φ-index m):
+
+* **Shadowing** Ψ^Fiber_G(v; θ_i, φ): the camera looks along −n (θ_o = 0, φ_o = 0); the light comes from θ_i,
+  φ_i = −φ. For every camera sample that hits a fiber, visibility of the light from the far side of that fiber
+  (``path_tracer._leave_point``) through the other fibers: 1 or 0. Ψ^Fiber_G of a v-bin = mean visibility of the
+  hits in it.
+* **Correction** ξ(v; θ_d, φ) = Ψ_*/Ψ_DS: the camera looks from θ_o = θ_d, the light comes from θ_i = −θ_d,
+  φ_i = −φ (so (θ_o − θ_i)/2 = θ_d). Ψ_* is the path-traced radiance of the hits in the bin (multiple scattering
+  inside the yarn, ``yarn_only_radius``), Ψ_DS the dual-scattering estimate of the same hits
+  (``knitrun.dual_scattering``) with the fiber count toward the light measured on the explicit fibers; ξ of a
+  bin = Σ Ψ_* / Σ Ψ_DS.
+
+Each quantity is measured B times with independent seeds; tables hold the batch mean, ``*_stderr`` the standard
+error s/√B. The factorization X[k, m] ≈ a[k]·c[m] per (v, channel) is the leading singular pair of X (non-negative),
+scaled so that c has mean 1 over m; the residual is ‖X − a cᵀ‖_F / ‖X‖_F. Bins without any hit (beyond the fibers)
+get the value 1 and error 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from data_formats.yarn_spec import YarnSpec
+from knitbake.fiber_set import KIND_REGULAR
+from knitbake.path_tracer import Camera, TracerScene, leave_points, render
+from knitbake.procedural_yarn import generate_fibers
+from knitbake.tessellate import tessellate_fibers
+from knitrun.fiber_bcsdf import params_from_optics
+
+
+def cell_centres(lo, hi, n):
+    return lo + (np.arange(n) + 0.5) * (hi - lo) / n
+
+
+def yarn_direction(theta, phi):
+    """World direction (x = n, y = −b, z = t) of longitudinal angle θ and azimuth φ (from n toward b)."""
+    return np.array([math.cos(theta) * math.cos(phi), -math.cos(theta) * math.sin(phi), math.sin(theta)])
+
+
+def yarn_tracer(spec: YarnSpec, seed: int, light_dir=None) -> TracerScene:
+    """Regular fibers of three periods, z ∈ [−P, 2P], as a tracer scene lit by one unit directional light."""
+    period = spec.geometry.ply_pitch
+    fibers = generate_fibers(spec, length=3 * period, z_start=-period, seed=seed, flyaways=False)
+    fibers = fibers.select(fibers.kind == KIND_REGULAR)
+    mesh = tessellate_fibers(fibers, sides=6)
+    lights = {} if light_dir is None else {"light_dirs": light_dir[None], "light_irradiance": np.ones((1, 3))}
+    return TracerScene(mesh, np.zeros(fibers.n_fibers, np.int32), params_from_optics(spec.optics)[None], **lights)
+
+
+def strip_camera(spec: YarnSpec, theta_o: float, rows: int) -> Camera:
+    """Orthographic camera from direction θ_o (φ_o = 0) framing v ∈ [−1, 1] in ``rows`` rows and ≥ one period."""
+    h = spec.radius
+    period = spec.geometry.ply_pitch
+    wo = yarn_direction(theta_o, 0.0)
+    centre = np.array([0.0, 0.0, period / 2])
+    width = max(1, math.ceil(rows * period * math.cos(theta_o) / (2 * h)))
+    # image up = +y = −b, so image row r has v = −(1 − 2 (r + ½)/rows)
+    return Camera(centre + 4 * h * wo, centre, np.array([0.0, 1.0, 0.0]), width, rows, ortho_height=2 * h)
+
+
+def row_v(rows: int) -> np.ndarray:
+    return -(1 - 2 * (np.arange(rows) + 0.5) / rows)
+
+
+def factor_rank1(x: np.ndarray):
+    """x (N_v, K, M, 3) → a (N_v, K, 3), c (N_v, M, 3) with x ≈ a c per (v, channel), c of mean 1 over M; plus the
+    relative residual per v and overall."""
+    n_v, n_k, n_m, _ = x.shape
+    a = np.ones((n_v, n_k, 3))
+    c = np.ones((n_v, n_m, 3))
+    approx = np.empty_like(x)
+    for i in range(n_v):
+        for ch in range(3):
+            u, s, vt = np.linalg.svd(x[i, :, :, ch])
+            av, cv = np.abs(u[:, 0]) * s[0], np.abs(vt[0])
+            scale = cv.mean()
+            if scale > 0:
+                a[i, :, ch], c[i, :, ch] = av * scale, cv / scale
+            approx[i, :, :, ch] = np.outer(a[i, :, ch], c[i, :, ch])
+    err = ((x - approx) ** 2).sum(axis=(1, 2, 3))
+    norm = (x ** 2).sum(axis=(1, 2, 3))
+    by_v = np.sqrt(err / np.maximum(norm, 1e-300))
+    total = math.sqrt(err.sum() / max(norm.sum(), 1e-300))
+    return a, c, by_v, total
+
+
+def _bins(values, weights, rows_v, n_v):
+    """Per-v-bin sums of ``values`` (rows, cols, ...) and counts of ``weights`` (rows, cols) > 0."""
+    idx = np.clip(((rows_v + 1) / 2 * n_v).astype(int), 0, n_v - 1)
+    sums = np.zeros((n_v,) + values.shape[2:])
+    counts = np.zeros(n_v)
+    for r, b in enumerate(idx):
+        sums[b] += values[r].sum(axis=0)
+        counts[b] += weights[r].sum()
+    return sums, counts
+
+
+def _factored_tables(samples, prefix, names, n_v):
+    """Batch samples (B, N_v, K, M, 3) → factored tables, per-entry stderr of each factor, residuals."""
+    factors = [factor_rank1(s) for s in samples]
+    a = np.stack([f[0] for f in factors])
+    c = np.stack([f[1] for f in factors])
+    b = samples.shape[0]
+    mean_factors = factor_rank1(samples.mean(axis=0))
+    tables = {f"{prefix}/{names[0]}": mean_factors[0], f"{prefix}/{names[1]}": mean_factors[1],
+              f"{prefix}/{names[2]}": np.float64(mean_factors[3]), f"{prefix}/{names[2]}_by_v": mean_factors[2]}
+    errors = {f"{prefix}/{names[0]}": a.std(axis=0, ddof=1) / math.sqrt(b),
+              f"{prefix}/{names[1]}": c.std(axis=0, ddof=1) / math.sqrt(b),
+              f"{prefix}/{names[2]}": float(np.std([f[3] for f in factors], ddof=1) / math.sqrt(b)),
+              f"{prefix}/{names[2]}_by_v": np.stack([f[2] for f in factors]).std(axis=0, ddof=1) / math.sqrt(b)}
+    return tables, errors
+
+
+def bake_shadowing(spec: YarnSpec, n_v=8, n_theta=8, n_phi=8, rows=32, spp=4, batches=4, seed=0, progress=None):
+    """Ψ^Fiber_{G,M}, Ψ^Fiber_{G,N} and residuals (see module docstring); returns (tables, errors)."""
+    thetas = cell_centres(-math.pi / 2, math.pi / 2, n_theta)
+    phis = cell_centres(-math.pi, math.pi, n_phi)
+    samples = np.ones((batches, n_v, n_theta, n_phi, 3))
+    rows = max(rows, n_v)
+    total, done = batches * n_theta * n_phi, 0
+    for b in range(batches):
+        tracer = yarn_tracer(spec, seed + b)
+        cam = strip_camera(spec, 0.0, rows)
+        for k, th in enumerate(thetas):
+            for m, ph in enumerate(phis):
+                light = yarn_direction(th, -ph)
+                vis, hit = _visibility_image(tracer, cam, light, spp, seed + 1000 * b + 37 * k + m)
+                sums, counts = _bins(vis[..., None], hit, row_v(rows), n_v)
+                ok = counts > 0
+                samples[b, ok, k, m, :] = (sums[ok] / counts[ok][:, None])
+                done += 1
+                if progress:
+                    progress(done, total)
+    return _factored_tables(samples, "shadowing", ("psi_GM", "psi_GN", "psi_residual"), n_v)
+
+
+def _primary_hits(tracer, cam, rng):
+    """One jittered orthographic sample per pixel: (hit mask (H, W), hit points (n, 3), prims (n,), ray dirs)."""
+    fwd, right, up = cam.basis()
+    h, w = cam.height, cam.width
+    jy, jx = rng.random((h, w)), rng.random((h, w))
+    sx = (2 * (np.arange(w)[None] + jx) / w - 1) * w / h
+    sy = 1 - 2 * (np.arange(h)[:, None] + jy) / h
+    org = np.asarray(cam.position) + 0.5 * cam.ortho_height * (sx[..., None] * right + sy[..., None] * up)
+    org = org.reshape(-1, 3)
+    hits = tracer.ray_scene.intersect(org, np.tile(fwd, (org.shape[0], 1)))
+    idx = np.flatnonzero(hits.hit)
+    return hits.hit.reshape(h, w), org[idx] + hits.t[idx, None] * fwd, hits.prim[idx].astype(np.int64), idx
+
+
+def _visibility_image(tracer, cam, light, spp, seed):
+    """Per pixel: summed visibility of the light over the pixel's fiber hits, and the number of hits (spp samples).
+    Shadow rays leave each hit fiber by the tracer's own rule (``leave_points``)."""
+    rng = np.random.default_rng(seed)
+    mesh = tracer.mesh
+    vis = np.zeros((cam.height, cam.width))
+    hits_n = np.zeros((cam.height, cam.width))
+    for _ in range(spp):
+        mask, points, prims, idx = _primary_hits(tracer, cam, rng)
+        dirs = np.tile(light, (prims.size, 1))
+        start = np.empty_like(points)
+        leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
+        v = np.zeros(mask.size)
+        v[idx] = ~tracer.ray_scene.occluded(start, dirs, np.inf)
+        vis += v.reshape(mask.shape)
+        hits_n += mask
+    return vis, hits_n
