@@ -25,13 +25,17 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from data_formats.asset_pack import write_pack
 from data_formats.yarn_spec import YarnSpec, dumps_spec
+from knitbake.correction_bake import bake_correction_stage, bake_shadowing_stage
+from knitbake.ds_precompute import bake_dual_scattering_stage
+from knitbake.im_table import bake_im_table
+from knitbake.stage_result import StageResult
+from knitbake.texture_bake import bake_flyaway_stage, bake_regular_stage
 
 CODE_VERSION = "0.1.0"
 STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment")
@@ -39,24 +43,27 @@ STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyawa
 QUALITY = {
     "draft": {
         "dual_scattering": {"n_theta": 32},
-        "correction": {"n_v": 8, "n_theta": 4, "n_phi": 4, "image": (32, 16), "spp": 8, "batches": 4},
-        "shadowing": {"n_v": 8, "n_theta": 6, "n_phi": 6, "rows": 32, "spp": 2, "batches": 3},
+        "correction": {"n_v": 8, "n_theta": 4, "n_phi": 4, "rows": 16, "spp": 2, "batches": 2,
+                       "ds": {"n_theta": 32}},
+        "shadowing": {"n_v": 8, "n_theta": 4, "n_phi": 4, "rows": 16, "spp": 2, "batches": 2},
         "textures": {"width": 128, "height": 32, "samples": 2, "ao_rays": 8},
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (8, 8, 12, 8)},
     },
     "standard": {
         "dual_scattering": {"n_theta": 64},
-        "correction": {"n_v": 16, "n_theta": 8, "n_phi": 8, "image": (64, 32), "spp": 16, "batches": 4},
-        "shadowing": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 64, "spp": 4, "batches": 4},
+        "correction": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 32, "spp": 4, "batches": 3,
+                       "ds": {"n_theta": 64}},
+        "shadowing": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 32, "spp": 4, "batches": 3},
         "textures": {"width": 256, "height": 64, "samples": 4, "ao_rays": 16},
         "flyaway": {"width": 256, "height": 64, "samples": 4},
         "environment": {"shape": (16, 16, 24, 12)},
     },
     "final": {
         "dual_scattering": {"n_theta": 128},
-        "correction": {"n_v": 32, "n_theta": 8, "n_phi": 8, "image": (128, 64), "spp": 64, "batches": 8},
-        "shadowing": {"n_v": 32, "n_theta": 16, "n_phi": 16, "rows": 128, "spp": 8, "batches": 8},
+        "correction": {"n_v": 32, "n_theta": 8, "n_phi": 8, "rows": 64, "spp": 16, "batches": 8,
+                       "ds": {"n_theta": 128}},
+        "shadowing": {"n_v": 32, "n_theta": 16, "n_phi": 16, "rows": 64, "spp": 8, "batches": 8},
         "textures": {"width": 512, "height": 128, "samples": 6, "ao_rays": 32},
         "flyaway": {"width": 512, "height": 128, "samples": 6},
         "environment": {"shape": (24, 24, 32, 16)},
@@ -64,16 +71,6 @@ QUALITY = {
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.
 STAGE_VERSION = {name: 1 for name in STAGE_ORDER}
-
-
-@dataclass
-class StageResult:
-    """Tables of one stage: arrays, their error (per-entry array or scalar), extra attributes, sample counts."""
-
-    tables: dict
-    errors: dict
-    attrs: dict = field(default_factory=dict)
-    counts: dict = field(default_factory=dict)
 
 
 def cache_dir() -> Path:
@@ -107,24 +104,27 @@ def _load_stage(path: Path) -> StageResult | None:
     return StageResult(tables, errors, meta["attrs"], meta["counts"])
 
 
-def _bake_shadowing(spec, settings, seed, progress) -> StageResult:
-    from knitbake.correction_bake import bake_shadowing
+def bake_environment_stage(spec, settings, seed, progress=None) -> StageResult:
+    """Stage ``environment``: the I_M table by deterministic quadrature (the seed is unused); settings: shape."""
+    from knitrun.fiber_bcsdf import params_from_optics
 
-    tables, errors = bake_shadowing(spec, seed=seed, progress=progress, **settings)
-    attrs = {name: {"error_kind": f"standard error of the mean over {settings['batches']} independent batches "
-                                  f"(fiber geometry and pixel jitter reseeded)"} for name in tables}
-    n_dirs = settings["n_theta"] * settings["n_phi"]
-    return StageResult(tables, errors, attrs, {"batches": settings["batches"], "directions": n_dirs,
-                                               "camera_samples_per_pixel": settings["spp"]})
+    del seed
+    table, err, axes = bake_im_table(params_from_optics(spec.optics), shape=tuple(settings["shape"]),
+                                     progress=progress)
+    kind = "quadrature: |I(n) − I(n/2)| between Gauss–Legendre rules with n and n/2 nodes per panel"
+    return StageResult({"environment/I_M": table}, {"environment/I_M": err},
+                       {"environment/I_M": {"axes": axes, "error_kind": kind}}, {"shape": list(settings["shape"])})
 
 
-STAGES = {"shadowing": _bake_shadowing}
+STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
+          "shadowing": bake_shadowing_stage, "textures": bake_regular_stage, "flyaway": bake_flyaway_stage,
+          "environment": bake_environment_stage}
 
 
 def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None = None) -> list[str]:
     """Stages to bake: all that apply to the yarn, narrowed by ``only`` (stage or table-group names) and by what a
     scene needs (``scene_needs``)."""
-    stages = [s for s in STAGE_ORDER if s in STAGES and (s != "flyaway" or spec.has_flyaways)]
+    stages = [s for s in STAGE_ORDER if s != "flyaway" or spec.has_flyaways]
     if needs is not None and not needs["environment"]:
         stages.remove("environment")
     if only:
@@ -158,14 +158,15 @@ def scene_needs(scene, spec: YarnSpec) -> dict:
 
 
 def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, seed: int = 0, use_cache=True,
-         on_stage=None, progress_factory=None) -> dict:
+         on_stage=None, progress_factory=None, overrides=None) -> dict:
     """Bake ``spec`` into the asset pack ``output``; returns the summary (per stage: seconds, cached, error).
 
+    ``overrides`` (stage → settings) replaces individual settings of the quality preset (tests, sweeps).
     ``on_stage(stage, index, count)`` is called as a stage starts; ``progress_factory(stage)`` returns the
     ``progress(done, total)`` callback for that stage (both optional, for the CLI)."""
     if quality not in QUALITY:
         raise ValueError(f"quality {quality!r} is not one of {', '.join(QUALITY)}")
-    settings = {k: dict(v) for k, v in QUALITY[quality].items()}
+    settings = {k: {**v, **(overrides or {}).get(k, {})} for k, v in QUALITY[quality].items()}
     if needs is not None:
         for stage in ("textures", "flyaway"):
             settings[stage]["height"] = needs["texture_height"]

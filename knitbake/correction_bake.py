@@ -29,10 +29,11 @@ import math
 
 import numpy as np
 
-from data_formats.yarn_spec import YarnSpec
+from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.fiber_set import KIND_REGULAR
 from knitbake.path_tracer import Camera, TracerScene, leave_points, render
 from knitbake.procedural_yarn import generate_fibers
+from knitbake.stage_result import StageResult
 from knitbake.tessellate import tessellate_fibers
 from knitrun.fiber_bcsdf import params_from_optics
 
@@ -46,14 +47,26 @@ def yarn_direction(theta, phi):
     return np.array([math.cos(theta) * math.cos(phi), -math.cos(theta) * math.sin(phi), math.sin(theta)])
 
 
-def yarn_tracer(spec: YarnSpec, seed: int, light_dir=None) -> TracerScene:
-    """Regular fibers of three periods, z ∈ [−P, 2P], as a tracer scene lit by one unit directional light."""
+_GEOMETRY_MEMO: dict = {}
+
+
+def yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
+    """Regular fibers of three periods, z ∈ [−P, 2P], as an unlit tracer scene (memoised per spec and seed, so
+    the correction and shadowing stages of one bake build each batch's geometry once)."""
+    key = (dumps_spec(spec), seed)
+    if key not in _GEOMETRY_MEMO:
+        if len(_GEOMETRY_MEMO) >= 8:
+            _GEOMETRY_MEMO.clear()
+        _GEOMETRY_MEMO[key] = _build_yarn_tracer(spec, seed)
+    return _GEOMETRY_MEMO[key]
+
+
+def _build_yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
     period = spec.geometry.ply_pitch
     fibers = generate_fibers(spec, length=3 * period, z_start=-period, seed=seed, flyaways=False)
     fibers = fibers.select(fibers.kind == KIND_REGULAR)
     mesh = tessellate_fibers(fibers, sides=6)
-    lights = {} if light_dir is None else {"light_dirs": light_dir[None], "light_irradiance": np.ones((1, 3))}
-    return TracerScene(mesh, np.zeros(fibers.n_fibers, np.int32), params_from_optics(spec.optics)[None], **lights)
+    return TracerScene(mesh, np.zeros(fibers.n_fibers, np.int32), params_from_optics(spec.optics)[None])
 
 
 def strip_camera(spec: YarnSpec, theta_o: float, rows: int) -> Camera:
@@ -174,3 +187,117 @@ def _visibility_image(tracer, cam, light, spp, seed):
         vis += v.reshape(mask.shape)
         hits_n += mask
     return vis, hits_n
+
+
+def fibers_toward(tracer, prims, points, light, max_fibers=256):
+    """Number of fibers a ray from each hit (leaving its own fiber) toward ``light`` crosses before escaping."""
+    mesh = tracer.mesh
+    dirs = np.tile(light, (prims.size, 1))
+    start = np.empty_like(points)
+    leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
+    count = np.zeros(prims.size, np.int64)
+    live = np.arange(prims.size)
+    for _ in range(max_fibers):
+        if live.size == 0:
+            break
+        hits = tracer.ray_scene.intersect(start[live], dirs[live])
+        live, start_live = live[hits.hit], start[live][hits.hit]
+        count[live] += 1
+        p = start_live + hits.t[hits.hit, None] * dirs[live]
+        nxt = np.empty_like(p)
+        leave_points(hits.prim[hits.hit].astype(np.int64), p, dirs[live], mesh.tri_fiber, mesh.tri_segment,
+                     mesh.axis_points, mesh.tube_radius, nxt)
+        start[live] = nxt
+    return count
+
+
+def fiber_frames(tracer, prims):
+    """Unit fiber tangents at hit triangles (from their axis segments)."""
+    mesh = tracer.mesh
+    seg = mesh.tri_segment[prims]
+    t = mesh.axis_points[seg + 1] - mesh.axis_points[seg]
+    return t / np.linalg.norm(t, axis=1, keepdims=True)
+
+
+def _signed_azimuth(t, w_o, w_i):
+    """φ = φ_o − φ_i about unit tangents t (rows), for unit directions w_o, w_i (rows or one vector)."""
+    o = w_o - (w_o * t).sum(-1, keepdims=True) * t
+    i = w_i - (w_i * t).sum(-1, keepdims=True) * t
+    return np.arctan2((np.cross(i, o) * t).sum(-1), (i * o).sum(-1))
+
+
+def _ds_image(tracer, cam, light, spp, seed, ds_tables, params):
+    """Per pixel: mean DS radiance per unit irradiance (``knitrun.dual_scattering.evaluate_ds``) of the pixel's
+    fiber hits, fiber angles in each hit fiber's frame, n_front counted on the explicit fibers (misses add 0)."""
+    from knitrun.dual_scattering import evaluate_ds
+
+    rng = np.random.default_rng(seed)
+    fwd = cam.basis()[0]
+    img = np.zeros((cam.height * cam.width, 3))
+    for _ in range(spp):
+        _, points, prims, idx = _primary_hits(tracer, cam, rng)
+        t = fiber_frames(tracer, prims)
+        w_o = np.broadcast_to(-fwd, t.shape)
+        w_i = np.broadcast_to(light, t.shape)
+        theta_o = np.arcsin(np.clip((w_o * t).sum(-1), -1, 1))
+        theta_i = np.arcsin(np.clip((w_i * t).sum(-1), -1, 1))
+        n_front = fibers_toward(tracer, prims, points, light)
+        img[idx] += evaluate_ds(ds_tables, theta_i, theta_o, _signed_azimuth(t, w_o, w_i), n_front, params=params)
+    return (img / spp).reshape(cam.height, cam.width, 3)
+
+
+def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, rows=32, spp=8, batches=4,
+                    max_depth=16, seed=0, progress=None):
+    """ξ_M, ξ_N and residuals (see module docstring); ``ds_tables``: the baked ``dual_scattering/*`` arrays.
+    Returns (tables, errors)."""
+    thetas = cell_centres(-math.pi / 2, math.pi / 2, n_theta)
+    phis = cell_centres(-math.pi, math.pi, n_phi)
+    params = params_from_optics(spec.optics)
+    samples = np.ones((batches, n_v, n_theta, n_phi, 3))
+    rows = max(rows, n_v)
+    total, done = batches * n_theta * n_phi, 0
+    for b in range(batches):
+        geometry = yarn_tracer(spec, seed + b)
+        for k, th_d in enumerate(thetas):
+            cam = strip_camera(spec, th_d, rows)
+            for m, ph in enumerate(phis):
+                light = yarn_direction(-th_d, -ph)
+                lit = TracerScene(geometry.mesh, geometry.fiber_type, geometry.params, light_dirs=light[None],
+                                  light_irradiance=np.ones((1, 3)), ray_scene=geometry.ray_scene)
+                s = seed + 1000 * b + 37 * k + m
+                traced, _ = render(lit, cam, spp, seed=s, max_depth=max_depth)
+                ds = _ds_image(geometry, cam, light, spp, s, ds_tables, params)
+                num, _ = _bins(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
+                den, _ = _bins(ds, np.ones(ds.shape[:2]), row_v(rows), n_v)
+                ok = np.all(den > 1e-12 * max(den.max(), 1e-300), axis=1)
+                samples[b, ok, k, m] = num[ok] / den[ok]
+                done += 1
+                if progress:
+                    progress(done, total)
+    return _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"), n_v)
+
+
+def bake_shadowing_stage(spec, settings, seed, progress=None) -> StageResult:
+    """Stage ``shadowing`` of ``knitbake.bake``: settings n_v, n_theta, n_phi, rows, spp, batches."""
+    tables, errors = bake_shadowing(spec, seed=seed, progress=progress, **settings)
+    kind = (f"standard error of the mean over {settings['batches']} independent batches (fiber geometry and "
+            f"pixel jitter reseeded)")
+    return StageResult(tables, errors, {name: {"error_kind": kind} for name in tables},
+                       {"batches": settings["batches"], "directions": settings["n_theta"] * settings["n_phi"],
+                        "camera_samples_per_pixel": settings["spp"]})
+
+
+def bake_correction_stage(spec, settings, seed, progress=None) -> StageResult:
+    """Stage ``correction`` of ``knitbake.bake``: settings n_v, n_theta, n_phi, rows, spp, batches, and ``ds`` —
+    the dual-scattering quadrature settings, the same as the pack's own dual_scattering stage, since ξ divides by
+    the DS estimate the runtime computes from those tables."""
+    from knitbake.ds_precompute import precompute_dual_scattering
+
+    ds = {k: v[0] for k, v in precompute_dual_scattering(params_from_optics(spec.optics), **settings["ds"]).items()}
+    tables, errors = bake_correction(spec, ds, seed=seed, progress=progress,
+                                     **{k: v for k, v in settings.items() if k != "ds"})
+    kind = (f"standard error of the mean over {settings['batches']} independent batches (fiber geometry, paths and "
+            f"pixel jitter reseeded)")
+    return StageResult(tables, errors, {name: {"error_kind": kind} for name in tables},
+                       {"batches": settings["batches"], "paths_per_pixel": settings["spp"],
+                        "directions": settings["n_theta"] * settings["n_phi"]})

@@ -51,6 +51,8 @@ from data_formats.asset_pack import cell_centres
 from knitrun.dual_scattering import D_B, TABLE_NAMES, backscatter_terms, tt_front_fraction
 from knitrun.fiber_bcsdf import (HALF_PI, N_PARAMS, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R,
                                  P_BETA_TT, P_GAMMA_TT, _lobe_centre)
+from knitbake.stage_result import StageResult
+from knitrun.fiber_bcsdf import params_from_optics
 from knitrun.table_lookup import THETA_RANGE
 
 D_THETA_H_VAR = (math.pi ** 2 / 12.0 - 0.5) / 4.0  # variance of θ_h = (θ + θ')/2 for θ' ~ cos²θ'/(π/2)
@@ -130,3 +132,13 @@ def precompute_dual_scattering(params, n_theta: int = 64, quality: int = 64, d_b
     fine = _tables(p, theta, int(quality), d_b)
     coarse = _tables(p, theta, int(quality) // 2, d_b)
     return {name: (np.ascontiguousarray(fine[k]), np.abs(fine[k] - coarse[k])) for k, name in enumerate(TABLE_NAMES)}
+
+
+def bake_dual_scattering_stage(spec, settings, seed, progress=None) -> StageResult:
+    """Stage ``dual_scattering`` of ``knitbake.bake`` (deterministic: the seed is unused); settings: n_theta."""
+    del seed
+    out = precompute_dual_scattering(params_from_optics(spec.optics), **settings)
+    if progress:
+        progress(1, 1)
+    return StageResult({k: v[0] for k, v in out.items()}, {k: v[1] for k, v in out.items()},
+                       {k: {"error_kind": ERROR_KIND} for k in out}, {"quadrature": dict(settings)})

@@ -71,6 +71,7 @@ import math
 import numpy as np
 
 from data_formats.yarn_spec import YarnSpec
+from knitbake.stage_result import StageResult
 from knitbake.fiber_set import KIND_REGULAR, FiberSet
 from knitbake.procedural_yarn import generate_fibers
 from knitbake.ray_scene import RayScene
@@ -441,9 +442,7 @@ def bake_textures(spec: YarnSpec, width: int = 256, height: int = 64, samples: i
     return out
 
 
-def _stage(out: dict, counts: dict):
-    from knitbake.bake import StageResult
-
+def _stage(out: dict, counts: dict) -> StageResult:
     return StageResult({k: v[0] for k, v in out.items()}, {k: v[1] for k, v in out.items()},
                        {k: v[2] for k, v in out.items()}, counts)
 

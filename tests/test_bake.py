@@ -1,0 +1,120 @@
+"""The bake end to end on a tiny configuration: a valid, finite, error-barred pack; determinism across thread
+counts; stage caching; what a scene needs; the CLI contract of `knitbake bake` and `knitbake export`."""
+
+import dataclasses
+import json
+
+import numba
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cli.knitbake_cli import main as knitbake
+from data_formats.asset_pack import read_pack, validate
+from data_formats.yarn_spec import load_preset
+from knitbake.bake import STAGE_ORDER, bake, scene_needs, stages_for
+
+TINY = {
+    "dual_scattering": {"n_theta": 8},
+    "correction": {"n_v": 4, "n_theta": 2, "n_phi": 2, "rows": 8, "spp": 1, "batches": 2, "ds": {"n_theta": 8}},
+    "shadowing": {"n_v": 4, "n_theta": 2, "n_phi": 2, "rows": 8, "spp": 1, "batches": 2},
+    "textures": {"width": 32, "height": 8, "samples": 1, "ao_rays": 2},
+    "flyaway": {"width": 32, "height": 8, "samples": 1},
+    "environment": {"shape": (3, 3, 4, 3)},
+}
+
+
+def small_yarn():
+    spec = load_preset("silk1")
+    return dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=12))
+
+
+@pytest.fixture(scope="module")
+def tiny_pack(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bake") / "p.h5"
+    summary = bake(small_yarn(), out, overrides=TINY, seed=3, use_cache=False)
+    return out, summary
+
+
+def test_pack_is_valid_finite_and_error_barred(tiny_pack):
+    out, summary = tiny_pack
+    assert validate(out) == []
+    pack = read_pack(out)
+    assert set(summary) == set(STAGE_ORDER)
+    for name, table in pack.tables.items():
+        assert np.all(np.isfinite(table)), name
+        assert np.isfinite(pack.info[name].error_estimate), name
+    prov = pack.provenance
+    assert set(prov["timings"]) == set(STAGE_ORDER) and prov["seed"] == 3
+    assert prov["sample_counts"]["correction"]["batches"] == 2
+    assert "correction/xi_residual" in pack.tables and "shadowing/psi_residual" in pack.tables
+
+
+def test_same_seed_same_pack_whatever_the_thread_count(tiny_pack, tmp_path):
+    out, _ = tiny_pack
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        bake(small_yarn(), tmp_path / "one.h5", overrides=TINY, seed=3, use_cache=False,
+             only=["correction", "textures", "environment"])
+    finally:
+        numba.set_num_threads(before)
+    a, b = read_pack(out), read_pack(tmp_path / "one.h5")
+    for name, table in b.tables.items():
+        assert np.array_equal(table, a.tables[name]), name
+
+
+def test_stages_are_cached_and_reused(tmp_path, monkeypatch):
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(tmp_path / "cache"))
+    first = bake(small_yarn(), tmp_path / "a.h5", overrides=TINY, only=["shadowing", "dual_scattering"])
+    second = bake(small_yarn(), tmp_path / "b.h5", overrides=TINY, only=["shadowing", "dual_scattering"])
+    assert not any(r["cached"] for r in first.values()) and all(r["cached"] for r in second.values())
+    a, b = read_pack(tmp_path / "a.h5"), read_pack(tmp_path / "b.h5")
+    assert all(np.array_equal(a.tables[n], b.tables[n]) for n in a.tables)
+    third = bake(small_yarn(), tmp_path / "c.h5", overrides=TINY, only=["shadowing"], seed=4)
+    assert not third["shadowing"]["cached"]  # another seed is another input
+
+
+def test_only_what_the_yarn_and_scene_need():
+    spec = small_yarn()
+    bare = dataclasses.replace(spec, flyaways=dataclasses.replace(spec.flyaways, hair_density=0.0, loop_density=0.0))
+    assert "flyaway" not in stages_for(bare) and "flyaway" in stages_for(spec)
+    assert "environment" not in stages_for(spec, needs={"environment": False})
+    with pytest.raises(ValueError, match="unknown table group"):
+        stages_for(spec, only=["xi"])
+
+
+def test_scene_sets_texture_size_and_environment():
+    from data_formats.scene import load_scene
+
+    scene = load_scene("examples/scenes/straight_yarn_directional.toml")
+    needs = scene_needs(scene, load_preset("cotton1"))
+    assert needs["environment"] is False
+    # 2 × 0.0297 cm across, 0.3 cm over 256 px → about 51 px → 64 texels
+    assert needs["texture_height"] == 64 and needs["texture_width"] >= needs["texture_height"]
+    sky = scene_needs(load_scene("examples/scenes/straight_yarn_sky.toml"), load_preset("cotton1"))
+    assert sky["environment"] is True
+
+
+def test_cli_bake_inspect_export(tmp_path, monkeypatch):
+    import knitbake.bake as bake_module
+
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(tmp_path / "cache"))
+    tiny = {q: {k: {**v, **TINY[k]} for k, v in stages.items()} for q, stages in bake_module.QUALITY.items()}
+    monkeypatch.setattr(bake_module, "QUALITY", tiny)
+    out = tmp_path / "c.h5"
+    runner = CliRunner()
+    result = runner.invoke(knitbake, ["bake", "silk1", "-o", str(out), "--only", "shadowing,textures", "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert set(summary["stages"]) == {"shadowing", "textures"}
+    inspect = runner.invoke(knitbake, ["inspect", str(out)])
+    assert "shadowing/psi_residual" in inspect.stdout and "error" in inspect.stdout
+    export = runner.invoke(knitbake, ["export", str(out), str(tmp_path / "exp")])
+    assert export.exit_code == 0
+    manifest = json.loads((tmp_path / "exp" / "manifest.json").read_text())
+    assert any(f["dataset"] == "textures/normal/mip0" for f in manifest["files"])
+    assert (tmp_path / "exp" / "normal_mip0.png").exists() and (tmp_path / "exp" / "shadowing_psi_GM.csv").exists()
+    bad = runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "x.h5"), "--only", "nope"])
+    assert bad.exit_code == 1 and "unknown table group" in bad.stderr and not (tmp_path / "x.h5").exists()
+    assert runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "x.txt")]).exit_code == 1
