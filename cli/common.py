@@ -14,7 +14,7 @@ import click
 import numpy as np
 
 from data_formats import FormatError, asset_pack, bcc, scene, stitch_mesh, yarn_curves, yarn_spec
-from data_formats.yarn_curves import HDF5_MAGIC
+from data_formats.hdf5_fields import HDF5_MAGIC
 
 # Recognised by content, most specific first: (kind, module with sniff/describe/validate).
 FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),

@@ -30,6 +30,7 @@ import numpy as np
 
 from .atomic import atomic_path
 from .errors import FormatError
+from .hdf5_fields import HDF5_MAGIC
 from .yarn_spec import UNITS as LENGTH_UNITS
 
 if sys.version_info >= (3, 11):
@@ -40,7 +41,6 @@ else:  # pragma: no cover
 FORMAT_NAME = "knit-asset-pack"
 SCHEMA_VERSION = "1.0"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
-HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
 COMPRESS_BYTES = 1 << 16  # datasets at least this large are stored gzip(4)+shuffle

@@ -21,7 +21,6 @@ Wavefront OBJ with a stitch-label sidecar. The full spec is ``STITCH_MESH.md``; 
 """
 
 import dataclasses
-import re
 from pathlib import Path
 
 import h5py
@@ -29,10 +28,11 @@ import numpy as np
 
 from .atomic import atomic_path
 from .errors import FormatError
+from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
 
 FORMAT_NAME = "knit-stitch-mesh"
 FORMAT_VERSION = "1.0"
-HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+
 STITCH_TYPES = ("knit", "purl", "yarn_over", "k2tog", "ssk")  # code = index
 LOOPS_CONSUMED = np.array([1, 1, 0, 2, 2], dtype=np.int64)  # bottom edges per stitch type
 EDGE_NAMES = ("bottom", "right", "top", "left")  # edge kinds 0..3
@@ -414,111 +414,54 @@ def read_stitch_mesh(path):
     try:
         f = h5py.File(path, "r")
     except (OSError, ValueError) as e:
-        raise FormatError(f"{where}: not a readable HDF5 file ({_one_line(e)}), expected a {FORMAT_NAME} file")
+        raise FormatError(f"{where}: not a readable HDF5 file ({one_line(e)}), expected a {FORMAT_NAME} file")
     with f:
-        _check_format_attrs(f, where)
-        names = _string_dataset(f, "stitch_types", where)
+        check_format_attrs(f, where, FORMAT_NAME, FORMAT_VERSION)
+        names = string_dataset(f, "stitch_types", where)
         unknown = [n for n in names if n not in STITCH_TYPES]
         if unknown:
             raise FormatError(f"{where}: stitch_types: unknown stitch type {unknown[0]!r:.40}, expected names from "
                               f"{', '.join(STITCH_TYPES)}")
-        codes = _dataset(f, "stitch_type", "iu", where)
+        codes = dataset(f, "stitch_type", "iu", where)
         bad = np.flatnonzero((codes < 0) | (codes >= len(names)))
         if bad.size:
             raise FormatError(f"{where}: face {bad[0]}: stitch_type = {codes.flat[bad[0]]}, expected an index "
                               f"0..{len(names) - 1} into stitch_types")
-        direction = _dataset(f, "yarn_direction", "i", where)
+        direction = dataset(f, "yarn_direction", "i", where)
         bad = np.flatnonzero(np.abs(direction) != 1)
         if bad.size:
             raise FormatError(f"{where}: yarn_direction[{bad[0]}] = {direction.flat[bad[0]]}, expected +1 "
                               f"(left -> right) or -1 (right -> left)")
-        yarn_type = _dataset(f, "yarn_type", "iu", where)
+        yarn_type = dataset(f, "yarn_type", "iu", where)
         if yarn_type.size and (yarn_type.min() < -2**31 or yarn_type.max() >= 2**31):
             raise FormatError(f"{where}: yarn_type: values outside int32, expected indices into yarn_types")
-        fields = {name: _dataset(f, name, "iu", where) for name in INDEX_FIELDS}
+        fields = {name: dataset(f, name, "iu", where) for name in INDEX_FIELDS}
         for name, arr in fields.items():
             if arr.dtype == np.uint64 and arr.size and arr.max() >= 2**63:
                 raise FormatError(f"{where}: {name}: value {arr.max()} does not fit int64")
         m = StitchMesh(
-            vertices=_dataset(f, "vertices", "f", where).astype(np.float64),
+            vertices=dataset(f, "vertices", "f", where).astype(np.float64),
             stitch_type=np.array([STITCH_TYPES.index(n) for n in names], np.int8)[codes],  # by name, not code
             yarn_direction=direction.astype(np.int8),
             yarn_type=yarn_type.astype(np.int32),
-            yarn_types=_string_dataset(f, "yarn_types", where),
-            units=_str_attr(f, "units", where),
+            yarn_types=string_dataset(f, "yarn_types", where),
+            units=str_attr(f, "units", where),
             **{name: arr.astype(np.int64) for name, arr in fields.items()},
         )
     validate_stitch_mesh(m, where)
     return m
 
 
-def _one_line(e):
-    return " ".join(str(e).split())
-
-
-def _str_attr(f, name, where):
-    if name not in f.attrs:
-        raise FormatError(f"{where}: missing root attribute {name!r}")
-    value = f.attrs[name]
-    if isinstance(value, bytes):
-        value = value.decode("utf-8", "replace")
-    if not isinstance(value, str):
-        raise FormatError(f"{where}: attribute {name}: got {value!r:.40}, expected a string")
-    return value
-
-
-def _check_format_attrs(f, where):
-    fmt = _str_attr(f, "format", where)
-    if fmt != FORMAT_NAME:
-        raise FormatError(f"{where}: attribute format = {fmt!r:.60}, expected {FORMAT_NAME!r}")
-    version = _str_attr(f, "version", where)
-    match = re.fullmatch(r"(\d+)\.(\d+)", version)
-    if not match:
-        raise FormatError(f"{where}: attribute version = {version!r:.40}, expected 'MAJOR.MINOR' such as "
-                          f"{FORMAT_VERSION!r}")
-    if match[1] != FORMAT_VERSION.split(".")[0]:
-        raise FormatError(f"{where}: unsupported {FORMAT_NAME} version {version}, this reader supports "
-                          f"{FORMAT_VERSION.split('.')[0]}.x")
-
-
-def _dataset(f, name, kinds, where):
-    obj = f.get(name)
-    if obj is None:
-        raise FormatError(f"{where}: missing dataset {name!r}")
-    if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in kinds:
-        raise FormatError(f"{where}: {name}: got {getattr(obj, 'dtype', type(obj).__name__)}, "
-                          f"expected a numeric dataset of kind {kinds!r}")
-    return np.asarray(obj[()])
-
-
-def _string_dataset(f, name, where):
-    obj = f.get(name)
-    if obj is None:
-        raise FormatError(f"{where}: missing dataset {name!r}")
-    if not isinstance(obj, h5py.Dataset) or h5py.check_string_dtype(obj.dtype) is None or obj.ndim != 1:
-        raise FormatError(f"{where}: {name}: got {getattr(obj, 'dtype', type(obj).__name__)} "
-                          f"{getattr(obj, 'shape', '')}, expected a 1-D string dataset")
-    return [str(s) for s in obj.asstr()[()]]
-
-
 def sniff(path):
     """True if ``path`` is an HDF5 file whose root attribute ``format`` is ``"knit-stitch-mesh"``; never raises."""
-    try:
-        with open(path, "rb") as fh:
-            if fh.read(8) != HDF5_MAGIC:
-                return False
-        with h5py.File(path, "r") as f:
-            fmt = f.attrs.get("format")
-        return (fmt.decode() if isinstance(fmt, bytes) else fmt) == FORMAT_NAME
-    except Exception:
-        return False
+    return sniff_hdf5(path, FORMAT_NAME)
 
 
 def describe(path):
     """JSON-serializable summary of a knit-stitch-mesh file; raises ``FormatError`` if the file is invalid."""
     m = read_stitch_mesh(path)
     with h5py.File(path, "r") as f:
-        version = _str_attr(f, "version", str(path))
+        version = str_attr(f, "version", str(path))
     return {"kind": "stitch-mesh", "version": version, **summary(m)}
 
 
@@ -533,7 +476,7 @@ def _problems(read, *args):
     except FormatError as e:
         return [str(e)]
     except Exception as e:  # corrupt HDF5 internals surface as assorted h5py errors
-        return [f"{args[0]}: unreadable ({type(e).__name__}: {_one_line(e)})"]
+        return [f"{args[0]}: unreadable ({type(e).__name__}: {one_line(e)})"]
     return []
 
 
@@ -585,7 +528,7 @@ def _read_text(path, where):
     except UnicodeDecodeError as e:
         raise FormatError(f"{where}: not UTF-8 text (byte {e.start}), expected a text file")
     except OSError as e:
-        raise FormatError(f"{where}: cannot read ({_one_line(e)})")
+        raise FormatError(f"{where}: cannot read ({one_line(e)})")
 
 
 def _parse_obj(path, where):

@@ -14,18 +14,18 @@ Conventions (the full spec is ``YARN_CURVES.md``):
 """
 
 import dataclasses
-import re
 
 import h5py
 import numpy as np
 
 from .atomic import atomic_path
 from .errors import FormatError
+from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
 
 FORMAT_NAME = "knit-yarn-curves"
 FORMAT_VERSION = "1.0"
 CURVE_TYPES = ("PL", "C0", "BS", "BZ")
-HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+
 
 
 @dataclasses.dataclass
@@ -211,104 +211,47 @@ def read_yarn_curves(path):
     try:
         f = h5py.File(path, "r")
     except (OSError, ValueError) as e:
-        raise FormatError(f"{where}: not a readable HDF5 file ({_one_line(e)}), expected a knit-yarn-curves file")
+        raise FormatError(f"{where}: not a readable HDF5 file ({one_line(e)}), expected a knit-yarn-curves file")
     with f:
-        _check_format_attrs(f, where)
-        points = _dataset(f, "points", "f", where)
+        check_format_attrs(f, where, FORMAT_NAME, FORMAT_VERSION)
+        points = dataset(f, "points", "f", where)
         if points.dtype not in (np.float32, np.float64):
             raise FormatError(f"{where}: points: dtype {points.dtype}, expected float32 or float64")
-        closed = _dataset(f, "closed", "biu", where)
+        closed = dataset(f, "closed", "biu", where)
         if closed.size and not np.isin(closed, (0, 1)).all():
             raise FormatError(f"{where}: closed: values {sorted(set(np.unique(closed).tolist()))[:4]}, expected 0 or 1")
-        yarn_type = _dataset(f, "yarn_type", "iu", where)
+        yarn_type = dataset(f, "yarn_type", "iu", where)
         if yarn_type.size and (yarn_type.min() < -2**31 or yarn_type.max() >= 2**31):
             raise FormatError(f"{where}: yarn_type: values outside int32, expected indices into yarn_types")
-        yarn_types = _string_dataset(f, "yarn_types", where)
+        yarn_types = string_dataset(f, "yarn_types", where)
         frame_time = f.attrs.get("frame_time")
         if frame_time is not None and not (np.ndim(frame_time) == 0 and np.issubdtype(type(frame_time), np.number)):
             raise FormatError(f"{where}: attribute frame_time: got {frame_time!r:.40}, expected a number of seconds")
         yc = YarnCurves(
             points=points.astype(np.float64),
-            offsets=_dataset(f, "offsets", "iu", where).astype(np.int64),
+            offsets=dataset(f, "offsets", "iu", where).astype(np.int64),
             closed=closed.astype(bool),
             yarn_type=yarn_type.astype(np.int32),
             yarn_types=yarn_types,
-            rest_arclength=_dataset(f, "rest_arclength", "f", where).astype(np.float64),
-            curve_type=_str_attr(f, "curve_type", where),
-            units=_str_attr(f, "units", where),
+            rest_arclength=dataset(f, "rest_arclength", "f", where).astype(np.float64),
+            curve_type=str_attr(f, "curve_type", where),
+            units=str_attr(f, "units", where),
             frame_time=None if frame_time is None else float(frame_time),
         )
     validate_curves(yc, where)
     return yc
 
 
-def _one_line(e):
-    return " ".join(str(e).split())
-
-
-def _str_attr(f, name, where):
-    if name not in f.attrs:
-        raise FormatError(f"{where}: missing root attribute {name!r}")
-    value = f.attrs[name]
-    if isinstance(value, bytes):
-        value = value.decode("utf-8", "replace")
-    if not isinstance(value, str):
-        raise FormatError(f"{where}: attribute {name}: got {value!r:.40}, expected a string")
-    return value
-
-
-def _check_format_attrs(f, where):
-    fmt = _str_attr(f, "format", where)
-    if fmt != FORMAT_NAME:
-        raise FormatError(f"{where}: attribute format = {fmt!r:.60}, expected {FORMAT_NAME!r}")
-    version = _str_attr(f, "version", where)
-    match = re.fullmatch(r"(\d+)\.(\d+)", version)
-    if not match:
-        raise FormatError(f"{where}: attribute version = {version!r:.40}, expected 'MAJOR.MINOR' such as "
-                          f"{FORMAT_VERSION!r}")
-    if match[1] != FORMAT_VERSION.split(".")[0]:
-        raise FormatError(f"{where}: unsupported {FORMAT_NAME} version {version}, this reader supports "
-                          f"{FORMAT_VERSION.split('.')[0]}.x")
-
-
-def _dataset(f, name, kinds, where):
-    obj = f.get(name)
-    if obj is None:
-        raise FormatError(f"{where}: missing dataset {name!r}")
-    if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in kinds:
-        raise FormatError(f"{where}: {name}: got {getattr(obj, 'dtype', type(obj).__name__)}, "
-                          f"expected a numeric dataset of kind {kinds!r}")
-    return np.asarray(obj[()])
-
-
-def _string_dataset(f, name, where):
-    obj = f.get(name)
-    if obj is None:
-        raise FormatError(f"{where}: missing dataset {name!r}")
-    if not isinstance(obj, h5py.Dataset) or h5py.check_string_dtype(obj.dtype) is None or obj.ndim != 1:
-        raise FormatError(f"{where}: {name}: got {getattr(obj, 'dtype', type(obj).__name__)} "
-                          f"{getattr(obj, 'shape', '')}, expected a 1-D string dataset")
-    return [str(s) for s in obj.asstr()[()]]
-
-
 def sniff(path):
     """True if ``path`` is an HDF5 file whose root attribute ``format`` is ``"knit-yarn-curves"``; never raises."""
-    try:
-        with open(path, "rb") as fh:
-            if fh.read(8) != HDF5_MAGIC:
-                return False
-        with h5py.File(path, "r") as f:
-            fmt = f.attrs.get("format")
-        return (fmt.decode() if isinstance(fmt, bytes) else fmt) == FORMAT_NAME
-    except Exception:
-        return False
+    return sniff_hdf5(path, FORMAT_NAME)
 
 
 def describe(path):
     """JSON-serializable summary of a knit-yarn-curves file; raises ``FormatError`` if the file is invalid."""
     yc = read_yarn_curves(path)
     with h5py.File(path, "r") as f:
-        version, points_dtype = _str_attr(f, "version", str(path)), str(f["points"].dtype)
+        version, points_dtype = str_attr(f, "version", str(path)), str(f["points"].dtype)
     return {"kind": "yarn-curves", "version": version, "points_dtype": points_dtype, **summary(yc)}
 
 
@@ -319,5 +262,5 @@ def validate(path):
     except FormatError as e:
         return [str(e)]
     except Exception as e:  # corrupt HDF5 internals surface as assorted h5py errors
-        return [f"{path}: unreadable ({type(e).__name__}: {_one_line(e)})"]
+        return [f"{path}: unreadable ({type(e).__name__}: {one_line(e)})"]
     return []
