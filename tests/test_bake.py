@@ -55,11 +55,11 @@ def test_same_seed_same_pack_whatever_the_thread_count(tiny_pack, tmp_path):
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        bake(small_yarn(), tmp_path / "one.h5", overrides=TINY, seed=3, use_cache=False,
-             only=["correction", "textures", "environment"])
+        bake(small_yarn(), tmp_path / "one.h5", overrides=TINY, seed=3, use_cache=False)
     finally:
         numba.set_num_threads(before)
     a, b = read_pack(out), read_pack(tmp_path / "one.h5")
+    assert set(a.tables) == set(b.tables)
     for name, table in b.tables.items():
         assert np.array_equal(table, a.tables[name]), name
 
