@@ -12,8 +12,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from data_formats.asset_pack import read_pack
+from data_formats.asset_pack import read_pack, validate
 from data_formats.yarn_spec import resolve_yarn
+from knitbake import correction_bake
 from knitbake.bake import bake
 
 
@@ -28,6 +29,7 @@ def main():
              overrides={"correction": {"batches": 2, "n_theta": 2, "n_phi": 2}})
         print(f"{'quality':<10}{'stage':<17}{'seconds':>9}{'tables':>8}  {'max error':>10}  residual")
         for quality in args.qualities.split(","):
+            correction_bake._GEOMETRY_MEMO.clear()  # each quality builds its own fiber geometry, as a fresh process
             t0 = time.perf_counter()
             out = Path(tmp) / f"{quality}.h5"
             summary = bake(spec, out, quality, use_cache=False)
@@ -39,7 +41,9 @@ def main():
                 res = f"{residual[stage]:.3f}" if stage in residual else ""
                 print(f"{quality:<10}{stage:<17}{row['seconds']:>9.1f}{row['tables']:>8}  "
                       f"{row['error_estimate']:>10.3g}  {res}")
-            print(f"{quality:<10}{'TOTAL':<17}{total:>9.1f}   pack {out.stat().st_size / 2**20:.1f} MiB")
+            problems = validate(out)
+            print(f"{quality:<10}{'TOTAL':<17}{total:>9.1f}   pack {out.stat().st_size / 2**20:.1f} MiB, "
+                  f"validate: {'ok' if not problems else problems}")
 
 
 if __name__ == "__main__":
