@@ -37,6 +37,8 @@ bench: setup
 	$(BIN)/python benchmarks/bench_ray_scene.py --preset cotton1
 	$(BIN)/python benchmarks/bench_ray_scene.py --preset rayon1
 	$(BIN)/python benchmarks/bench_reference.py
+	$(BIN)/python benchmarks/bench_knots.py
+	$(BIN)/python benchmarks/bench_bake.py
 
 # Regenerate data_formats/presets/ from ../shared/reference (the measured tables).
 presets: setup

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from cli.common import FriendlyGroup, file_kind
+from cli.common import FriendlyGroup, echo_json, file_kind
 from data_formats import FormatError
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 110}
@@ -20,6 +20,8 @@ def main():
     \b
     Examples:
       knitrun convert yarns.h5 yarns.bcc
+      knitrun pattern eyelet --rows 16 --cols 16 -o eyelet.h5
+      knitrun simulate eyelet.h5 --deform stretch-x=1.5 --frames 31 -o yarns.h5
     """
 
 
@@ -54,3 +56,116 @@ def convert(source, target, frame, units):
     else:
         raise FormatError(f"{target}: target must end in .bcc, .h5 or .hdf5")
     click.echo(f"{source} ({kind}, {len(curves.closed)} curves) → {target}")
+
+
+def _read_mesh(path):
+    """A stitch mesh from our HDF5 file or an OBJ (+ its .labels sidecar), by content / extension."""
+    from data_formats import stitch_mesh
+
+    if Path(path).suffix.lower() == ".obj":
+        return stitch_mesh.read_obj_stitch_mesh(path)
+    if not Path(path).is_file():
+        raise FormatError(f"{path}: no such file")
+    if not stitch_mesh.sniff(path):
+        raise FormatError(f"{path}: not a stitch mesh, expected a knit-stitch-mesh .h5 file or an .obj (+ .labels)")
+    return stitch_mesh.read_stitch_mesh(path)
+
+
+@main.command()
+@click.argument("source")
+@click.option("--rows", type=click.IntRange(min=1), help="Courses of a named pattern.  [default: 12]")
+@click.option("--cols", type=click.IntRange(min=1), help="Stitches per course of a named pattern.  [default: 12]")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="MESH.h5 (knit-stitch-mesh) or MESH.obj (also writes MESH.labels).")
+@click.option("--json", "as_json", is_flag=True, help="Print the mesh summary as JSON.")
+def pattern(source, rows, cols, output, as_json):
+    """Stitch mesh from a knit chart file or a named pattern (SOURCE).
+
+    A chart is text, top course first: k knit, p purl, o yarn-over, / k2tog, \\ ssk (data_formats/STITCH_MESH.md).
+    Named patterns: stockinette, garter, rib1x1, rib2x2, seed, diamond, eyelet.
+
+    \b
+    Examples:
+      knitrun pattern eyelet --rows 16 --cols 16 -o eyelet.h5
+      knitrun pattern my_chart.txt -o patch.obj
+    """
+    from data_formats.stitch_mesh import summary, write_obj_stitch_mesh, write_stitch_mesh
+    from knitrun.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
+
+    suffix = Path(output).suffix.lower()
+    if suffix not in (".h5", ".hdf5", ".obj"):
+        raise FormatError(f"{output}: output must end in .h5, .hdf5 or .obj")
+    if Path(source).is_file():
+        if rows is not None or cols is not None:
+            raise FormatError(f"--rows/--cols size a named pattern, but {source} is a chart file")
+        mesh = chart_to_mesh(Path(source).read_text(encoding="utf-8"), where=source)
+    elif source in PATTERNS:
+        mesh = chart_to_mesh(pattern_chart(source, rows or 12, cols or 12), where=f"pattern {source}")
+    else:
+        raise FormatError(f"{source}: neither a chart file nor a pattern name, expected a file or one of "
+                          f"{', '.join(PATTERNS)}")
+    (write_obj_stitch_mesh if suffix == ".obj" else write_stitch_mesh)(output, mesh)
+    info = {"output": output, **summary(mesh)}
+    if as_json:
+        echo_json(info)
+    else:
+        click.echo(f"{source} → {output}: {info['faces']} faces in {info['courses']} courses "
+                   f"({', '.join(f'{n} {k}' for k, n in info['faces_per_stitch_type'].items())})")
+
+
+@main.command()
+@click.argument("mesh_path", metavar="MESH")
+@click.option("--deform", "deforms", multiple=True, metavar="NAME=VALUE",
+              help="Built-in deformation, repeatable, applied in order: stretch-x=S, stretch-y=S, shear=G, "
+                   "cylinder=RADIUS.")
+@click.option("--frames", type=click.IntRange(min=1),
+              help="Frames: 1 = the full deformation; N > 1 = stretch and release (rest, full at the middle, rest).  "
+                   "[default: 1]")
+@click.option("--obj-dir", type=click.Path(file_okay=False),
+              help="Folder of OBJ frames with the mesh's topology (instead of --deform/--frames).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="YARNS.h5 (all frames) or YARNS.bcc (the last frame).")
+@click.option("--iterations", type=click.IntRange(min=0), default=3, show_default=True,
+              help="Gauss-Newton iterations per frame.")
+@click.option("--w-length", type=float, default=100.0, show_default=True, help="Weight of the length energy.")
+@click.option("--beta", type=float, default=1.0, show_default=True,
+              help="Knot spacing blend: 1 interpolates knots with the mesh, 0 keeps their rest spacing.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, beta, as_json):
+    """Knot simulation: yarn curves of a stitch mesh (.h5, or .obj + .labels) driven by deformations or OBJ frames.
+
+    Reports milliseconds per frame (median; Numba compile or cache load excluded) and the final energy.
+
+    \b
+    Examples:
+      knitrun simulate eyelet.h5 --deform stretch-x=1.5 --deform shear=0.3 --frames 31 -o yarns.h5
+      knitrun simulate patch.obj --obj-dir frames/ -o yarns.h5 --json
+      knitrun simulate patch.obj --deform cylinder=2.0 -o bent.bcc
+    """
+    from data_formats.bcc import write_bcc
+    from data_formats.yarn_curves import write_yarn_curves
+    from knitrun.deformations import deformation_frames, parse_deformation, read_obj_frames
+    from knitrun.simulate import simulate as run_simulation
+
+    suffix = Path(output).suffix.lower()
+    if suffix not in (".h5", ".hdf5", ".bcc"):
+        raise FormatError(f"{output}: output must end in .h5, .hdf5 or .bcc")
+    if obj_dir is not None and (deforms or frames is not None):
+        raise FormatError("--obj-dir gives the frames: use it without --deform and --frames")
+    specs = [parse_deformation(spec) for spec in deforms]
+    mesh = _read_mesh(mesh_path)
+    vertex_frames = read_obj_frames(obj_dir, mesh) if obj_dir is not None else \
+        deformation_frames(mesh.vertices, specs, frames or 1)
+    curves, report = run_simulation(mesh, vertex_frames, iterations=iterations, w_length=w_length, beta=beta)
+    if suffix == ".bcc":
+        write_bcc(output, curves, frame=curves.points.shape[0] - 1)
+    else:
+        write_yarn_curves(output, curves)
+    report = {"mesh": mesh_path, "output": output, **{k: v for k, v in report.items() if k != "ms_per_frame"}}
+    if as_json:
+        echo_json(report)
+    else:
+        click.echo(f"{mesh_path} → {output}: {report['faces']} faces, {report['frames']} frame(s), "
+                   f"{report['render_points']} points in {report['curves']} curves; "
+                   f"{report['ms_per_frame_median']:.2f} ms/frame (median, {report['threads']} threads); "
+                   f"final energy {report['final_energy']:.6g}")

@@ -498,7 +498,7 @@ def read_obj_stitch_mesh(obj_path, labels_path=None, units="cm", yarn_type="unkn
     ``labels_path_for(obj_path)`` if it exists, otherwise every face is knit. Adjacency, courses and one yarn are
     derived as in ``make_stitch_mesh``; OBJ carries no units or yarn data, hence ``units`` and ``yarn_type``."""
     where = str(obj_path)
-    vertices, face_offsets, face_vertices, face_lines = _parse_obj(obj_path, where)
+    vertices, face_offsets, face_vertices, face_lines = parse_obj(obj_path, where)
     n_faces = len(face_offsets) - 1
     labels_path = _resolve_labels(obj_path, labels_path)
     if labels_path is None:
@@ -531,7 +531,7 @@ def _read_text(path, where):
         raise FormatError(f"{where}: cannot read ({one_line(e)})")
 
 
-def _parse_obj(path, where):
+def parse_obj(path, where):
     vertices, vertex_lines, faces, face_lines = [], [], [], []
     for lineno, line in enumerate(_read_text(path, where).splitlines(), 1):
         tokens = line.split("#", 1)[0].split()
