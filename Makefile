@@ -15,7 +15,8 @@ $(BIN)/knitbake: pyproject.toml
 	@touch $@
 
 # What exists so far: list the presets, generate two yarns' fibers with preview images, inspect and validate them,
-# path-trace the example straight yarn under the built-in sky.
+# path-trace the example straight yarn under the built-in sky, bake a draft asset pack, and simulate a stretched
+# diamond-pattern patch (the strip renderer that will draw it is the next issue).
 demo: setup
 	@mkdir -p $(OUT)
 	$(BIN)/knitbake yarn list
@@ -24,6 +25,10 @@ demo: setup
 	$(BIN)/knitbake inspect $(OUT)/rayon1_fibers.h5
 	$(BIN)/knitbake validate $(OUT)/cotton1_fibers.bcc
 	$(BIN)/knitbake reference examples/scenes/straight_yarn_sky.toml -o $(OUT)/straight_yarn_sky.exr --spp 16
+	$(BIN)/knitbake bake cotton1 --quality draft -o $(OUT)/cotton1_draft.h5
+	$(BIN)/knitbake inspect $(OUT)/cotton1_draft.h5
+	$(BIN)/knitrun pattern diamond --rows 12 --cols 12 -o $(OUT)/diamond.h5
+	$(BIN)/knitrun simulate $(OUT)/diamond.h5 --deform stretch-x=1.4 --frames 9 -o $(OUT)/diamond_yarns.h5
 	@echo "demo outputs in $(OUT)/ (open the *_preview.png images)"
 
 test: setup
