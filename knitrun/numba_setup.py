@@ -3,7 +3,7 @@
 * Compiled kernels are cached on disk (``cache=True``) so compile cost is paid once per machine. The cache lives in
   ``$NUMBA_CACHE_DIR`` if set, else in ``~/.cache/knit/numba`` (a writable folder even when the package is
   installed read-only). This module must be imported before numba compiles anything; ``knitrun/__init__`` does.
-* Kernels never use ``fastmath=True`` (it drops NaN/Inf checks); ``FASTMATH`` is the flag set that keeps them.
+* Kernels never turn on all of fastmath (that drops NaN/Inf checks); ``FASTMATH`` is the flag set that keeps them.
 """
 
 import os
