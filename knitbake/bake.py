@@ -61,9 +61,9 @@ QUALITY = {
     },
     "final": {
         "dual_scattering": {"n_theta": 128},
-        "correction": {"n_v": 32, "n_theta": 8, "n_phi": 8, "rows": 64, "spp": 16, "batches": 8,
+        "correction": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 32, "spp": 8, "batches": 4,
                        "ds": {"n_theta": 128}},
-        "shadowing": {"n_v": 32, "n_theta": 16, "n_phi": 16, "rows": 64, "spp": 8, "batches": 8},
+        "shadowing": {"n_v": 32, "n_theta": 16, "n_phi": 16, "rows": 64, "spp": 8, "batches": 4},
         "textures": {"width": 512, "height": 128, "samples": 6, "ao_rays": 32},
         "flyaway": {"width": 512, "height": 128, "samples": 6},
         "environment": {"shape": (24, 24, 32, 16)},
