@@ -31,7 +31,7 @@ import numpy as np
 
 from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.fiber_set import KIND_REGULAR
-from knitbake.path_tracer import Camera, TracerScene, leave_points, render
+from knitbake.path_tracer import Camera, TracerScene, _camera_rays, leave_points, render
 from knitbake.procedural_yarn import generate_fibers
 from knitbake.stage_result import StageResult
 from knitbake.tessellate import tessellate_fibers
@@ -156,29 +156,28 @@ def bake_shadowing(spec: YarnSpec, n_v=8, n_theta=8, n_phi=8, rows=32, spp=4, ba
     return _factored_tables(samples, "shadowing", ("psi_GM", "psi_GN", "psi_residual"), n_v)
 
 
-def _primary_hits(tracer, cam, rng):
-    """One jittered orthographic sample per pixel: (hit mask (H, W), hit points (n, 3), prims (n,), ray dirs)."""
+def _primary_hits(tracer, cam, seed, sample):
+    """Camera sample ``sample`` of every pixel — exactly the primary rays ``path_tracer.render`` traces for this
+    seed, so the path-traced and DS images share their hits (common random numbers: the ratio ξ loses the
+    coverage noise). Returns (hit mask (H, W), hit points (n, 3), prims (n,), flat pixel indices (n,))."""
     fwd, right, up = cam.basis()
     h, w = cam.height, cam.width
-    jy, jx = rng.random((h, w)), rng.random((h, w))
-    sx = (2 * (np.arange(w)[None] + jx) / w - 1) * w / h
-    sy = 1 - 2 * (np.arange(h)[:, None] + jy) / h
-    org = np.asarray(cam.position) + 0.5 * cam.ortho_height * (sx[..., None] * right + sy[..., None] * up)
-    org = org.reshape(-1, 3)
-    hits = tracer.ray_scene.intersect(org, np.tile(fwd, (org.shape[0], 1)))
+    org, dirs = np.empty((h * w, 3)), np.empty((h * w, 3))
+    _camera_rays(np.asarray(cam.position, float), fwd, right, up, w, h, math.tan(math.radians(cam.fov_deg) / 2),
+                 float(cam.ortho_height), seed, sample, 1, org, dirs)
+    hits = tracer.ray_scene.intersect(org, dirs)
     idx = np.flatnonzero(hits.hit)
-    return hits.hit.reshape(h, w), org[idx] + hits.t[idx, None] * fwd, hits.prim[idx].astype(np.int64), idx
+    return hits.hit.reshape(h, w), org[idx] + hits.t[idx, None] * dirs[idx], hits.prim[idx].astype(np.int64), idx
 
 
 def _visibility_image(tracer, cam, light, spp, seed):
     """Per pixel: summed visibility of the light over the pixel's fiber hits, and the number of hits (spp samples).
     Shadow rays leave each hit fiber by the tracer's own rule (``leave_points``)."""
-    rng = np.random.default_rng(seed)
     mesh = tracer.mesh
     vis = np.zeros((cam.height, cam.width))
     hits_n = np.zeros((cam.height, cam.width))
-    for _ in range(spp):
-        mask, points, prims, idx = _primary_hits(tracer, cam, rng)
+    for sample in range(spp):
+        mask, points, prims, idx = _primary_hits(tracer, cam, seed, sample)
         dirs = np.tile(light, (prims.size, 1))
         start = np.empty_like(points)
         leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
@@ -231,11 +230,10 @@ def _ds_image(tracer, cam, light, spp, seed, ds_tables, params):
     fiber hits, fiber angles in each hit fiber's frame, n_front counted on the explicit fibers (misses add 0)."""
     from knitrun.dual_scattering import evaluate_ds
 
-    rng = np.random.default_rng(seed)
     fwd = cam.basis()[0]
     img = np.zeros((cam.height * cam.width, 3))
-    for _ in range(spp):
-        _, points, prims, idx = _primary_hits(tracer, cam, rng)
+    for sample in range(spp):
+        _, points, prims, idx = _primary_hits(tracer, cam, seed, sample)
         t = fiber_frames(tracer, prims)
         w_o = np.broadcast_to(-fwd, t.shape)
         w_i = np.broadcast_to(light, t.shape)
