@@ -117,7 +117,7 @@ def _bins(values, weights, rows_v, n_v):
     return sums, counts
 
 
-def _factored_tables(samples, prefix, names, n_v):
+def _factored_tables(samples, prefix, names):
     """Batch samples (B, N_v, K, M, 3) → factored tables, per-entry stderr of each factor, residuals."""
     factors = [factor_rank1(s) for s in samples]
     a = np.stack([f[0] for f in factors])
@@ -153,7 +153,7 @@ def bake_shadowing(spec: YarnSpec, n_v=8, n_theta=8, n_phi=8, rows=32, spp=4, ba
                 done += 1
                 if progress:
                     progress(done, total)
-    return _factored_tables(samples, "shadowing", ("psi_GM", "psi_GN", "psi_residual"), n_v)
+    return _factored_tables(samples, "shadowing", ("psi_GM", "psi_GN", "psi_residual"))
 
 
 def _primary_hits(tracer, cam, seed, sample):
@@ -272,7 +272,7 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
                 done += 1
                 if progress:
                     progress(done, total)
-    return _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"), n_v)
+    return _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"))
 
 
 def bake_shadowing_stage(spec, settings, seed, progress=None) -> StageResult:
