@@ -118,3 +118,15 @@ def test_cli_bake_inspect_export(tmp_path, monkeypatch):
     bad = runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "x.h5"), "--only", "nope"])
     assert bad.exit_code == 1 and "unknown table group" in bad.stderr and not (tmp_path / "x.h5").exists()
     assert runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "x.txt")]).exit_code == 1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("quality", ["draft", "standard", "final"])
+def test_every_quality_bakes_a_valid_pack(quality, tmp_path):
+    """The real presets (no overrides): `knitbake validate` passes and no table holds NaN/Inf (minutes each)."""
+    out = tmp_path / f"{quality}.h5"
+    summary = bake(load_preset("cotton1"), out, quality=quality, use_cache=False)
+    assert set(summary) == set(STAGE_ORDER)
+    assert validate(out) == []
+    pack = read_pack(out)
+    assert all(np.all(np.isfinite(t)) for t in pack.tables.values())
