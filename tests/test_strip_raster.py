@@ -1,0 +1,185 @@
+"""Strip rasterizer: analytic coverage, depth test, perspective-correct arc length, v across the strip, MSAA
+coverage, crack-free joints, determinism across thread counts, camera projection, and degenerate input."""
+
+import numba
+import numpy as np
+import pytest
+
+from knitrun.camera import Camera, project, tan_half_fov
+from knitrun.strip_raster import SAMPLE_PATTERNS, rasterize_strips
+
+Z_UP = np.array([0.0, 0.0, 1.0])
+Y_UP = np.array([0.0, 1.0, 0.0])
+
+
+def ortho_camera(width=64, height=48, view_height=4.0, distance=5.0):
+    """Orthographic camera looking down −z at the origin: 1 px = view_height / height scene units, +y up."""
+    return Camera(np.array([0.0, 0.0, distance]), np.zeros(3), Y_UP, width, height, ortho_height=view_height)
+
+
+def single(points, camera, radius=0.25, rest=None, msaa=1, **kw):
+    points = np.asarray(points, float)
+    if rest is None:
+        rest = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    return rasterize_strips(points, [0, len(points)], [False], rest, radius, [7], camera, msaa=msaa, **kw)
+
+
+def finite(g):
+    return all(np.isfinite(a).all() for a in (g.depth, g.arclength, g.v, g.tangent))
+
+
+def test_straight_strip_area_matches_analytic():
+    cam = ortho_camera()
+    px = cam.ortho_height / cam.height
+    a, b = np.array([-1.23, -0.31, 0.2]), np.array([1.41, 0.52, -0.4])
+    radius = 0.17
+    g = single([a, b], cam, radius=radius, msaa=4)
+    length_px = np.linalg.norm((b - a)[:2]) / px  # the camera looks along z: the visible length
+    area_px = 2 * radius / px * length_px
+    assert abs(g.coverage.mean(axis=2).sum() - area_px) < length_px / 4  # well within one pixel row
+    assert np.all(g.yarn[g.coverage] == 7) and np.all(g.curve[g.coverage] == 0) and np.all(g.segment[g.coverage] == 0)
+    assert np.all(g.curve[~g.coverage] == -1) and np.all(g.depth[~g.coverage] == 0)
+    t = (b - a) / np.linalg.norm(b - a)
+    assert np.allclose(g.tangent[g.coverage], t, atol=1e-6)
+
+
+def test_depth_test_keeps_the_nearer_strip_in_any_order():
+    cam = Camera(np.array([0.0, 0.0, 6.0]), np.zeros(3), Y_UP, 64, 64, fov_deg=40.0)
+    horizontal = [[-1.0, 0.0, 0.3], [1.0, 0.0, 0.3]]  # nearer to the camera
+    vertical = [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]]
+    for order in ((horizontal, vertical), (vertical, horizontal)):
+        pts = np.array(order[0] + order[1])
+        g = rasterize_strips(pts, [0, 2, 4], [False, False], [0, 2.0, 0, 2.0], 0.2, [0, 1], cam, msaa=4)
+        near_curve = 0 if order[0] is horizontal else 1
+        assert np.all(g.curve[30:34, 30:34] == near_curve)
+        assert np.allclose(g.depth[32, 32], 6.0 - 0.3, atol=0.02)
+        assert np.all(g.curve[20:24, 31:33] == 1 - near_curve)  # only the vertical strip reaches the top
+
+
+def test_arclength_is_perspective_correct_and_linear_in_rest_length():
+    cam = Camera(np.array([0.3, -0.2, 3.0]), np.zeros(3), Y_UP, 96, 64, fov_deg=50.0)
+    a, b = np.array([-1.5, -0.2, -2.0]), np.array([1.5, 0.3, 1.0])  # strongly foreshortened
+    g = single([a, b], cam, radius=0.05, rest=[1.0, 7.0], msaa=4)
+    fwd, right, up = cam.basis()
+    rows, cols, samples = np.nonzero(g.coverage)
+    assert len(rows) > 100
+    pattern = SAMPLE_PATTERNS[4][samples]
+    sx = (2 * (cols + pattern[:, 0]) - cam.width) / cam.height
+    sy = 1 - 2 * (rows + pattern[:, 1]) / cam.height
+    rays = fwd + tan_half_fov(cam) * (sx[:, None] * right + sy[:, None] * up)
+    hits = cam.position + g.depth[rows, cols, samples][:, None] * rays / np.linalg.norm(rays, axis=1, keepdims=True)
+    along = (hits - a) @ (b - a) / np.linalg.norm(b - a) ** 2  # 0 at a, 1 at b
+    assert np.allclose(g.arclength[rows, cols, samples], 1.0 + 6.0 * along, atol=2e-3)
+
+
+def test_v_spans_the_strip_from_minus_b_to_plus_b():
+    cam = ortho_camera()
+    radius = 0.3
+    g = single([[-1.0, 0.01, 0.0], [1.0, 0.01, 0.0]], cam, radius=radius, msaa=8)
+    # b = ω_o × t = z × x = +y: v = (y − 0.01) / radius at every covered sample.
+    rows, cols, samples = np.nonzero(g.coverage)
+    y = (1 - 2 * (rows + SAMPLE_PATTERNS[8][samples, 1]) / cam.height) * cam.ortho_height / 2
+    assert np.allclose(g.v[rows, cols, samples], (y - 0.01) / radius, atol=1e-5)
+    assert g.v[g.coverage].min() < -0.95 and g.v[g.coverage].max() > 0.95
+    assert np.allclose(g.depth[g.coverage], 5.0)
+
+
+@pytest.mark.parametrize("x", [32.0, 32.13, 31.77, 10.5])
+def test_msaa8_coverage_of_a_half_pixel_strip(x):
+    cam = ortho_camera()
+    px = cam.ortho_height / cam.height
+    wx = (x - cam.width / 2) * px  # a vertical strip centred on screen column x, half a pixel wide
+    g = single([[wx, -1.0, 0.0], [wx, 1.0, 0.0]], cam, radius=px / 4, msaa=8)
+    rows = g.coverage.any(axis=(1, 2))
+    assert rows.sum() >= 20
+    per_row = g.coverage.mean(axis=2).sum(axis=1)[rows][1:-1]  # whole rows (the ends are cut across samples)
+    assert np.allclose(per_row, 0.5)
+
+
+def test_joints_have_no_cracks_and_closed_curves_wrap():
+    cam = ortho_camera(96, 96, view_height=4.0)
+    n = 37
+    angle = 2 * np.pi * np.arange(n) / n
+    ring = np.stack([1.5 * np.cos(angle), 1.5 * np.sin(angle), 0.2 * np.sin(3 * angle)], axis=1)
+    rest = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ring, axis=0), axis=1))])
+    radius = 0.08  # 1.9 px
+    g = rasterize_strips(ring, [0, n], [True], rest, radius, [0], cam, msaa=1)
+    assert finite(g)
+    # Every pixel centre within radius / 2 of the polyline (closing segment included) is covered.
+    ys, xs = np.mgrid[0:96, 0:96] + 0.5
+    centres = np.stack([(xs - 48) / 24, (48 - ys) / 24], axis=-1).reshape(-1, 2)
+    a, b = ring[:, :2], np.roll(ring, -1, axis=0)[:, :2]
+    f = np.clip(np.einsum("psk,sk->ps", centres[:, None] - a, b - a) / ((b - a) ** 2).sum(1), 0, 1)
+    dist = np.linalg.norm(centres[:, None] - (a + f[..., None] * (b - a)), axis=2).min(axis=1)
+    assert g.coverage[..., 0].reshape(-1)[dist < radius / 2].all()
+    closing = g.segment == n - 1
+    assert closing.any()
+    assert g.arclength[closing].max() > rest[-1] and g.arclength[closing].max() <= rest[-1] + 1.5 * 2 * np.pi / n
+
+
+def test_deterministic_across_thread_counts():
+    cam = Camera(np.array([0.4, 0.3, 2.5]), np.array([0.0, 0.1, 0.0]), Y_UP, 80, 60, fov_deg=45.0)
+    rng = np.random.default_rng(3)
+    rows = [np.stack([np.linspace(-1, 1, 40), np.full(40, y), 0.1 * np.sin(9 * np.linspace(-1, 1, 40) + y)], 1)
+            for y in np.linspace(-0.8, 0.8, 12)]
+    pts = np.concatenate(rows) + rng.normal(0, 0.002, (480, 3))
+    offsets = 40 * np.arange(13)
+    rest = np.tile(np.linspace(0, 2, 40), 12)
+    before = numba.get_num_threads()
+    results = []
+    try:
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            results.append(rasterize_strips(pts, offsets, np.zeros(12, bool), rest, 0.06, np.arange(12), cam,
+                                            msaa=4, tile=16))
+    finally:
+        numba.set_num_threads(before)
+    for field in ("coverage", "depth", "curve", "yarn", "segment", "arclength", "v", "tangent"):
+        assert np.array_equal(getattr(results[0], field), getattr(results[1], field)), field
+    assert results[0].coverage.mean() > 0.2
+
+
+def test_project_matches_the_camera_rays():
+    for cam in (Camera(np.array([1.0, 2.0, 3.0]), np.array([0.2, 0.0, -0.5]), Z_UP, 40, 30, fov_deg=35.0),
+                Camera(np.array([1.0, 2.0, 3.0]), np.array([0.2, 0.0, -0.5]), Z_UP, 40, 30, ortho_height=2.0)):
+        fwd, right, up = cam.basis()
+        X, Y, z = np.array([3.25, 20.0, 39.9]), np.array([0.5, 15.0, 29.0]), np.array([0.5, 2.0, 7.0])
+        sx, sy = (2 * X - cam.width) / cam.height, 1 - 2 * Y / cam.height
+        offset = sx[:, None] * right + sy[:, None] * up
+        if cam.ortho_height > 0:
+            pts = cam.position + cam.ortho_height / 2 * offset + z[:, None] * fwd
+        else:
+            pts = cam.position + z[:, None] * (fwd + tan_half_fov(cam) * offset)
+        assert np.allclose(np.stack(project(cam, pts)), np.stack([X, Y, z]))
+
+
+def test_degenerate_input_gives_finite_buffers():
+    cam = Camera(np.array([0.0, 0.0, 4.0]), np.zeros(3), Y_UP, 32, 24, fov_deg=40.0)
+    empty = rasterize_strips(np.zeros((0, 3)), [0], [], np.zeros(0), [], [], cam, msaa=4)
+    assert not empty.coverage.any() and finite(empty) and np.all(empty.segment == -1)
+    # Zero-length segments inside a curve are skipped without breaking the strip around them.
+    g = single([[-1, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [1, 0, 0]], cam)
+    assert finite(g) and g.coverage[11:13, 9:23].all() and not np.isin(g.segment[g.coverage], [1, 2]).any()
+    # A segment pointing at the camera is skipped; the rest of its curve is drawn.
+    g = single([[0, 0, -1.0], [0, 0, 1.0], [1, 0, 1.0]], cam)
+    assert finite(g) and g.coverage.any() and not (g.segment == 0).any()
+    # A curve through the camera (near-plane clipping): finite, every depth at least the near distance.
+    for msaa in (1, 8):
+        g = single([[-0.5, -0.3, 3.0], [0.0, 0.0, 4.0], [0.3, 0.2, 5.0], [1.0, 1.0, -2.0]], cam, radius=0.1,
+                   msaa=msaa, near=1e-3)
+        assert finite(g) and g.coverage.any() and g.depth[g.coverage].min() >= 1e-3
+    bad = np.zeros((5, 3))
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="curve 1"):
+        rasterize_strips(bad, [0, 2, 5], [False, False], np.zeros(5), 0.1, [0, 0], cam)
+    with pytest.raises(ValueError, match="msaa"):
+        single([[0, 0, 0], [1, 0, 0]], cam, msaa=2)
+
+
+def test_frustum_culling_drops_only_invisible_segments():
+    cam = ortho_camera()
+    x = np.linspace(-40.0, 40.0, 401)  # most segments far outside the 5.3 × 4 view
+    g = single(np.stack([x, 0.3 * np.sin(x), np.zeros_like(x)], 1), cam, radius=0.1, msaa=1)
+    visible = np.flatnonzero(np.abs(x[:-1]) < 2.8)
+    drawn = np.unique(g.segment[g.coverage])
+    assert set(drawn) <= set(visible) and len(drawn) >= len(visible) - 2
