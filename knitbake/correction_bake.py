@@ -31,10 +31,11 @@ import numpy as np
 
 from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.fiber_set import KIND_REGULAR
-from knitbake.path_tracer import Camera, TracerScene, _camera_rays, leave_points, render
+from knitbake.path_tracer import TracerScene, _camera_rays, leave_points, render
 from knitbake.procedural_yarn import generate_fibers
 from knitbake.stage_result import StageResult
 from knitbake.tessellate import tessellate_fibers
+from knitrun.camera import Camera, tan_half_fov
 from knitrun.fiber_bcsdf import params_from_optics
 
 
@@ -163,7 +164,7 @@ def _primary_hits(tracer, cam, seed, sample):
     fwd, right, up = cam.basis()
     h, w = cam.height, cam.width
     org, dirs = np.empty((h * w, 3)), np.empty((h * w, 3))
-    _camera_rays(np.asarray(cam.position, float), fwd, right, up, w, h, math.tan(math.radians(cam.fov_deg) / 2),
+    _camera_rays(np.asarray(cam.position, float), fwd, right, up, w, h, tan_half_fov(cam),
                  float(cam.ortho_height), seed, sample, 1, org, dirs)
     hits = tracer.ray_scene.intersect(org, dirs)
     idx = np.flatnonzero(hits.hit)

@@ -37,31 +37,10 @@ from numba import njit, prange
 from knitbake.env_light import EnvLight, env_pdf, env_pixel, env_sample
 from knitbake.ray_scene import RayScene
 from knitbake.tessellate import TubeMesh
+from knitrun.camera import Camera, tan_half_fov
 from knitrun.fiber_bcsdf import N_PARAMS, context, evaluate, pdf, sample
 
 _MASK = np.uint64(0xFFFFFFFFFFFFFFFF)
-
-
-@dataclass
-class Camera:
-    """Pinhole (``fov_deg`` vertical field of view) or orthographic (``ortho_height`` > 0) camera."""
-
-    position: np.ndarray
-    look_at: np.ndarray
-    up: np.ndarray
-    width: int
-    height: int
-    fov_deg: float = 40.0
-    ortho_height: float = 0.0
-
-    def basis(self):
-        fwd = np.asarray(self.look_at, float) - np.asarray(self.position, float)
-        fwd /= np.linalg.norm(fwd)
-        right = np.cross(fwd, self.up)
-        if np.linalg.norm(right) < 1e-12:
-            raise ValueError("camera up is parallel to the viewing direction")
-        right /= np.linalg.norm(right)
-        return fwd, right, np.cross(right, fwd)
 
 
 @dataclass
@@ -309,7 +288,7 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
     if samples_per_pass is None:
         samples_per_pass = max(1, min(spp, (1 << 21) // n_pix))
     fwd, right, up = camera.basis()
-    tan_half = math.tan(math.radians(camera.fov_deg) / 2)
+    tan_half = tan_half_fov(camera)
     mesh = scene.mesh
     env = scene.env
     has_env = env is not None

@@ -21,9 +21,10 @@ from data_formats.yarn_curves import read_yarn_curves
 from knitbake.env_light import env_from_image
 from knitbake.fiber_set import FiberSet
 from knitbake.fiber_sweep import sweep_fibers
-from knitbake.path_tracer import Camera, TracerScene
+from knitbake.path_tracer import TracerScene
 from knitbake.tessellate import tessellate_fibers
 from knitrun.builtin_sky import sky_image
+from knitrun.camera import Camera
 from knitrun.fiber_bcsdf import P_A_D, P_A_R, P_A_TT, params_from_optics
 
 TUBE_SIDES = 6
