@@ -11,10 +11,10 @@ import os
 import sys
 
 import click
-import numpy as np
 
 from data_formats import FormatError, asset_pack, bcc, scene, stitch_mesh, yarn_curves, yarn_spec
 from data_formats.hdf5_fields import HDF5_MAGIC
+from data_formats.jsonable import jsonable
 
 # Recognised by content, most specific first: (kind, module with sniff/describe/validate).
 FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),
@@ -56,20 +56,8 @@ def file_kind(path):
     raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5, BCC, stitch mesh, scene or yarn spec TOML)")
 
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
-
-
 def echo_json(obj):
-    click.echo(json.dumps(_jsonable(obj), indent=2, allow_nan=False))
+    click.echo(json.dumps(jsonable(obj), indent=2, allow_nan=False))
 
 
 def echo_tree(obj, indent=0):

@@ -31,6 +31,7 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import FormatError
 from .hdf5_fields import HDF5_MAGIC
+from .jsonable import jsonable
 from .yarn_spec import UNITS as LENGTH_UNITS
 
 if sys.version_info >= (3, 11):
@@ -1041,20 +1042,6 @@ def sniff(path) -> bool:
         return False
 
 
-def _jsonable(v):
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())
-    if isinstance(v, np.generic):
-        return _jsonable(v.item())
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
 def describe(path) -> dict:
     """JSON-serializable summary for ``knitbake inspect``: kind, yarn, provenance, BCSDF, and every table with its
     shape, units, axes and error estimate. Reads no table data. Raises FormatError for a bad pack."""
@@ -1069,7 +1056,7 @@ def describe(path) -> dict:
                          if a.range else {})} for a in info.axes],
             "error_estimate": info.error_estimate, "error_kind": info.error_kind,
             "error_statistic": info.error_statistic, "per_entry_errors": info.has_stderr}
-    return _jsonable(out)
+    return jsonable(out)
 
 
 # --- documentation ------------------------------------------------------------------------------------------------

@@ -207,7 +207,7 @@ def generate_fibers(spec: YarnSpec, length: float | None = None, z_start: float 
     info = {
         "period": period, "length": length, "seed": seed, "segments_per_period": segments_per_period,
         "regular": int(succ.size), "loops": n_loops, "hairs": n_hairs,
-        "successor": succ, "base_radius": r0,
+        "successor": succ,
         "fiber_pitch_change_mean": float(1.0 / np.mean(twist) - 1.0),
         "fiber_pitch_change_max": float(np.max(np.abs(1.0 / twist - 1.0))),
         "radius_change_max": float(np.max(np.abs(d_r))),
