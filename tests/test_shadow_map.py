@@ -1,0 +1,132 @@
+"""Yarn-level shadow map: map framing and texel mapping, shadows between yarns, no self-shadowing, PCSS penumbrae
+that widen with the receiver's distance from the blocker, determinism across thread counts, and degenerate input."""
+
+import numba
+import numpy as np
+import pytest
+
+from knitrun.shadow_map import build_shadow_map, shadow_visibility
+
+R = 0.1  # yarn radius
+BIAS = 1.5 * R
+UP = np.array([0.0, 1.0, 0.0])  # toward the light
+
+
+def yarns(*heights, half_length=2.0, n=21):
+    """Straight yarns along x at the given y (z = 0): (points, offsets, rest)."""
+    x = np.linspace(-half_length, half_length, n)
+    pts = np.vstack([np.stack([x, np.full(n, h), np.zeros(n)], axis=1) for h in heights])
+    return pts, np.arange(len(heights) + 1) * n, np.tile(x + half_length, len(heights))
+
+
+def shadow_map(heights, size=256, direction=UP):
+    pts, offsets, rest = yarns(*heights)
+    lo, hi = pts.min(axis=0) - R, pts.max(axis=0) + R
+    return build_shadow_map(pts, offsets, False, rest, R, np.arange(len(heights)), direction, size, lo, hi)
+
+
+def across(y, zs, x=0.3):
+    """Receivers on the line (x, y, z) for z in zs."""
+    return np.stack([np.full(len(zs), x), np.full(len(zs), y), zs], axis=1)
+
+
+def test_map_frames_the_scene_and_maps_texels_like_the_camera():
+    sm = shadow_map([0.0, 1.0], size=128)
+    assert sm.depth.shape == (128, 128) and sm.depth.dtype == np.float32
+    assert np.allclose(sm.view[2], -UP) and np.allclose(sm.view @ sm.view.T, np.eye(3))
+    covered = np.isfinite(sm.depth)
+    assert covered.any() and not covered.all()
+    texel = sm.ortho_height / sm.size
+    i, j = np.argwhere(covered)[0]
+    centre = np.array([-sm.ortho_height / 2 + (j + 0.5) * texel, sm.ortho_height / 2 - (i + 0.5) * texel])
+    p = sm.origin + centre @ sm.view[:2] + sm.depth[i, j] * sm.view[2]  # the yarn point seen by the texel
+    assert abs(p[2]) <= R + 1e-6 and abs(p[1] - 1.0) < 1e-5  # the upper yarn's axis plane hides the lower one
+    assert np.allclose(sm.depth[covered], sm.depth[covered].min(), atol=1e-5)
+
+
+def test_lower_yarn_is_shadowed_by_the_upper_one():
+    sm = shadow_map([0.0, 1.0])
+    zs = np.linspace(-0.6 * R, 0.6 * R, 7)
+    lower_top = across(R, zs)
+    upper_top = across(1.0 + R, zs)
+    beside = np.vstack([across(R, [-0.5, 0.5]), across(0.0, [-3 * R, 3 * R])])
+    assert np.all(shadow_visibility(sm, lower_top, BIAS, 0.0) < 0.02)
+    assert np.all(shadow_visibility(sm, upper_top, BIAS, 0.0) > 0.98)
+    assert np.all(shadow_visibility(sm, beside, BIAS, 0.0) > 0.98)
+    assert np.all(shadow_visibility(sm, lower_top, np.full(7, BIAS), 0.02) < 0.02)
+
+
+def test_no_self_shadowing_with_the_bias():
+    sm = shadow_map([0.0])
+    phi = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    surface = np.stack([np.full(16, 0.4), R * np.sin(phi), R * np.cos(phi)], axis=1)  # around the tube
+    assert np.all(shadow_visibility(sm, [[0.4, 0.0, 0.0]], BIAS, 0.0) == 1.0)
+    assert np.all(shadow_visibility(sm, surface, BIAS, 0.05) == 1.0)
+
+
+def test_penumbra_widens_with_distance_from_the_blocker():
+    sm = shadow_map([1.0, -1.5], size=512)  # the second yarn only extends the box below the receivers
+    zs = np.linspace(0.0, 0.4, 401)
+    tan_angle = 0.04
+    widths = []
+    for y in (0.5, -1.0):  # 0.5 and 2 below the blocker's axis: penumbra half-widths 0.02 and 0.08
+        v = shadow_visibility(sm, across(y, zs), BIAS, np.arctan(tan_angle))
+        assert v[0] < 0.02 and v[-1] > 0.98
+        assert np.all(np.diff(v) >= -0.01) and np.all(np.diff(v) < 0.05)  # a smooth, monotone edge
+        edge = zs[(v > 0.05) & (v < 0.95)]
+        widths.append(edge.max() - edge.min())
+        assert R - 0.03 < edge.mean() < R + 0.03  # centred on the blocker's silhouette
+    assert widths[1] > 2.5 * widths[0]
+    hard = shadow_visibility(sm, across(-1.0, zs), BIAS, 0.0)
+    edge = zs[(hard > 0.05) & (hard < 0.95)]
+    assert edge.max() - edge.min() < widths[0]  # a delta light: only the PCF blur of 1.5 texels
+
+
+def test_identical_for_any_thread_count():
+    sm = shadow_map([0.0, 0.7, 1.2], size=128)
+    rng = np.random.default_rng(5)
+    pos = rng.uniform([-2, -0.2, -0.5], [2, 1.5, 0.5], size=(2000, 3))
+    bias = rng.uniform(0.0, 0.2, size=2000)
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = shadow_visibility(sm, pos, bias, 0.05)
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = shadow_visibility(sm, pos, bias, 0.05)
+    finally:
+        numba.set_num_threads(threads)
+    assert np.array_equal(one, two) and np.array_equal(one, shadow_visibility(sm, pos, bias, 0.05))
+    assert np.all((one >= 0) & (one <= 1)) and 0 < np.mean(one < 1) < 1
+
+
+def test_empty_scene_and_degenerate_receivers():
+    sm = build_shadow_map(np.zeros((0, 3)), [0], [], np.zeros(0), [], [], [1.0, 2.0, 3.0], 16, [0, 0, 0],
+                          [0, 0, 0])
+    assert sm.depth.shape == (16, 16) and np.all(sm.depth == np.inf)
+    assert np.all(shadow_visibility(sm, np.random.default_rng(0).normal(size=(50, 3)), 0.0, 0.1) == 1.0)
+    sm = shadow_map([0.0, 1.0], size=1, direction=[0.3, 1.0, -0.2])
+    assert sm.depth.shape == (1, 1)
+    sm = shadow_map([0.0, 1.0])
+    odd = np.array([[np.nan, 0, 0], [0.3, np.inf, 0], [0.3, R, -np.inf], [1e300, R, 0], [0.3, 1e300, 0],
+                    [0.3, -1e300, 0], [0.3, R, 0]])
+    v = shadow_visibility(sm, odd, BIAS, 0.1)
+    assert np.all(v[:5] == 1.0) and 0.0 <= v[5] <= 1.0 and v[6] < 0.02  # far below the yarns: in their shadow
+    assert shadow_visibility(sm, np.zeros((0, 3)), BIAS, 0.1).shape == (0,)
+
+
+def test_bad_input_raises():
+    pts, offsets, rest = yarns(0.0)
+    for direction in ([0, 0, 0], [np.nan, 1, 0]):
+        with pytest.raises(ValueError, match="direction"):
+            build_shadow_map(pts, offsets, False, rest, R, [0], direction, 64, [-2, -1, -1], [2, 1, 1])
+    with pytest.raises(ValueError, match="size"):
+        build_shadow_map(pts, offsets, False, rest, R, [0], UP, 0, [-2, -1, -1], [2, 1, 1])
+    with pytest.raises(ValueError, match="bounds"):
+        build_shadow_map(pts, offsets, False, rest, R, [0], UP, 64, [2, -1, -1], [-2, 1, 1])
+    sm = shadow_map([0.0])
+    with pytest.raises(ValueError, match="bias"):
+        shadow_visibility(sm, [[0, 0, 0]], np.nan, 0.0)
+    with pytest.raises(ValueError, match="light_angular_radius"):
+        shadow_visibility(sm, [[0, 0, 0]], 0.1, -0.1)
+    with pytest.raises(ValueError, match="pcf_radius_texels"):
+        shadow_visibility(sm, [[0, 0, 0]], 0.1, 0.0, pcf_radius_texels=np.inf)
