@@ -635,3 +635,14 @@ def describe_obj(path, labels_path=None):
 def validate_obj(path, labels_path=None):
     """Problems found in an OBJ stitch mesh and its labels (empty list: valid); never raises for bad content."""
     return _problems(read_obj_stitch_mesh, path, labels_path)
+
+
+def load_stitch_mesh(path):
+    """A stitch mesh from our HDF5 file or an OBJ (+ its .labels sidecar), by content / extension."""
+    if Path(path).suffix.lower() == ".obj":
+        return read_obj_stitch_mesh(path)
+    if not Path(path).is_file():
+        raise FormatError(f"{path}: no such file")
+    if not sniff(path):
+        raise FormatError(f"{path}: not a stitch mesh, expected a knit-stitch-mesh .h5 file or an .obj (+ .labels)")
+    return read_stitch_mesh(path)

@@ -42,7 +42,7 @@ from numba import njit
 
 from data_formats.yarn_curves import YarnCurves
 from data_formats.yarn_spec import YarnSpec
-from knitbake.curve_eval import dense_curve
+from data_formats.curve_eval import dense_curve
 from knitbake.fiber_set import FiberSet
 from knitbake.procedural_yarn import generate_fibers
 

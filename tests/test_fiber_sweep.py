@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves
 from data_formats.yarn_spec import load_preset
-from knitbake.curve_eval import dense_curve, evaluate, rest_length
+from data_formats.curve_eval import dense_curve, evaluate, rest_length
 from knitbake.fiber_set import KIND_REGULAR
 from knitbake.fiber_sweep import curve_frames, curve_seed, initial_normal, sweep_fibers
 from knitbake.procedural_yarn import generate_fibers
