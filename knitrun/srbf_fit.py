@@ -1,8 +1,10 @@
 """Fit J spherical Gaussians (SRBFs) to an equirectangular HDR environment (seed 000 §4.5, eq. 14).
 
 Model: L(ω) ≈ Σ_j W_j G(ω; ω_j, λ_j), G the SRBF of ``knitrun.im_lookup.sg`` (G(ω_j) = 1, unnormalised), ω_j unit
-directions in the world frame of ``knitrun.equirect`` (+y up), λ_j ∈ [0.5, 1e4] (the I_M table's range), W_j
-linear RGB radiance (same units as the image), W_j ≥ 0.
+directions in the world frame of ``knitrun.equirect`` (+y up), λ_j ∈ [0.5, λ_max], W_j linear RGB radiance (same
+units as the image), W_j ≥ 0. λ_max = min(1e4, 4/Δ²), Δ = π/H the texel's angular height: a lobe's angular standard
+deviation 1/√λ stays ≥ Δ/2, so the texel samples integrate it to < 1 % (a narrower lobe could match a sun texel's
+radiance at its centre while carrying a fraction of its energy; 1e4 is the top of the I_M table's λ range).
 
 Fitted error measure: Σ_t Ω_t ‖L_t − M(ω_t)‖², ω_t a texel centre and Ω_t its exact solid angle — a quadrature of
 ∫_S² ‖L − M‖² dω, the square of the reported relative L2 error's numerator (see ``SRBFFit``). A small bright sun
@@ -14,7 +16,7 @@ Method (deterministic):
    solid-angle-weighted within-cell variance are then split back into their full-resolution texels until ``max_samples``
    samples are used (the sun disk and the horizon come back at full resolution; a small image is used whole).
 1. Greedy matching pursuit: candidate centres are the 8 samples of largest weighted positive residual luminance plus 64
-   fixed Fibonacci directions, candidate λ are 13 log-spaced values in [0.5, 1e4]; the (centre, λ) whose best
+   fixed Fibonacci directions, candidate λ are the 13 log-spaced values in [0.5, 1e4] below λ_max, and λ_max; the (centre, λ) whose best
    non-negative single-lobe fit removes the most squared residual is added, then all weights are re-solved by
    non-negative least squares (NNLS, per channel). Lobes stop being added once nothing positive is left; the rest
    get zero weight, λ = 0.5 and Fibonacci directions under a random rotation drawn from ``seed`` (its only use).
@@ -86,11 +88,12 @@ def fit_srbf(image, n_lobes: int = 16, max_iterations: int = 30, seed: int = 0,
     dirs, omega = _texels(h, w)
     radiance = img.reshape(-1, 3)
     sdirs, somega, sradiance = _samples(img, dirs, omega, int(max_samples))
+    lam_max = lambda_max(h)
 
-    centres, lam = _greedy(sdirs, somega, sradiance, int(n_lobes))
+    centres, lam = _greedy(sdirs, somega, sradiance, int(n_lobes), lam_max)
     active = len(lam)
     if active and max_iterations:
-        centres, lam = _refine(sdirs, somega, sradiance, centres, lam, int(max_iterations))
+        centres, lam = _refine(sdirs, somega, sradiance, centres, lam, int(max_iterations), lam_max)
     weights = (_nnls_weights(sg(dirs[:, None, :], centres[None], lam[None]), omega, radiance) if active
                else np.zeros((0, 3)))  # scipy's NNLS aborts on an empty matrix
     filler = int(n_lobes) - active
@@ -160,8 +163,14 @@ def _nnls_weights(g, weight, radiance):
     return np.stack([nnls(a, b[:, c])[0] for c in range(3)], axis=1)
 
 
-def _greedy(dirs, weight, radiance, n_lobes):
+def lambda_max(height: int) -> float:
+    """The largest λ fitted to an equirectangular image of ``height`` rows (module docstring)."""
+    return min(LAMBDA_MAX, 4.0 / (np.pi / height) ** 2)
+
+
+def _greedy(dirs, weight, radiance, n_lobes, lam_max):
     """Matching pursuit with NNLS re-fits: (K, 3) centres and (K,) λ, K ≤ n_lobes active lobes."""
+    candidates = np.append(_LAMBDA_CANDIDATES[_LAMBDA_CANDIDATES < lam_max], lam_max)
     centres = np.zeros((0, 3))
     lam = np.zeros(0)
     residual = radiance
@@ -173,12 +182,12 @@ def _greedy(dirs, weight, radiance, n_lobes):
             break
         peaks = np.argsort(-score, kind="stable")[:8]
         cand = np.vstack([dirs[peaks], fixed])  # (C, 3)
-        g = sg(dirs[:, None, None, :], cand[None, :, None, :], _LAMBDA_CANDIDATES[None, None, :])  # (N, C, L)
+        g = sg(dirs[:, None, None, :], cand[None, :, None, :], candidates[None, None, :])  # (N, C, L)
         proj = np.clip(np.einsum("ncl,n,nk->clk", g, weight, residual), 0, None)
         gain = (proj ** 2).sum(axis=2) / np.einsum("ncl,n->cl", g * g, weight)
         c, l = np.unravel_index(np.argmax(gain), gain.shape)
         centres = np.vstack([centres, cand[c]])
-        lam = np.append(lam, _LAMBDA_CANDIDATES[l])
+        lam = np.append(lam, candidates[l])
         basis = sg(dirs[:, None, :], centres[None], lam[None])
         residual = radiance - basis @ _nnls_weights(basis, weight, radiance)
     return centres, lam
@@ -192,7 +201,7 @@ def _tangent_frame(c):
     return e1, np.cross(c, e1)
 
 
-def _refine(dirs, weight, radiance, centres, lam, max_iterations):
+def _refine(dirs, weight, radiance, centres, lam, max_iterations, lam_max):
     """Joint least-squares refinement of (ω_j, λ_j, W_j); returns refined (centres, λ)."""
     k = len(lam)
     e1, e2 = _tangent_frame(centres)
@@ -227,12 +236,12 @@ def _refine(dirs, weight, radiance, centres, lam, max_iterations):
     weights = _nnls_weights(sg(dirs[:, None, :], centres[None], lam[None]), weight, radiance)
     x0 = np.concatenate([np.zeros(2 * k), np.log(lam), weights.ravel()])
     lower = np.concatenate([np.full(2 * k, -np.inf), np.full(k, np.log(LAMBDA_MIN)), np.zeros(3 * k)])
-    upper = np.concatenate([np.full(2 * k, np.inf), np.full(k, np.log(LAMBDA_MAX)), np.full(3 * k, np.inf)])
+    upper = np.concatenate([np.full(2 * k, np.inf), np.full(k, np.log(lam_max)), np.full(3 * k, np.inf)])
     x0 = np.clip(x0, lower, upper)
     result = least_squares(residuals, x0, jac=jacobian, bounds=(lower, upper), method="trf", x_scale="jac",
                            max_nfev=max_iterations)
     c, _, lm, _ = unpack(result.x)
-    return c, np.clip(lm, LAMBDA_MIN, LAMBDA_MAX)
+    return c, np.clip(lm, LAMBDA_MIN, lam_max)
 
 
 def _fibonacci(n):
