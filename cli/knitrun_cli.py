@@ -58,19 +58,6 @@ def convert(source, target, frame, units):
     click.echo(f"{source} ({kind}, {len(curves.closed)} curves) → {target}")
 
 
-def _read_mesh(path):
-    """A stitch mesh from our HDF5 file or an OBJ (+ its .labels sidecar), by content / extension."""
-    from data_formats import stitch_mesh
-
-    if Path(path).suffix.lower() == ".obj":
-        return stitch_mesh.read_obj_stitch_mesh(path)
-    if not Path(path).is_file():
-        raise FormatError(f"{path}: no such file")
-    if not stitch_mesh.sniff(path):
-        raise FormatError(f"{path}: not a stitch mesh, expected a knit-stitch-mesh .h5 file or an .obj (+ .labels)")
-    return stitch_mesh.read_stitch_mesh(path)
-
-
 @main.command()
 @click.argument("source")
 @click.option("--rows", type=click.IntRange(min=1), help="Courses of a named pattern.  [default: 12]")
@@ -142,6 +129,7 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
       knitrun simulate patch.obj --obj-dir frames/ -o yarns.h5 --json
       knitrun simulate patch.obj --deform cylinder=2.0 -o bent.bcc
     """
+    from data_formats import stitch_mesh
     from data_formats.bcc import write_bcc
     from data_formats.yarn_curves import write_yarn_curves
     from knitrun.deformations import deformation_frames, parse_deformation, read_obj_frames
@@ -153,7 +141,7 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     if obj_dir is not None and (deforms or frames is not None):
         raise FormatError("--obj-dir gives the frames: use it without --deform and --frames")
     specs = [parse_deformation(spec) for spec in deforms]
-    mesh = _read_mesh(mesh_path)
+    mesh = stitch_mesh.load_stitch_mesh(mesh_path)
     vertex_frames = read_obj_frames(obj_dir, mesh) if obj_dir is not None else \
         deformation_frames(mesh.vertices, specs, frames or 1)
     curves, report = run_simulation(mesh, vertex_frames, iterations=iterations, w_length=w_length, beta=beta)
@@ -169,3 +157,65 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
                    f"{report['render_points']} points in {report['curves']} curves; "
                    f"{report['ms_per_frame_median']:.2f} ms/frame (median, {report['threads']} threads); "
                    f"final energy {report['final_energy']:.6g}")
+
+
+def _pack_overrides(values):
+    """--pack YARN=FILE (or INDEX=FILE) options as a dict."""
+    out = {}
+    for value in values:
+        name, sep, path = value.partition("=")
+        if not sep or not name or not path:
+            raise FormatError(f"--pack {value!r}: expected YARN=FILE, e.g. --pack cotton1=cotton1.h5")
+        out[name] = path
+    return out
+
+
+@main.command()
+@click.argument("scene_path", metavar="SCENE", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True, help="Tone-mapped PNG image.")
+@click.option("--exr", "exr_path", type=click.Path(dir_okay=False), default=None, help="Also write the linear EXR.")
+@click.option("--pack", "pack_values", multiple=True, metavar="YARN=FILE",
+              help="Asset pack for a yarn (its name or entry index); overrides the scene's `pack`. Repeatable.")
+@click.option("--ablation", type=click.Choice(["full", "plain_ds", "xi", "xi_shadowing"]), default="full",
+              show_default=True, help="Which baked terms to use (seed 000 Fig. 7 ablation).")
+@click.option("--samples-per-segment", type=click.IntRange(1, 64), default=4, show_default=True,
+              help="Polyline samples per segment of smooth (C0/BS/BZ) curves.")
+@click.option("--msaa", type=click.Choice(["1", "2", "4", "8", "16"]), default=None,
+              help="Samples per pixel (default: the scene's).")
+@click.option("--exposure", type=float, default=0.0, show_default=True, help="PNG exposure in stops.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary: time per pass, counts.")
+def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segment, msaa, exposure, as_json):
+    """Render a scene with the strip renderer (yarns as textured strips shaded from their asset packs).
+
+    Example: knitrun render examples/scenes/knit_patch_directional.toml --pack cotton1=cotton1.h5 -o patch.png
+    """
+    import dataclasses
+
+    from data_formats.images import write_exr, write_png
+    from data_formats.scene import load_scene
+    from knitrun.render import ABLATIONS
+    from knitrun.render import render as render_scene
+
+    if not output.lower().endswith(".png"):
+        raise FormatError(f"{output}: output must end in .png")
+    if exr_path is not None and not exr_path.lower().endswith(".exr"):
+        raise FormatError(f"{exr_path}: --exr must end in .exr")
+    scene = load_scene(scene_path)
+    if msaa is not None:
+        scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, msaa=int(msaa)))
+    result = render_scene(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
+                          progress=lambda name: click.echo(f"  {name} done", err=True))
+    write_png(output, result.image, exposure)
+    if exr_path is not None:
+        write_exr(exr_path, result.image)
+    total = sum(result.timings.values())
+    summary = {"scene": scene_path, "output": output, "exr": exr_path, "ablation": ablation,
+               "width": scene.camera.width, "height": scene.camera.height, "msaa": scene.render.msaa,
+               "ms_total": total * 1e3, "ms_per_pass": {k: v * 1e3 for k, v in result.timings.items()},
+               **result.facts, "mean_rgb": result.image.reshape(-1, 3).mean(axis=0).tolist()}
+    if as_json:
+        echo_json(summary)
+        return
+    passes = ", ".join(f"{k} {v * 1e3:.0f}" for k, v in result.timings.items())
+    click.echo(f"{output}: {scene.camera.width}x{scene.camera.height}, {result.facts['points']} points, "
+               f"{total * 1e3:.0f} ms ({passes} ms)")

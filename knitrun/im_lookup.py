@@ -60,6 +60,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
+
+from .table_lookup import axis_cell
 
 
 def sg(omega, omega_j, lam):
@@ -142,3 +145,53 @@ def im_lookup(table, axes, theta_o, theta_j, dphi, lam):
     coords = [AXIS_VARIABLES[n][2](theta_o, theta_j, dphi, lam) for n in names]
     return multilinear(table, [tuple(_field(a, "range")) for a in sampled], [_field(a, "wrap") for a in sampled],
                        coords)
+
+
+# --- the same lookup inside Numba kernels (the strip renderer) ---------------------------------------------------
+
+AXIS_CODES = {name: code for code, name in enumerate(AXIS_VARIABLES)}  # theta_o, theta_j, |Δφ|, log10 λ
+
+
+def kernel_axes(axes):
+    """(lo, hi, repeat, codes) arrays for ``im_kernel`` from the four sampled axes of an I_M table (dicts or
+    ``AxisInfo``); ValueError naming the axes for a parameterisation this renderer does not implement."""
+    sampled = [a for a in axes if _field(a, "name") != "channel"]
+    names = [_field(a, "name") for a in sampled]
+    if len(sampled) != 4 or any(n not in AXIS_CODES for n in names):
+        raise ValueError(f"I_M axes {names}: this renderer implements 4 axes from {sorted(AXIS_CODES)}")
+    ranges = np.array([_field(a, "range") for a in sampled], np.float64)
+    return (ranges[:, 0].copy(), ranges[:, 1].copy(), np.array([_field(a, "wrap") == "repeat" for a in sampled]),
+            np.array([AXIS_CODES[n] for n in names], np.int64))
+
+
+@njit(cache=True)
+def im_kernel(table, lo, hi, repeat, codes, theta_o, theta_j, dphi, lam, out):
+    """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0) by the rule of ``multilinear`` (one point, no allocation)."""
+    i0 = np.empty(4, np.int64)
+    i1 = np.empty(4, np.int64)
+    fr = np.empty(4)
+    for axis in range(4):
+        code = codes[axis]
+        if code == 0:
+            x = theta_o
+        elif code == 1:
+            x = theta_j
+        elif code == 2:
+            x = abs((dphi + math.pi) % (2.0 * math.pi) - math.pi)
+        else:
+            x = math.log10(lam)
+        i0[axis], i1[axis], fr[axis] = axis_cell(x, lo[axis], hi[axis], table.shape[axis], repeat[axis])
+    out[:] = 0.0
+    idx = np.empty(4, np.int64)
+    for bits in range(16):
+        w = 1.0
+        for axis in range(4):
+            if (bits >> axis) & 1:
+                w *= fr[axis]
+                idx[axis] = i1[axis]
+            else:
+                w *= 1.0 - fr[axis]
+                idx[axis] = i0[axis]
+        if w > 0.0:
+            for ch in range(3):
+                out[ch] += w * table[idx[0], idx[1], idx[2], idx[3], ch]

@@ -25,9 +25,10 @@ Sample attributes (all interpolated perspective-correctly over each triangle; vi
 * ``v`` ∈ [−1, 1]: −1 on the −b edge, +1 on the +b edge.
 * ``tangent``: unit world tangent (the interpolated vertex tangents, renormalized).
 
-Samples (``SAMPLE_PATTERNS``, positions inside the pixel, x right and y down, in pixels): k = 1 the centre; k = 4
-and k = 8 the standard Direct3D 11 patterns (offsets from the centre in 1/16 px: 4: (−2,−6) (6,−2) (−6,2) (2,6);
-8: (1,−3) (−1,3) (5,1) (−3,−5) (−5,5) (−7,−1) (3,7) (7,−7)); the 8 x positions are distinct, so a vertical strip
+Samples (``SAMPLE_PATTERNS``, positions inside the pixel, x right and y down, in pixels): k = 1 the centre; k = 2,
+4, 8 and 16 the standard Direct3D 11 patterns (offsets from the centre in 1/16 px: 2: (4,4) (−4,−4); 4: (−2,−6)
+(6,−2) (−6,2) (2,6); 8: (1,−3) (−1,3) (5,1) (−3,−5) (−5,5) (−7,−1) (3,7) (7,−7); 16: the D3D 16× pattern); the 8
+x positions are distinct, so a vertical strip
 w px wide covers 8·w samples per row up to one. Coverage is exact per sample: edge functions are evaluated in a
 canonical order of each edge's end points and ties follow a top-left rule, so a sample on an edge shared by two
 triangles belongs to exactly one of them.
@@ -48,8 +49,11 @@ from .camera import Camera, tan_half_fov, view_matrix
 
 SAMPLE_PATTERNS = {
     1: np.array([[0.5, 0.5]]),
+    2: 0.5 + np.array([[4, 4], [-4, -4]]) / 16.0,
     4: 0.5 + np.array([[-2, -6], [6, -2], [-6, 2], [2, 6]]) / 16.0,
     8: 0.5 + np.array([[1, -3], [-1, 3], [5, 1], [-3, -5], [-5, 5], [-7, -1], [3, 7], [7, -7]]) / 16.0,
+    16: 0.5 + np.array([[1, 1], [-1, -3], [-3, 2], [4, -1], [-5, -2], [2, 5], [5, 3], [3, -5], [-2, 6], [0, -7],
+                        [-4, -6], [-6, 4], [-8, 0], [7, -4], [6, 7], [-7, -8]]) / 16.0,
 }
 DEGENERATE_SIN = 1e-6  # |ω_o × t| below this: the strip is skipped (ASSET_PACK.md §3)
 
@@ -86,7 +90,7 @@ def rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, c
 
     ``points`` (P, 3) and ``offsets`` (C+1,) as in ``YarnCurves`` (one frame; curve c is points[offsets[c]:
     offsets[c+1]]); ``closed`` (C,) bool; ``rest_arclength`` (P,) scene units; ``radius`` (C,) or a scalar, the
-    yarn radius (strip half-width) in scene units; ``yarn_id`` (C,) ints; ``msaa`` ∈ {1, 4, 8}; ``near`` > 0 and
+    yarn radius (strip half-width) in scene units; ``yarn_id`` (C,) ints; ``msaa`` ∈ {1, 2, 4, 8, 16}; ``near`` > 0 and
     ``far`` view depths in scene units; ``closing_length`` (C,) the rest length of each closed curve's closing
     segment (default: its current length); ``tile`` the tile size in px; ``out`` a ``StripGBuffer`` of the right
     shape to reuse. ValueError for non-finite points (naming the curve) or bad arguments.

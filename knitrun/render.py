@@ -1,0 +1,270 @@
+"""The strip renderer (seed 000 §5.2): a scene file's yarn curves and asset packs → a linear HDR image.
+
+Passes, each timed (``RenderResult.timings``, seconds):
+
+1. ``load``: the scene's curves at ``render.frame`` (a stitch mesh is simulated at rest by ``knitrun.simulate``),
+   evaluated by their curve type (``data_formats.curve_eval``: PL as drawn, C0 as uniform Catmull-Rom, BS, BZ) into
+   polylines of ``samples_per_segment`` samples per smooth segment, each sample with its rest arc length; each
+   yarn entry's pack (``knitrun.yarn_look``), reading only the tables the scene needs.
+2. ``srbf_fit`` (environment light only): J = ``render.srbf_count`` spherical Gaussians fitted to the map
+   (``knitrun.srbf_fit``); the fit's errors are in ``RenderResult.facts``.
+3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample G-buffer (``strip_raster``);
+   with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second one. A flyaway
+   sample is kept where no regular strip is nearer than the yarn radius.
+4. ``shadow``: per directional light a yarn-level shadow map of ``render.shadow_map_size``² texels, filtered by PCF
+   (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
+   angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.shadow_map``). Receivers are biased by 1.5 yarn
+   radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job).
+5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
+   (``knitrun.strip_shading``).
+6. ``resolve``: coverage-weighted MSAA resolve over the background, the flyaway layer on top.
+
+``Features`` switch the baked terms off for ablations (seed 000 Fig. 7): without ``xi`` the correction is 1,
+without ``fiber_shadowing`` Ψ^Fiber_G = 1 (and no fiber lies between a visible fiber and the light), without
+``flyaways`` no flyaway layer.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from data_formats.bcc import read_bcc
+from data_formats.bcc import sniff as is_bcc
+from data_formats.curve_eval import dense_curve
+from data_formats.images import read_image
+from data_formats.scene import EnvironmentLight, Scene
+from data_formats.yarn_curves import read_yarn_curves
+
+from .builtin_sky import sky_image
+from .camera import Camera
+from .shadow_map import build_shadow_map, shadow_visibility
+from .srbf_fit import fit_srbf
+from .strip_raster import SAMPLE_PATTERNS, rasterize_strips
+from .strip_shading import resolve, shade_flyaway, shade_regular, shading_points
+from .yarn_look import load_look
+
+BUILTIN_ENVIRONMENTS = {"sky": sky_image}
+SHADOW_BIAS_RADII = 1.5
+LOBE_SHADOW_DIVISOR = 4
+MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
+
+
+@dataclass(frozen=True)
+class Features:
+    """Which baked terms the renderer uses (all on: the full model)."""
+
+    xi: bool = True
+    fiber_shadowing: bool = True
+    flyaways: bool = True
+
+
+ABLATIONS = {
+    "plain_ds": Features(xi=False, fiber_shadowing=False, flyaways=False),
+    "xi": Features(xi=True, fiber_shadowing=False, flyaways=False),
+    "xi_shadowing": Features(xi=True, fiber_shadowing=True, flyaways=False),
+    "full": Features(),
+}
+
+
+@dataclass
+class RenderResult:
+    image: np.ndarray  # (H, W, 3) float32, linear RGB
+    timings: dict  # pass → seconds
+    facts: dict = field(default_factory=dict)
+
+
+@dataclass
+class _Polylines:
+    points: np.ndarray  # (P, 3)
+    offsets: np.ndarray  # (C+1,)
+    rest: np.ndarray  # (P,)
+    entry: np.ndarray  # (C,) yarn entry index
+
+
+def _scene_curves(entry, units, frame):
+    if entry.stitch_mesh is not None:
+        from data_formats.stitch_mesh import load_stitch_mesh
+        from .simulate import simulate
+
+        mesh = load_stitch_mesh(entry.stitch_mesh)
+        curves, _ = simulate(mesh, mesh.vertices[None], radius=entry.radius)
+        return curves, 0
+    curves = read_bcc(entry.curves, units=units) if is_bcc(entry.curves) else read_yarn_curves(entry.curves)
+    return curves, frame
+
+
+def _polylines(scene: Scene, samples_per_segment: int) -> _Polylines:
+    pts, rest, entry_of, sizes = [], [], [], [0]
+    for k, entry in enumerate(scene.yarns):
+        curves, frame = _scene_curves(entry, scene.units, scene.render.frame)
+        wanted = entry.yarn_type_indices or tuple(range(len(curves.yarn_types)))
+        for c in range(len(curves.offsets) - 1):
+            if curves.yarn_type[c] not in wanted or curves.offsets[c + 1] - curves.offsets[c] < 2:
+                continue
+            xyz, sigma = dense_curve(curves, c, frame, None if curves.curve_type == "PL" else samples_per_segment)
+            pts.append(xyz)
+            rest.append(sigma)
+            entry_of.append(k)
+            sizes.append(len(xyz))
+    if not pts:
+        return _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64))
+    return _Polylines(np.concatenate(pts), np.cumsum(sizes), np.concatenate(rest), np.array(entry_of, np.int64))
+
+
+def _camera(scene: Scene) -> Camera:
+    c = scene.camera
+    return Camera(np.array(c.position, float), np.array(c.look_at, float), np.array(c.up, float), c.width, c.height,
+                  fov_deg=c.fov_deg if c.fov_deg is not None else 40.0, ortho_height=c.ortho_height or 0.0)
+
+
+def _pack_path(k, entry, packs):
+    path = packs.get(entry.yarn, packs.get(str(k), entry.pack))
+    if path is None:
+        raise ValueError(f"yarns[{k}] ({entry.yarn}) has no asset pack: bake one (knitbake bake {entry.yarn} -o "
+                         f"{entry.yarn}.h5) and name it in the scene (pack = ...) or with --pack {entry.yarn}=FILE")
+    if not Path(path).is_file():
+        raise ValueError(f"yarns[{k}] ({entry.yarn}): pack {path} does not exist")
+    return path
+
+
+def _environment(scene: Scene):
+    envs = [light for light in scene.lights if isinstance(light, EnvironmentLight)]
+    if not envs:
+        return None
+    env = envs[0]
+    image = BUILTIN_ENVIRONMENTS[env.builtin]() if env.builtin else read_image(env.file)
+    return fit_srbf(np.asarray(image, np.float64) * np.asarray(env.scale, np.float64),
+                    n_lobes=scene.render.srbf_count, seed=scene.render.seed)
+
+
+def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers):
+    """Yarn-level visibility of each receiver set (position, bias) toward ``direction``."""
+    if len(lines.entry) == 0:
+        return [np.ones(len(p)) for p, _ in receivers]
+    sm = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius_of_curve, lines.entry, direction,
+                          size, lines.points.min(axis=0), lines.points.max(axis=0))
+    return [shadow_visibility(sm, p, bias, angular_radius) for p, bias in receivers]
+
+
+def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,
+           progress=None) -> RenderResult:
+    """Render ``scene``; ``packs`` maps a yarn name or an entry index (as a string) to a pack path, overriding the
+    scene's ``pack``; ``progress(name)`` is called as each pass starts. ValueError (one line) for a scene the
+    renderer cannot draw (a missing pack, a pack for another yarn)."""
+    packs = packs or {}
+    timings, facts = {}, {}
+    clock = [time.perf_counter()]
+
+    def lap(name):
+        now = time.perf_counter()
+        timings[name] = timings.get(name, 0.0) + now - clock[0]
+        clock[0] = now
+        if progress is not None:
+            progress(name)
+
+    environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
+    looks = [load_look(_pack_path(k, e, packs), e, scene.units, corrections=features.xi or features.fiber_shadowing,
+                       flyaways=features.flyaways, environment=environment) for k, e in enumerate(scene.yarns)]
+    if not features.xi:
+        for look in looks:
+            look.xi_m, look.xi_n = np.ones((1, 1, 3)), np.ones((1, 1, 3))
+    if not features.fiber_shadowing:
+        for look in looks:
+            look.psi_gm, look.psi_gn, look.n_occluded = np.ones((1, 1, 3)), np.ones((1, 1, 3)), 0.0
+    lines = _polylines(scene, samples_per_segment)
+    facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
+    lap("load")
+
+    fit = _environment(scene)
+    if fit is not None:
+        facts.update(srbf_lobes=int(len(fit.sharpness)), srbf_relative_l2_error=fit.relative_l2_error,
+                     srbf_irradiance_error=fit.irradiance_error)
+        lap("srbf_fit")
+
+    camera = _camera(scene)
+    msaa = scene.render.msaa
+    pattern = SAMPLE_PATTERNS[msaa]
+    radius = np.array([looks[k].radius for k in lines.entry])
+    fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
+    gbuffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
+    points = shading_points(gbuffer, camera, pattern)
+    drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
+    fly_points = None
+    if drawn_fly and len(lines.entry):
+        fly_curves = np.isin(lines.entry, drawn_fly)
+        fly_buffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest,
+                                      np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
+        tolerance = float(radius.max())
+        mask = ~gbuffer.coverage | (fly_buffer.depth <= gbuffer.depth + tolerance)
+        mask &= np.isin(fly_buffer.yarn, drawn_fly)
+        fly_points = shading_points(fly_buffer, camera, pattern, mask=mask)
+    facts.update(shading_points=int(len(points["weight"])),
+                 flyaway_points=0 if fly_points is None else int(len(fly_points["weight"])))
+    lap("raster")
+
+    sets = [points] + ([fly_points] if fly_points is not None else [])
+    bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
+    receivers = [(s["position"], bias_radius[s["yarn"]] if len(s["yarn"]) else np.zeros(0)) for s in sets]
+    directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
+    light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)
+    light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
+    size = scene.render.shadow_map_size
+    light_vis = [np.empty((len(light_dir), len(s["weight"]))) for s in sets]
+    for i, d in enumerate(light_dir):
+        for out, vis in zip(light_vis, _visibility(lines, radius, d, size, 0.0, receivers)):
+            out[i] = vis
+    lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
+    lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
+    lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
+    lobe_vis = [np.empty((len(lobe_dir), len(s["weight"]))) for s in sets]
+    for j, d in enumerate(lobe_dir):
+        angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
+        for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
+                                                  receivers)):
+            out[j] = vis
+    lap("shadow")
+
+    h, w = camera.height, camera.width
+    rgb, alpha = np.zeros((len(points["weight"]), 3)), np.zeros(len(points["weight"]))
+    for k, look in enumerate(looks):
+        idx = np.flatnonzero(points["yarn"] == k)
+        im = look.im if look.im is not None else _NO_IM
+        shade_regular(idx, points["position"], points["view_dir"], points["tangent"],
+                      points["arclength"].astype(np.float64), points["v"].astype(np.float64), points["footprint"],
+                      look.params, look.ds, look.xi_m, look.xi_n, look.psi_gm, look.psi_gn,
+                      look.tangent.data, look.tangent.offset, look.tangent.rows, look.tangent.cols,
+                      look.coverage.data, look.coverage.offset, look.coverage.rows, look.coverage.cols,
+                      look.period, look.radius, look.n_occluded, look.n_cross,
+                      light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_vis[0], *im, rgb, alpha)
+    if fly_points is not None:
+        fly_rgb, fly_alpha = np.zeros((len(fly_points["weight"]), 3)), np.zeros(len(fly_points["weight"]))
+        for k in drawn_fly:
+            look = looks[k]
+            idx = np.flatnonzero(fly_points["yarn"] == k)
+            im = look.im if look.im is not None else _NO_IM
+            shade_flyaway(idx, fly_points["position"], fly_points["view_dir"], fly_points["tangent"],
+                          fly_points["arclength"].astype(np.float64), fly_points["v"].astype(np.float64),
+                          fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params,
+                          look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,
+                          look.period, look.flyaway_half_width, light_dir, light_e, light_vis[1], lobe_dir,
+                          lobe_lambda, lobe_w, lobe_vis[1], *im, fly_rgb, fly_alpha)
+    lap("shade")
+
+    image = np.empty((h * w, 3))
+    resolve(points["start"], points["weight"], rgb, alpha,
+            np.ascontiguousarray(np.broadcast_to(np.asarray(scene.background, np.float64), (h * w, 3))), image)
+    if fly_points is not None:
+        resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, image.copy(), image)
+    if not np.all(np.isfinite(image)):
+        raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
+    lap("resolve")
+    facts["residuals"] = {look.name: look.residuals for look in looks}
+    return RenderResult(image.reshape(h, w, 3).astype(np.float32), timings, facts)
+
+
+_NO_IM = (np.zeros((1, 1, 1, 1, 3)), np.zeros(4), np.ones(4), np.zeros(4, np.bool_), np.arange(4, dtype=np.int64))

@@ -1,0 +1,299 @@
+"""The strip renderer end to end (knitrun.render and `knitrun render`): determinism, finite images at the extremes
+(camera inside a yarn, grazing views, zero-length segments, an empty view), SRBF counts 1/16/64, ablations, pack
+errors; plus the texture sampler, the flyaway variant hash and the resolve."""
+
+import dataclasses
+import json
+import math
+
+import numba
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cli.knitrun_cli import main as knitrun
+from data_formats.images import read_exr
+from data_formats.scene import load_scene
+from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
+from data_formats.yarn_spec import load_preset
+from knitbake import im_table as im
+from knitbake.bake import bake
+from knitrun import fiber_bcsdf as fb
+from knitrun.builtin_sky import sky_image
+from knitrun.equirect import texel_directions
+from knitrun.im_lookup import kernel_axes
+from knitrun.srbf_fit import fit_srbf
+from knitrun.render import ABLATIONS, render
+from knitrun.strip_shading import resolve, shade_regular, variant_of
+from knitrun.texture_sampling import mip_stack, sample_mip
+from tests.test_bake import TINY
+from tests.test_im_table import ROUGH, TEST_SHAPE
+
+
+@pytest.fixture(scope="module")
+def pack(tmp_path_factory):
+    spec = load_preset("cotton1")
+    spec = dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=15))
+    out = tmp_path_factory.mktemp("pack") / "cotton1.h5"
+    bake(spec, out, overrides=TINY, seed=1, use_cache=False)
+    return out
+
+
+def write_scene(folder, curves, *, camera, lights, render="", name="s"):
+    """A scene over ``curves`` (list of (n, 3) point arrays, PL) with cotton1 yarn; returns its path."""
+    pts = [np.asarray(c, float) for c in curves]
+    offsets = np.concatenate([[0], np.cumsum([len(c) for c in pts])]).astype(np.int64)
+    points = np.concatenate(pts) if pts else np.zeros((0, 3))
+    write_yarn_curves(folder / f"{name}.h5", make_yarn_curves(points[None], offsets, yarn_types=["cotton1"],
+                                                             units="cm"))
+    text = f"""format = "knit-scene"
+version = "1.0"
+units = "cm"
+background = [0.1, 0.2, 0.3]
+[[yarns]]
+curves = "{name}.h5"
+yarn = "cotton1"
+{camera}
+{lights}
+[render]
+msaa = 4
+shadow_map_size = 256
+srbf_count = 4
+{render}
+"""
+    path = folder / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+FRONT = """[camera]
+position = [0.0, 0.0, 1.0]
+look_at = [0.0, 0.0, 0.0]
+fov_deg = 30.0
+width = 64
+height = 48"""
+SUN = """[[lights]]
+type = "directional"
+direction = [0.3, 0.6, 1.0]
+irradiance = [2.0, 2.0, 2.0]"""
+SKY = """[[lights]]
+type = "environment"
+builtin = "sky\""""
+
+
+def straight(n=9, length=0.6, z=0.0):
+    return np.stack([np.linspace(-length / 2, length / 2, n), np.zeros(n), np.full(n, z)], axis=1)
+
+
+def _render(path, pack, **kw):
+    return render(load_scene(path), {"cotton1": str(pack)}, **kw)
+
+
+def test_straight_yarn_is_drawn_lit_and_deterministic(tmp_path, pack):
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    a = _render(path, pack)
+    b = _render(path, pack)
+    assert np.array_equal(a.image, b.image)
+    img = a.image
+    assert img.shape == (48, 64, 3) and np.all(np.isfinite(img)) and img.min() >= 0
+    # the yarn crosses the middle rows; the corners show the background exactly
+    assert np.allclose(img[0, 0], [0.1, 0.2, 0.3]) and np.allclose(img[-1, -1], [0.1, 0.2, 0.3])
+    middle = img[22:26, 10:54]
+    assert np.abs(middle - [0.1, 0.2, 0.3]).sum(axis=2).mean() > 0.05
+    assert set(a.timings) >= {"load", "raster", "shadow", "shade", "resolve"}
+    assert a.facts["shading_points"] > 0 and a.facts["flyaway_points"] > 0
+
+
+def test_identical_for_one_and_two_threads(tmp_path, pack):
+    path = write_scene(tmp_path, [straight(), straight(z=0.1) + [0, 0.05, 0]], camera=FRONT, lights=SUN)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = _render(path, pack).image
+        numba.set_num_threads(2)
+        two = _render(path, pack).image
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(one, two)
+
+
+def test_a_yarn_in_front_shadows_the_one_behind(tmp_path, pack):
+    overhead = SUN.replace("[0.3, 0.6, 1.0]", "[0.0, 0.0, 1.0]")
+    lower = straight(z=0.0)
+    upper = straight(z=0.2)[:, [1, 0, 2]]  # crosses the lower yarn at right angles, between it and the light
+    lit = _render(write_scene(tmp_path, [lower], camera=FRONT, lights=overhead, name="a"), pack).image
+    shadowed = _render(write_scene(tmp_path, [lower, upper], camera=FRONT.replace("0.0, 0.0, 1.0]", "0.0, -0.6, 0.9]"),
+                                   lights=overhead, name="b"), pack, features=ABLATIONS["plain_ds"]).image
+    assert np.all(np.isfinite(shadowed))
+    # the lower yarn's centre, seen from the front, lies in the upper yarn's shadow: darker than the unshadowed yarn
+    lone = _render(write_scene(tmp_path, [lower], camera=FRONT.replace("0.0, 0.0, 1.0]", "0.0, -0.6, 0.9]"),
+                               lights=overhead, name="c"), pack, features=ABLATIONS["plain_ds"]).image
+    centre = (slice(20, 28), slice(28, 36))
+    assert shadowed[centre].mean() < 0.8 * lone[centre].mean()
+    assert lit.mean() > 0
+
+
+@pytest.mark.parametrize("case", ["inside", "grazing", "along", "zero_length", "empty_view", "one_point"])
+def test_extremes_give_finite_images(tmp_path, pack, case):
+    curves = [straight()]
+    camera = FRONT
+    if case == "inside":  # the camera sits on the yarn axis, looking across it
+        camera = FRONT.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, 0.0]").replace("look_at = [0.0, 0.0, 0.0]",
+                                                                             "look_at = [0.0, 1.0, 0.0]")
+        camera = camera.replace("fov_deg", "up = [0.0, 0.0, 1.0]\nfov_deg")
+    elif case == "grazing":  # light along the yarn, camera almost along it
+        camera = FRONT.replace("[0.0, 0.0, 1.0]", "[2.0, 0.0, 0.01]")
+    elif case == "along":  # the camera looks exactly along the yarn: every strip is edge-on
+        camera = FRONT.replace("[0.0, 0.0, 1.0]", "[2.0, 0.0, 0.0]")
+    elif case == "zero_length":
+        c = straight()
+        curves = [np.concatenate([c[:3], c[2:3], c[2:3], c[3:]]), np.repeat(c[:1], 3, axis=0)]
+    elif case == "empty_view":
+        camera = FRONT.replace("look_at = [0.0, 0.0, 0.0]", "look_at = [0.0, 0.0, 2.0]")
+    elif case == "one_point":  # nothing to draw: a curve file needs a curve, this one is a single point twice
+        curves = [np.repeat(straight()[:1], 2, axis=0)]
+    lights = SUN.replace("[0.3, 0.6, 1.0]", "[1.0, 0.0, 0.0]") if case == "grazing" else SUN
+    path = write_scene(tmp_path, curves, camera=camera, lights=lights + "\n" + SKY)
+    img = _render(path, pack).image
+    assert np.all(np.isfinite(img)) and img.min() >= 0
+    if case in ("empty_view", "one_point", "along"):
+        assert np.allclose(img, [0.1, 0.2, 0.3])
+
+
+def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
+    """Eq. 17 in the shading kernel (I_M table lookups summed over J lobes, ξ = Ψ = 1, unshadowed) against direct
+    quadrature of the same fitted lobes, Σ_j W_j I_M^direct; and the 64-lobe result against brute-force
+    integration of the sky itself."""
+    table = im.bake_im_table(ROUGH, TEST_SHAPE, nodes=4)[0]
+    axes = im.im_axes(TEST_SHAPE)
+    lo, hi, repeat, codes = kernel_axes(axes)
+    rng = np.random.default_rng(5)
+    n = 12
+    tangent = rng.normal(size=(n, 3))
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    view = rng.normal(size=(n, 3))
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    flat = mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]])
+    full = mip_stack([[np.ones((2, 4))]])
+    sky = sky_image(64, 128)
+    dirs = texel_directions(64, 128).reshape(-1, 3)
+    texel_sr = (np.pi / 64) * (2 * np.pi / 128) * np.cos(np.arcsin(np.clip(dirs[:, 1], -1, 1)))
+    results = {}
+    for j in (1, 16, 64):
+        fit = fit_srbf(sky, n_lobes=j, seed=0)
+        rgb, alpha = np.zeros((n, 3)), np.zeros(n)
+        shade_regular(np.arange(n), np.zeros((n, 3)), view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3),
+                      ROUGH, np.ones((5, 4, 3)), *(np.ones((1, 1, 3)),) * 4, flat.data, flat.offset, flat.rows,
+                      flat.cols, full.data, full.offset, full.rows, full.cols, 1.0, 1.0, 0.0, 0.0,
+                      np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)), fit.directions, fit.sharpness,
+                      fit.weights, np.ones((j, n)), table, lo, hi, repeat, codes, rgb, alpha)
+        theta_o = np.arcsin(np.sum(view * tangent, axis=1))
+        direct = np.zeros((n, 3))
+        for wj, lam, w in zip(fit.directions, fit.sharpness, fit.weights):
+            theta_j = np.arcsin(np.clip(tangent @ wj, -1, 1))
+            dphi = -np.array([_phi(t, v, wj) for t, v in zip(tangent, view)])
+            direct += w * im.im_direct(ROUGH, theta_o, theta_j, dphi, lam)
+        assert np.all(alpha == 1.0)
+        assert np.allclose(rgb, direct, rtol=0.03, atol=0.01 * direct.max()), j
+        results[j] = rgb
+    truth = np.zeros((n, 3))
+    for k in range(n):
+        wo = np.broadcast_to(_local(tangent[k], view[k], view[k]), (len(dirs), 3)).copy()
+        wi = np.array([_local(tangent[k], view[k], d) for d in dirs])
+        f = fb.eval_batch(ROUGH, wo, wi) * np.sqrt(np.maximum(0, 1 - wi[:, :1] ** 2))
+        truth[k] = (sky.reshape(-1, 3) * f * texel_sr[:, None]).sum(axis=0)
+    err = {j: np.abs(r - truth).sum() / truth.sum() for j, r in results.items()}
+    print(err)
+    assert err[16] < 0.1 and err[64] < 0.1 and err[64] <= err[1]
+
+
+def _phi(t, wo, wi):
+    o, i = wo - (wo @ t) * t, wi - (wi @ t) * t
+    return math.atan2(np.cross(i, o) @ t, i @ o)
+
+
+def _local(t, wo, w):
+    """w in the BCSDF's local frame (x along t, y toward wo's normal-plane part)."""
+    y = wo - (wo @ t) * t
+    y /= np.linalg.norm(y)
+    return np.array([w @ t, w @ y, w @ np.cross(t, y)])
+
+
+def test_ablations_change_the_image(tmp_path, pack):
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    images = {name: _render(path, pack, features=f).image for name, f in ABLATIONS.items()}
+    assert not np.array_equal(images["plain_ds"], images["xi"])
+    assert not np.array_equal(images["xi"], images["xi_shadowing"])
+    assert not np.array_equal(images["xi_shadowing"], images["full"])
+
+
+def test_pack_errors_are_one_line(tmp_path, pack):
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    with pytest.raises(ValueError, match=r"yarns\[0\] \(cotton1\) has no asset pack"):
+        render(load_scene(path))
+    with pytest.raises(ValueError, match="does not exist"):
+        render(load_scene(path), {"cotton1": str(tmp_path / "nope.h5")})
+    other = tmp_path / "silk.h5"
+    bake(load_preset("silk1"), other, overrides=TINY, seed=1, use_cache=False, only=["dual_scattering"])
+    with pytest.raises(ValueError, match="silk1"):
+        render(load_scene(path), {"cotton1": str(other)})
+
+
+def test_cli_render_writes_png_exr_and_json(tmp_path, pack):
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    out, exr = tmp_path / "out.png", tmp_path / "out.exr"
+    result = CliRunner().invoke(knitrun, ["render", str(path), "-o", str(out), "--exr", str(exr),
+                                          "--pack", f"cotton1={pack}", "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert out.is_file() and read_exr(exr).shape == (48, 64, 3)
+    assert set(summary["ms_per_pass"]) >= {"raster", "shade"} and summary["ms_total"] > 0
+    bad = CliRunner().invoke(knitrun, ["render", str(path), "-o", str(out)])
+    assert bad.exit_code != 0 and "has no asset pack" in bad.output and "Traceback" not in bad.output
+
+
+# --- building blocks ---------------------------------------------------------------------------------------------
+
+def test_texture_sampling_hits_texel_centres_and_wraps_u():
+    rng = np.random.default_rng(0)
+    level0 = rng.random((4, 8, 2)).astype(np.float32)
+    level1 = level0.reshape(2, 2, 4, 2, 2).mean(axis=(1, 3))
+    stack = mip_stack([[level0, level1]])
+    out = np.empty(2)
+    for i in range(4):
+        for j in range(8):
+            u, v = (j + 0.5) / 8, -1 + (i + 0.5) * 2 / 4
+            sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.0, u + 3.0, v, out)
+            assert np.allclose(out, level0[i, j], atol=1e-6)
+    # halfway between the last and the first column: the mean of the two (u repeats)
+    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.0, 1.0, -1 + 0.25, out)
+    assert np.allclose(out, (level0[0, 0] + level0[0, 7]) / 2, atol=1e-6)
+    # level 0.5 blends the two levels; levels beyond the chain clamp to the last
+    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.5, 0.3125, -0.75, out)
+    a, b = np.empty(2), np.empty(2)
+    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.0, 0.3125, -0.75, a)
+    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 1.0, 0.3125, -0.75, b)
+    assert np.allclose(out, (a + b) / 2)
+    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 9.0, 0.3125, -0.75, out)
+    assert np.allclose(out, b)
+
+
+def test_flyaway_variant_hash_is_stable_and_uses_all_three():
+    picks = np.array([[variant_of(c, p) for p in range(200)] for c in range(5)])
+    assert np.array_equal(picks, [[variant_of(c, p) for p in range(200)] for c in range(5)])
+    counts = np.bincount(picks.ravel(), minlength=3)
+    assert counts.min() > 0.25 * picks.size  # each variant about a third
+    assert variant_of(0, -1) in (0, 1, 2)
+
+
+def test_resolve_weights_coverage_over_the_background():
+    start = np.array([0, 2, 2])
+    weight = np.array([0.5, 0.5])
+    rgb = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    alpha = np.array([1.0, 0.5])
+    under = np.array([[0, 0, 1.0], [0.2, 0.2, 0.2]])
+    out = np.empty((2, 3))
+    resolve(start, weight, rgb, alpha, under, out)
+    assert np.allclose(out[0], [0.5, 0.25, 0.25])  # 0.5 red + 0.25 green + (1 − 0.75) blue
+    assert np.allclose(out[1], [0.2, 0.2, 0.2])
+    assert math.isclose(out.sum(), 0.5 + 0.25 + 0.25 + 0.6)
