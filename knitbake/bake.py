@@ -70,7 +70,7 @@ QUALITY = {
     },
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.
-STAGE_VERSION = {name: 1 for name in STAGE_ORDER}
+STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 2}  # 2: weighted ξ factorization
 
 
 def cache_dir() -> Path:

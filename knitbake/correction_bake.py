@@ -15,7 +15,9 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
   φ_i = −φ (so (θ_o − θ_i)/2 = θ_d). Ψ_* is the path-traced radiance of the hits in the bin (multiple scattering
   inside the yarn, ``yarn_only_radius``), Ψ_DS the dual-scattering estimate of the same hits
   (``knitrun.dual_scattering``) with the fiber count toward the light measured on the explicit fibers; ξ of a
-  bin = Σ Ψ_* / Σ Ψ_DS.
+  bin = Σ Ψ_* / Σ Ψ_DS. ξ's factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
+  ξ·Ψ_DS that shading produces: a bin where the DS estimate is tiny (an edge bin lit from the far side) has a
+  ratio far from the others that an unweighted fit lets distort every other direction of that v.
 
 Each quantity is measured B times with independent seeds; tables hold the batch mean, ``*_stderr`` the standard
 error s/√B. The factorization X[k, m] ≈ a[k]·c[m] per (v, channel) is the leading singular pair of X (non-negative),
@@ -85,9 +87,13 @@ def row_v(rows: int) -> np.ndarray:
     return -(1 - 2 * (np.arange(rows) + 0.5) / rows)
 
 
-def factor_rank1(x: np.ndarray):
+def factor_rank1(x: np.ndarray, weight: np.ndarray | None = None, iterations: int = 30):
     """x (N_v, K, M, 3) → a (N_v, K, 3), c (N_v, M, 3) with x ≈ a c per (v, channel), c of mean 1 over M; plus the
-    relative residual per v and overall."""
+    relative residual ‖x − a cᵀ‖_F/‖x‖_F per v and overall (unweighted, ASSET_PACK.md §6).
+
+    Without ``weight``: the leading singular pair (non-negative). With ``weight`` (same shape, ≥ 0): the weighted
+    least-squares rank-1 fit min Σ w (x − a c)², by alternating exact updates a_k = Σ_m w x c / Σ_m w c² (and
+    likewise c) from the singular pair, ``iterations`` times, a and c kept ≥ 0."""
     n_v, n_k, n_m, _ = x.shape
     a = np.ones((n_v, n_k, 3))
     c = np.ones((n_v, n_m, 3))
@@ -96,6 +102,11 @@ def factor_rank1(x: np.ndarray):
         for ch in range(3):
             u, s, vt = np.linalg.svd(x[i, :, :, ch])
             av, cv = np.abs(u[:, 0]) * s[0], np.abs(vt[0])
+            if weight is not None and np.any(weight[i, :, :, ch] > 0):
+                w, xi = weight[i, :, :, ch], x[i, :, :, ch]
+                for _ in range(iterations):
+                    av = np.maximum((w * xi) @ cv / np.maximum(w @ (cv * cv), 1e-300), 0.0)
+                    cv = np.maximum(av @ (w * xi) / np.maximum((av * av) @ w, 1e-300), 0.0)
             scale = cv.mean()
             if scale > 0:
                 a[i, :, ch], c[i, :, ch] = av * scale, cv / scale
@@ -118,13 +129,16 @@ def _bins(values, weights, rows_v, n_v):
     return sums, counts
 
 
-def _factored_tables(samples, prefix, names):
-    """Batch samples (B, N_v, K, M, 3) → factored tables, per-entry stderr of each factor, residuals."""
-    factors = [factor_rank1(s) for s in samples]
+def _factored_tables(samples, prefix, names, weights=None):
+    """Batch samples (B, N_v, K, M, 3) → factored tables, per-entry stderr of each factor, residuals; ``weights``
+    (same shape) makes each factorization the weighted fit of ``factor_rank1``."""
+    if weights is None:
+        weights = [None] * len(samples)
+    factors = [factor_rank1(s, w) for s, w in zip(samples, weights)]
     a = np.stack([f[0] for f in factors])
     c = np.stack([f[1] for f in factors])
     b = samples.shape[0]
-    mean_factors = factor_rank1(samples.mean(axis=0))
+    mean_factors = factor_rank1(samples.mean(axis=0), None if weights[0] is None else np.mean(weights, axis=0))
     tables = {f"{prefix}/{names[0]}": mean_factors[0], f"{prefix}/{names[1]}": mean_factors[1],
               f"{prefix}/{names[2]}": np.float64(mean_factors[3]), f"{prefix}/{names[2]}_by_v": mean_factors[2]}
     errors = {f"{prefix}/{names[0]}": a.std(axis=0, ddof=1) / math.sqrt(b),
@@ -253,6 +267,7 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
     phis = cell_centres(-math.pi, math.pi, n_phi)
     params = params_from_optics(spec.optics)
     samples = np.ones((batches, n_v, n_theta, n_phi, 3))
+    weights = np.zeros((batches, n_v, n_theta, n_phi, 3))
     rows = max(rows, n_v)
     total, done = batches * n_theta * n_phi, 0
     for b in range(batches):
@@ -270,10 +285,11 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
                 den, _ = _bins(ds, np.ones(ds.shape[:2]), row_v(rows), n_v)
                 ok = np.all(den > 1e-12 * max(den.max(), 1e-300), axis=1)
                 samples[b, ok, k, m] = num[ok] / den[ok]
+                weights[b, :, k, m] = den ** 2
                 done += 1
                 if progress:
                     progress(done, total)
-    return _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"))
+    return _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"), weights)
 
 
 def bake_shadowing_stage(spec, settings, seed, progress=None) -> StageResult:

@@ -30,6 +30,22 @@ def test_factor_rank1_recovers_a_product_and_reports_residual():
     assert cb.factor_rank1(noisy)[3] > 0.02
 
 
+def test_weighted_factorization_ignores_an_outlier_of_zero_weight():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0.5, 2, (2, 6, 3))
+    c = rng.uniform(0.5, 2, (2, 8, 3))
+    x = a[:, :, None, :] * c[:, None, :, :]
+    spiked = x.copy()
+    spiked[:, 0, 0] *= 20.0  # one cell whose DS denominator was tiny: a huge, meaningless ratio
+    weight = np.ones_like(x)
+    weight[:, 0, 0] = 0.0
+    fa, fc, _, _ = cb.factor_rank1(spiked, weight)
+    product = fa[:, :, None] * fc[:, None]
+    np.testing.assert_allclose(product[:, 1:], x[:, 1:], rtol=1e-6)  # every other cell exact
+    plain = cb.factor_rank1(spiked)
+    assert np.abs(plain[0][:, :, None] * plain[1][:, None] - x)[:, 1:].max() > 0.1  # the unweighted fit is pulled
+
+
 def slab(layers=3, per_layer=24, radius=0.01, spacing=0.025, length=2.0):
     """Parallel straight fibers along z in ``layers`` planes x = −k·spacing, packed along y."""
     pts, offs = [], [0]
