@@ -219,3 +219,37 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
     passes = ", ".join(f"{k} {v * 1e3:.0f}" for k, v in result.timings.items())
     click.echo(f"{output}: {scene.camera.width}x{scene.camera.height}, {result.facts['points']} points, "
                f"{total * 1e3:.0f} ms ({passes} ms)")
+
+
+@main.command()
+@click.argument("scene_path", metavar="SCENE", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False), required=True,
+              help="Report folder (created): report.md, report.json and the images.")
+@click.option("--reference", type=click.Path(dir_okay=False), default=None,
+              help="A reference EXR to compare with instead of path tracing one.")
+@click.option("--spp", type=click.IntRange(min=1), default=None,
+              help="Reference samples per pixel (default: the scene's).")
+@click.option("--pack", "pack_values", multiple=True, metavar="YARN=FILE",
+              help="Asset pack for a yarn; overrides the scene's `pack`. Repeatable.")
+@click.option("--exposure", type=float, default=0.0, show_default=True,
+              help="Exposure in stops of the PNGs and of the tone mapping FLIP sees.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+def compare(scene_path, out_dir, reference, spp, pack_values, exposure, as_json):
+    """Compare the strip renderer (full model and its ablations) with the reference path tracer.
+
+    Example: knitrun compare examples/scenes/straight_yarn_directional.toml --pack cotton1=cotton1.h5 --spp 64 -o report/
+    """
+    from knitbake.compare_report import ABLATION_LABELS, compare_scene
+
+    if reference is not None and spp is not None:
+        raise FormatError("--reference and --spp exclude each other (--spp sets the reference's samples)")
+    summary = compare_scene(scene_path, out_dir, reference=reference, spp=spp, packs=_pack_overrides(pack_values),
+                            exposure=exposure, progress=lambda message: click.echo(message, err=True))
+    if as_json:
+        echo_json(summary)
+        return
+    for name, row in summary["ablations"].items():
+        speed = f", {row['speedup']:.0f}x faster than the reference" if row["speedup"] else ""
+        click.echo(f"{ABLATION_LABELS[name]:26s} FLIP {row['flip']:.4f}  RMSE {row['rmse']:.4f}  "
+                   f"relMSE {row['rel_mse']:.4f}  {row['ms']:.0f} ms{speed}")
+    click.echo(f"report: {Path(out_dir) / 'report.md'}")

@@ -1,0 +1,94 @@
+"""Strip renderer: ms per frame and per pass for a stockinette patch, under a directional light and under the
+built-in sky fitted with 16 SRBFs, and how the cost grows with control points and pixels.
+
+Patch: ``knitbake.stockinette.stockinette_curves(rows, 21)`` (48 points per stitch, yarn radius 0.03 cm; 60 rows
+≈ 60K control points, about 5 × 10 cm), cotton1, seen from the front (pinhole, fov 40°, whole patch in view),
+MSAA 4, shadow maps 2048² (lobes 512²). Every figure is the median of ``--frames`` renders after one warm-up
+render (which pays Numba's compile or cache load). ``load`` re-reads the pack and re-evaluates the curves each
+frame (an interactive viewer would keep them); the per-frame work is the other passes.
+
+    .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3]
+
+Without ``--pack`` a draft cotton1 pack is baked (or taken from the bake cache).
+"""
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from data_formats.scene import load_scene
+from data_formats.yarn_curves import write_yarn_curves
+from data_formats.yarn_spec import load_preset
+from knitbake.bake import bake
+from knitbake.stockinette import stockinette_curves
+from knitrun.render import render
+
+SCENE = """format = "knit-scene"
+version = "1.0"
+units = "cm"
+[[yarns]]
+curves = "patch.h5"
+yarn = "cotton1"
+radius = 0.03
+[camera]
+position = [2.4, 5.0, 15.0]
+look_at = [2.4, 5.0, 0.0]
+fov_deg = 40.0
+width = {width}
+height = {height}
+[[lights]]
+{light}
+[render]
+msaa = 4
+shadow_map_size = 2048
+srbf_count = 16
+"""
+LIGHTS = {"directional": 'type = "directional"\ndirection = [0.4, 0.6, 1.0]\nirradiance = [3.0, 3.0, 3.0]',
+          "sky16": 'type = "environment"\nbuiltin = "sky"'}
+
+
+def time_scene(folder, pack, rows, width, height, light, frames):
+    write_yarn_curves(folder / "patch.h5", stockinette_curves(rows, 21))
+    (folder / "scene.toml").write_text(SCENE.format(width=width, height=height, light=LIGHTS[light]))
+    scene = load_scene(folder / "scene.toml")
+    result = render(scene, {"cotton1": str(pack)})
+    runs = []
+    for _ in range(frames):
+        t0 = time.perf_counter()
+        result = render(scene, {"cotton1": str(pack)})
+        runs.append((time.perf_counter() - t0, result.timings))
+    total, timings = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
+    return total, timings, result.facts
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pack", default=None)
+    parser.add_argument("--frames", type=int, default=3)
+    args = parser.parse_args()
+    folder = Path(tempfile.mkdtemp(prefix="knit_bench_render_"))
+    pack = args.pack
+    if pack is None:
+        pack = folder / "cotton1_draft.h5"
+        bake(load_preset("cotton1"), pack, quality="draft")
+    print(f"## Strip renderer (cotton1, {numba.get_num_threads()} threads, pack {Path(pack).name})")
+    print("| light | control points | pixels | shading points | total ms | load | srbf_fit | raster | shadow | shade "
+          "| resolve |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    cases = [("directional", 60, 1280, 960), ("sky16", 60, 1280, 960),
+             ("directional", 15, 1280, 960), ("directional", 30, 1280, 960), ("directional", 120, 1280, 960),
+             ("directional", 60, 640, 480), ("directional", 60, 2560, 1920)]
+    for light, rows, width, height in cases:
+        total, timings, facts = time_scene(folder, pack, rows, width, height, light, args.frames)
+        passes = " | ".join(f"{1e3 * timings.get(k, 0.0):.0f}" for k in
+                            ("load", "srbf_fit", "raster", "shadow", "shade", "resolve"))
+        print(f"| {light} | {facts['points']} | {width}×{height} | {facts['shading_points']} | {1e3 * total:.0f} | "
+              f"{passes} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
