@@ -14,9 +14,9 @@ $(BIN)/knitbake: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	@touch $@
 
-# What exists so far: list the presets, generate two yarns' fibers with preview images, inspect and validate them,
-# path-trace the example straight yarn under the built-in sky, bake a draft asset pack, and simulate a stretched
-# diamond-pattern patch (the strip renderer that will draw it is the next issue).
+# List the presets, generate two yarns' fibers with preview images, inspect and validate them, path-trace the
+# example straight yarn under the built-in sky, bake a draft asset pack, simulate a stretched diamond-pattern patch
+# and render its last frame with the strip renderer (demo_patch.png).
 demo: setup
 	@mkdir -p $(OUT)
 	$(BIN)/knitbake yarn list
@@ -29,7 +29,14 @@ demo: setup
 	$(BIN)/knitbake inspect $(OUT)/cotton1_draft.h5
 	$(BIN)/knitrun pattern diamond --rows 12 --cols 12 -o $(OUT)/diamond.h5
 	$(BIN)/knitrun simulate $(OUT)/diamond.h5 --deform stretch-x=1.4 --frames 9 -o $(OUT)/diamond_yarns.h5
-	@echo "demo outputs in $(OUT)/ (open the *_preview.png images)"
+	@printf '%s\n' 'format = "knit-scene"' 'version = "1.0"' 'name = "demo: stretched diamond patch"' \
+	  'units = "cm"' 'background = [0.02, 0.02, 0.03]' '[[yarns]]' 'curves = "diamond_yarns.h5"' 'yarn = "cotton1"' \
+	  'pack = "cotton1_draft.h5"' 'color = [0.85, 0.3, 0.25]' '[camera]' 'position = [1.5, -1.2, 6.5]' \
+	  'look_at = [1.5, 1.2, 0.0]' 'fov_deg = 38.0' 'width = 960' 'height = 720' '[[lights]]' 'type = "directional"' \
+	  'direction = [0.5, 0.4, 1.0]' 'irradiance = [2.5, 2.5, 2.5]' '[[lights]]' 'type = "environment"' \
+	  'builtin = "sky"' 'scale = [0.3, 0.3, 0.3]' '[render]' 'frame = 8' 'msaa = 4' > $(OUT)/demo_patch.toml
+	$(BIN)/knitrun render $(OUT)/demo_patch.toml -o $(OUT)/demo_patch.png --exr $(OUT)/demo_patch.exr
+	@echo "demo outputs in $(OUT)/ (open demo_patch.png and the *_preview.png images)"
 
 test: setup
 	$(BIN)/python -m pytest -q

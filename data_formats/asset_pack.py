@@ -40,7 +40,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "1.0"
+SCHEMA_VERSION = "1.1"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
@@ -144,6 +144,8 @@ TABLES = (
               "ξ_M(v, θ_d): longitudinal factor of the DS correction ξ = Ψ_*/Ψ_DS", value_range=(0.0, None)),
     TableSpec("correction/xi_N", "correction", ("N_v", "N_phi", 3), ("v", "phi", "channel"), "1",
               "ξ_N(v, φ): azimuthal factor of the DS correction", value_range=(0.0, None)),
+    TableSpec("correction/xi", "correction", ("N_v", "N_theta", "N_phi", 3), ("v", "theta_d", "phi", "channel"), "1",
+              "ξ(v, θ_d, φ) as baked, before factorization (schema 1.1)", value_range=(0.0, None)),
     TableSpec("correction/xi_residual", "correction", (), (), "1",
               "relative RMS residual of ξ ≈ ξ_M ξ_N over the whole baked grid", value_range=(0.0, None)),
     TableSpec("correction/xi_residual_by_v", "correction", ("N_v",), ("v",), "1",
@@ -152,6 +154,8 @@ TABLES = (
               "Ψ^Fiber_{G,M}(v, θ_i): longitudinal factor of fiber-level shadowing", value_range=(0.0, None)),
     TableSpec("shadowing/psi_GN", "shadowing", ("N_v", "N_phi", 3), ("v", "phi", "channel"), "1",
               "Ψ^Fiber_{G,N}(v, φ): azimuthal factor of fiber-level shadowing", value_range=(0.0, None)),
+    TableSpec("shadowing/psi", "shadowing", ("N_v", "N_theta", "N_phi", 3), ("v", "theta_i", "phi", "channel"), "1",
+              "Ψ^Fiber_G(v, θ_i, φ) as baked, before factorization (schema 1.1)", value_range=(0.0, None)),
     TableSpec("shadowing/psi_residual", "shadowing", (), (), "1",
               "relative RMS residual of Ψ^Fiber_G ≈ Ψ_{G,M} Ψ_{G,N} over the whole baked grid",
               value_range=(0.0, None)),

@@ -70,7 +70,8 @@ QUALITY = {
     },
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.
-STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 2}  # 2: weighted ξ factorization
+# correction 2: weighted ξ factorization; 3, shadowing 2: the unfactorized tables are stored too
+STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 3, "shadowing": 2}
 
 
 def cache_dir() -> Path:

@@ -130,7 +130,8 @@ def _bins(values, weights, rows_v, n_v):
 
 
 def _factored_tables(samples, prefix, names, weights=None):
-    """Batch samples (B, N_v, K, M, 3) → factored tables, per-entry stderr of each factor, residuals; ``weights``
+    """Batch samples (B, N_v, K, M, 3) → the full table (batch mean), its factors, per-entry stderr of each, and
+    the residuals; ``weights``
     (same shape) makes each factorization the weighted fit of ``factor_rank1``."""
     if weights is None:
         weights = [None] * len(samples)
@@ -139,9 +140,12 @@ def _factored_tables(samples, prefix, names, weights=None):
     c = np.stack([f[1] for f in factors])
     b = samples.shape[0]
     mean_factors = factor_rank1(samples.mean(axis=0), None if weights[0] is None else np.mean(weights, axis=0))
-    tables = {f"{prefix}/{names[0]}": mean_factors[0], f"{prefix}/{names[1]}": mean_factors[1],
+    full = names[2].split("_")[0]  # "xi" or "psi": the unfactorized table
+    tables = {f"{prefix}/{full}": samples.mean(axis=0),
+              f"{prefix}/{names[0]}": mean_factors[0], f"{prefix}/{names[1]}": mean_factors[1],
               f"{prefix}/{names[2]}": np.float64(mean_factors[3]), f"{prefix}/{names[2]}_by_v": mean_factors[2]}
-    errors = {f"{prefix}/{names[0]}": a.std(axis=0, ddof=1) / math.sqrt(b),
+    errors = {f"{prefix}/{full}": samples.std(axis=0, ddof=1) / math.sqrt(b),
+              f"{prefix}/{names[0]}": a.std(axis=0, ddof=1) / math.sqrt(b),
               f"{prefix}/{names[1]}": c.std(axis=0, ddof=1) / math.sqrt(b),
               f"{prefix}/{names[2]}": float(np.std([f[3] for f in factors], ddof=1) / math.sqrt(b)),
               f"{prefix}/{names[2]}_by_v": np.stack([f[2] for f in factors]).std(axis=0, ddof=1) / math.sqrt(b)}

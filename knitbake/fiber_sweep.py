@@ -10,7 +10,8 @@ Conventions
 * **Attachment.** Yarn-space z·k is the rest arc length σ along the curve (``curve_eval.dense_curve``), never the
   current arc length: a curve stretched between frames carries every fiber point to the same rest coordinate, and
   the twist of the fibers is a function of σ only — fibers do not swim.
-* **Frame.** (x, y) are laid along (N, B) of a rotation-minimising frame, B = T × N, transported along the dense
+* **Frame** (the yarn frame of ``data_formats.curve_eval``, shared with the strip renderer, which aligns its
+  textures' phase to it). (x, y) are laid along (N, B) of a rotation-minimising frame, B = T × N, transported along the dense
   curve by the double reflection method (Wang et al. 2008, "Computation of rotation minimizing frames", ACM TOG
   27(1)) with central-difference tangents. Between samples the tangent and normal are interpolated linearly and
   re-orthonormalised. A straight curve along +z starting at the origin therefore reproduces the generator's
@@ -38,11 +39,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from data_formats.yarn_curves import YarnCurves
 from data_formats.yarn_spec import YarnSpec
-from data_formats.curve_eval import dense_curve
+from data_formats.curve_eval import curve_frames, dense_curve, start_normal, tangents
 from knitbake.fiber_set import FiberSet
 from knitbake.procedural_yarn import generate_fibers
 
@@ -50,95 +50,6 @@ from knitbake.procedural_yarn import generate_fibers
 def curve_seed(seed: int, c: int) -> int:
     """Seed of curve c's fibers: a 63-bit hash of (seed, c) by numpy's SeedSequence."""
     return int(np.random.SeedSequence((int(seed), int(c))).generate_state(1, np.uint64)[0] >> np.uint64(1))
-
-
-def initial_normal(t: np.ndarray) -> np.ndarray:
-    """Unit normal ⟂ unit tangent t: x̂ made orthogonal to t, or ŷ when |t·x̂| > 0.9."""
-    ref = np.array([1.0, 0.0, 0.0]) if abs(t[0]) <= 0.9 else np.array([0.0, 1.0, 0.0])
-    n = ref - (ref @ t) * t
-    return n / np.linalg.norm(n)
-
-
-def tangents(xyz: np.ndarray, closed: bool) -> np.ndarray:
-    """Unit tangents (m, 3) of a dense polyline by central differences (one-sided at open ends; a closed polyline
-    repeats its first point at the end). Samples where the difference vanishes take the nearest valid tangent."""
-    if closed:
-        ext = np.concatenate([xyz[-2:-1], xyz, xyz[1:2]])
-        d = ext[2:] - ext[:-2]
-    else:
-        d = np.empty_like(xyz)
-        d[1:-1] = xyz[2:] - xyz[:-2]
-        d[0], d[-1] = xyz[1] - xyz[0], xyz[-1] - xyz[-2]
-    norm = np.linalg.norm(d, axis=1)
-    valid = norm > 1e-300
-    if not valid.any():
-        raise ValueError("the curve has zero length (all its points coincide)")
-    idx = np.maximum.accumulate(np.where(valid, np.arange(len(d)), -1))
-    idx[idx < 0] = np.flatnonzero(valid)[0]
-    return d[idx] / norm[idx, None]
-
-
-@njit(cache=True)
-def rotation_minimizing_normals(xyz, t, n0):
-    """Normals (m, 3) of the rotation-minimising frame along points xyz with unit tangents t, starting from the
-    unit normal n0 ⟂ t[0]: double reflection (Wang et al. 2008, Algorithm 1). A zero-length step skips its
-    first reflection; equal tangents skip the second."""
-    m = xyz.shape[0]
-    out = np.empty((m, 3))
-    out[0] = n0
-    for i in range(m - 1):
-        v1 = xyz[i + 1] - xyz[i]
-        c1 = v1 @ v1
-        r, ti = out[i].copy(), t[i].copy()
-        if c1 > 0.0:
-            r = r - (2.0 / c1) * (v1 @ r) * v1
-            ti = ti - (2.0 / c1) * (v1 @ ti) * v1
-        v2 = t[i + 1] - ti
-        c2 = v2 @ v2
-        if c2 > 0.0:
-            r = r - (2.0 / c2) * (v2 @ r) * v2
-        r = r - (r @ t[i + 1]) * t[i + 1]  # remove rounding drift; the exact result is already ⟂ t[i+1]
-        out[i + 1] = r / np.sqrt(r @ r)
-    return out
-
-
-def curve_frames(xyz: np.ndarray, sigma: np.ndarray, closed: bool, n0: np.ndarray | None = None):
-    """(T, N, holonomy) along a dense polyline: unit tangents, rotation-minimising normals from n0 (default
-    ``initial_normal(T_0)``; otherwise made orthogonal to T_0), and for a closed curve (xyz[-1] == xyz[0],
-    sigma[-1] = L) the holonomy Δ (rad), distributed as a turn of −Δ·σ/L about T so that the frame closes;
-    holonomy is 0.0 for an open curve."""
-    t = tangents(xyz, closed)
-    if n0 is None:
-        n0 = initial_normal(t[0])
-    n0 = n0 - (n0 @ t[0]) * t[0]
-    n0 = n0 / np.linalg.norm(n0)
-    n = rotation_minimizing_normals(xyz, t, n0)
-    if not closed:
-        return t, n, 0.0
-    t0, n_end = t[0], n[-1]
-    holonomy = math.atan2(float(np.cross(n0, n_end) @ t0), float(n0 @ n_end))
-    phi = -holonomy * sigma / sigma[-1]
-    n = n * np.cos(phi)[:, None] + np.cross(t, n) * np.sin(phi)[:, None]
-    n[-1] = n0
-    return t, n, holonomy
-
-
-def _start_normal(curves: YarnCurves, c: int, frame: int, t_now: np.ndarray,
-                  samples_per_segment: int | None) -> np.ndarray | None:
-    """The start normal of curve c at ``frame`` whose start tangent is t_now (module docstring: Start normal);
-    None at frame 0 (``curve_frames`` then uses ``initial_normal``)."""
-    if frame == 0:
-        return None
-    xyz0, _ = dense_curve(curves, c, 0, samples_per_segment)
-    t0 = tangents(xyz0, bool(curves.closed[c]))[0]
-    n0 = initial_normal(t0)
-    cos = float(t0 @ t_now)
-    if cos > -1.0 + 1e-12:  # smallest rotation taking t0 to t_now, applied to n0 ⟂ t0
-        n = n0 - ((t_now @ n0) / (1.0 + cos)) * (t0 + t_now)
-    else:  # opposite tangents: half turn about n0 keeps n0
-        n = n0
-    n = n - (n @ t_now) * t_now
-    return n / np.linalg.norm(n)
 
 
 def place(yarn_pts: np.ndarray, xyz: np.ndarray, sigma: np.ndarray, t: np.ndarray, n: np.ndarray,
@@ -186,7 +97,7 @@ def sweep_curve(curves: YarnCurves, c: int, frame: int, spec: YarnSpec, radius: 
     fs = generate_fibers(spec, length=gen_length, z_start=0.0, seed=cseed, segments_per_period=segments_per_period,
                          flyaways=flyaways)
     yarn_pts = fs.points * np.array([k, k, k * stretch])
-    n0 = _start_normal(curves, c, frame, tangents(xyz, closed)[0], samples_per_segment)
+    n0 = start_normal(curves, c, frame, tangents(xyz, closed)[0], samples_per_segment)
     t, n, holonomy = curve_frames(xyz, sigma, closed, n0)
     if closed:
         succ = fs.info["successor"]

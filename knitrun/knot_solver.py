@@ -56,7 +56,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .numba_setup import FASTMATH
+from data_formats.numba_setup import FASTMATH
 from .stitch_templates import (F_A, F_C, F_KNOTS, F_S, F_T, I_KNOT, I_PIECES, I_V0, I_V1, MAX_ANGLES, MAX_POINTS,
                                MAX_SEGMENTS, N_UNKNOWNS)
 

@@ -16,12 +16,18 @@ Passes, each timed (``RenderResult.timings``, seconds):
    angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.shadow_map``). Receivers are biased by 1.5 yarn
    radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job).
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
-   (``knitrun.strip_shading``).
+   (``knitrun.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
+   frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
+   seen from azimuth 0 shifted along its axis by twist_sign·γ/(2π) ply periods, so the texture is read at
+   u = (s − twist_sign·γ/(2π)·period)/period, γ = atan2(ω_o·(T × N), ω_o·N) with N of the curve's yarn frame
+   (``data_formats.curve_eval.yarn_frame``, the frame the reference sweeps its fibers in). The ply pattern is
+   then where the reference has it, and moves along the yarn as the camera circles it, as a real yarn's does.
 6. ``resolve``: coverage-weighted MSAA resolve over the background, the flyaway layer on top.
 
 ``Features`` switch the baked terms off for ablations (seed 000 Fig. 7): without ``xi`` the correction is 1,
 without ``fiber_shadowing`` Ψ^Fiber_G = 1 (and no fiber lies between a visible fiber and the light), without
-``flyaways`` no flyaway layer.
+``flyaways`` no flyaway layer; ``full_tables`` False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N}
+(the paper's) instead of the pack's unfactorized tables.
 """
 
 from __future__ import annotations
@@ -35,7 +41,7 @@ import numpy as np
 
 from data_formats.bcc import read_bcc
 from data_formats.bcc import sniff as is_bcc
-from data_formats.curve_eval import dense_curve
+from data_formats.curve_eval import yarn_frame
 from data_formats.images import read_image
 from data_formats.scene import EnvironmentLight, Scene
 from data_formats.yarn_curves import read_yarn_curves
@@ -46,7 +52,7 @@ from .shadow_map import build_shadow_map, shadow_visibility
 from .srbf_fit import fit_srbf
 from .strip_raster import SAMPLE_PATTERNS, rasterize_strips
 from .strip_shading import resolve, shade_flyaway, shade_regular, shading_points
-from .yarn_look import load_look
+from .yarn_look import load_look, no_full_table, ones_factor
 
 BUILTIN_ENVIRONMENTS = {"sky": sky_image}
 SHADOW_BIAS_RADII = 1.5
@@ -61,6 +67,7 @@ class Features:
     xi: bool = True
     fiber_shadowing: bool = True
     flyaways: bool = True
+    full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
 
 
 ABLATIONS = {
@@ -68,6 +75,7 @@ ABLATIONS = {
     "xi": Features(xi=True, fiber_shadowing=False, flyaways=False),
     "xi_shadowing": Features(xi=True, fiber_shadowing=True, flyaways=False),
     "full": Features(),
+    "factored": Features(full_tables=False),
 }
 
 
@@ -84,6 +92,7 @@ class _Polylines:
     offsets: np.ndarray  # (C+1,)
     rest: np.ndarray  # (P,)
     entry: np.ndarray  # (C,) yarn entry index
+    normal: np.ndarray  # (P, 3) the yarn frame's normal N (data_formats.curve_eval.yarn_frame)
 
 
 def _scene_curves(entry, units, frame):
@@ -99,21 +108,46 @@ def _scene_curves(entry, units, frame):
 
 
 def _polylines(scene: Scene, samples_per_segment: int) -> _Polylines:
-    pts, rest, entry_of, sizes = [], [], [], [0]
+    pts, rest, normals, entry_of, sizes = [], [], [], [], [0]
     for k, entry in enumerate(scene.yarns):
         curves, frame = _scene_curves(entry, scene.units, scene.render.frame)
         wanted = entry.yarn_type_indices or tuple(range(len(curves.yarn_types)))
         for c in range(len(curves.offsets) - 1):
-            if curves.yarn_type[c] not in wanted or curves.offsets[c + 1] - curves.offsets[c] < 2:
-                continue
-            xyz, sigma = dense_curve(curves, c, frame, None if curves.curve_type == "PL" else samples_per_segment)
+            control = curves.points[frame, curves.offsets[c]:curves.offsets[c + 1]]
+            if curves.yarn_type[c] not in wanted or len(control) < 2 or np.all(control == control[0]):
+                continue  # not this entry's, or nothing to draw (a point)
+            xyz, sigma, _, normal = yarn_frame(curves, c, frame,
+                                               None if curves.curve_type == "PL" else samples_per_segment)
             pts.append(xyz)
             rest.append(sigma)
+            normals.append(normal)
             entry_of.append(k)
             sizes.append(len(xyz))
     if not pts:
-        return _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64))
-    return _Polylines(np.concatenate(pts), np.cumsum(sizes), np.concatenate(rest), np.array(entry_of, np.int64))
+        return _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)))
+    return _Polylines(np.concatenate(pts), np.cumsum(sizes), np.concatenate(rest), np.array(entry_of, np.int64),
+                      np.concatenate(normals))
+
+
+def _view_phase_arclength(points, lines, looks):
+    """Rest arc length shifted so the texture shows the yarn as seen from the view's azimuth (module docstring)."""
+    seg = points["segment"].astype(np.int64)
+    s = points["arclength"].astype(np.float64)
+    if len(seg) == 0:
+        return s
+    s_a, s_b = lines.rest[seg], lines.rest[seg + 1]
+    ds = s_b - s_a
+    f = np.clip(np.where(ds > 0, (s - s_a) / np.where(ds > 0, ds, 1.0), 0.0), 0.0, 1.0)[:, None]
+    t = points["tangent"]
+    n = (1.0 - f) * lines.normal[seg] + f * lines.normal[seg + 1]
+    n -= np.sum(n * t, axis=1, keepdims=True) * t
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(norm > 1e-9, n / np.maximum(norm, 1e-300), lines.normal[seg])
+    wo = points["view_dir"]
+    gamma = np.arctan2(np.sum(wo * np.cross(t, n), axis=1), np.sum(wo * n, axis=1))
+    sign = np.array([look.twist_sign for look in looks])[points["yarn"]]
+    period = np.array([look.period for look in looks])[points["yarn"]]
+    return s - sign * gamma / (2.0 * np.pi) * period
 
 
 def _camera(scene: Scene) -> Camera:
@@ -169,13 +203,14 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
 
     environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
     looks = [load_look(_pack_path(k, e, packs), e, scene.units, corrections=features.xi or features.fiber_shadowing,
-                       flyaways=features.flyaways, environment=environment) for k, e in enumerate(scene.yarns)]
-    if not features.xi:
-        for look in looks:
-            look.xi_m, look.xi_n = np.ones((1, 1, 3)), np.ones((1, 1, 3))
-    if not features.fiber_shadowing:
-        for look in looks:
-            look.psi_gm, look.psi_gn, look.n_occluded = np.ones((1, 1, 3)), np.ones((1, 1, 3)), 0.0
+                       full_tables=features.full_tables, flyaways=features.flyaways, environment=environment)
+             for k, e in enumerate(scene.yarns)]
+    for look in looks:
+        if not features.xi:
+            look.xi_full, look.xi_m, look.xi_n = no_full_table(), ones_factor(), ones_factor()
+        if not features.fiber_shadowing:
+            look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
+            look.n_occluded = 0.0
     lines = _polylines(scene, samples_per_segment)
     facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
     lap("load")
@@ -235,8 +270,9 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
         idx = np.flatnonzero(points["yarn"] == k)
         im = look.im if look.im is not None else _NO_IM
         shade_regular(idx, points["position"], points["view_dir"], points["tangent"],
-                      points["arclength"].astype(np.float64), points["v"].astype(np.float64), points["footprint"],
-                      look.params, look.ds, look.xi_m, look.xi_n, look.psi_gm, look.psi_gn,
+                      _view_phase_arclength(points, lines, looks), points["v"].astype(np.float64), points["footprint"],
+                      look.params, look.ds, look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm,
+                      look.psi_gn,
                       look.tangent.data, look.tangent.offset, look.tangent.rows, look.tangent.cols,
                       look.coverage.data, look.coverage.offset, look.coverage.rows, look.coverage.cols,
                       look.period, look.radius, look.n_occluded, look.n_cross,
@@ -248,7 +284,7 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
             idx = np.flatnonzero(fly_points["yarn"] == k)
             im = look.im if look.im is not None else _NO_IM
             shade_flyaway(idx, fly_points["position"], fly_points["view_dir"], fly_points["tangent"],
-                          fly_points["arclength"].astype(np.float64), fly_points["v"].astype(np.float64),
+                          _view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
                           fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params,
                           look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,
                           look.period, look.flyaway_half_width, light_dir, light_e, light_vis[1], lobe_dir,

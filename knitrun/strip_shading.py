@@ -16,13 +16,13 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
 (toward ω_i, irradiance E, yarn-level visibility V from the shadow map):
 
     yarn angles   θ_i, θ_o against t;  θ_d = (θ_o − θ_i)/2;  φ = φ_o − φ_i = −atan2(ω_i·b, ω_i·n)
-    ξ           = ξ_M(v, θ_d) ξ_N(v, φ)
-    Ψ^Fiber_G   = mean_RGB Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ), clamped to [0, 1]
+    ξ           = ξ(v, θ_d, φ) (the pack's full table), or ξ_M(v, θ_d) ξ_N(v, φ) (its factors)
+    Ψ^Fiber_G   = mean_RGB Ψ(v, θ_i, φ), or Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ); clamped to [0, 1]
     D           = V · Ψ^Fiber_G                                           fraction lit directly
     n           = n_occluded + (1 − V) n_cross                            fibers toward the light when not lit
     L_o        += E · ξ · DS(θ_i^f, θ_o^f, φ^f; n, D)                    ``dual_scattering.ds_kernel``, fiber frame
 
-with θ^f, φ^f against t_f. An ablation passes (1, 1, 3) tables of ones for ξ or Ψ (and n_occluded = 0 without
+with θ^f, φ^f against t_f. An empty (0, 1, 1, 3) full table selects the factors. An ablation passes (1, 1, 3) factor tables of ones for ξ or Ψ (and n_occluded = 0 without
 Ψ^Fiber: no fiber of the yarn is assumed between a visible fiber and the light). This is the bin average of what the bake divides by (ξ = ΣΨ_*/ΣΨ_DS over the hits of a
 (v, θ_d, φ) bin, each hit lit directly iff no fiber lies toward the light), with Ψ^Yarn_G = V from the yarn-level
 shadow map in place of the other yarns' fibers: seed 000 eq. 11. Per SRBF lobe j (centre ω_j, sharpness λ_j,
@@ -124,7 +124,8 @@ def shading_points(gbuffer, camera, pattern, mask=None):
     """Group a ``StripGBuffer``'s covered samples into shading points (module docstring). Returns a dict of arrays:
     ``start`` (H·W + 1,), ``pixel_sample`` (N, 3) (row, column, sample), ``weight`` (N,), ``position`` (N, 3) world,
     ``view_dir`` (N, 3) unit toward the camera, ``footprint`` (N,) pixel size at the point (scene units), and the
-    G-buffer attributes ``curve``, ``yarn``, ``arclength``, ``v``, ``tangent``, ``depth`` of each point's sample."""
+    G-buffer attributes ``curve``, ``yarn``, ``segment``, ``arclength``, ``v``, ``tangent``, ``depth`` of each
+    point's sample."""
     use = gbuffer.coverage if mask is None else (gbuffer.coverage & mask)
     height, width, _ = use.shape
     counts = np.empty(height * width, np.int64)
@@ -143,7 +144,7 @@ def shading_points(gbuffer, camera, pattern, mask=None):
     i, j, a = pixel_sample.T
     points = {"start": start, "pixel_sample": pixel_sample, "weight": weight, "position": position,
               "view_dir": view_dir, "footprint": footprint}
-    for name in ("curve", "yarn", "arclength", "v", "depth"):
+    for name in ("curve", "yarn", "segment", "arclength", "v", "depth"):
         points[name] = getattr(gbuffer, name)[i, j, a]
     points["tangent"] = gbuffer.tangent[i, j, a].astype(np.float64)
     return points
@@ -199,15 +200,36 @@ def _table_v(tab, v, x, lo, hi, repeat, out):
 
 
 @njit(cache=True)
-def _corrections(xi_m, xi_n, psi_gm, psi_gn, v, theta_i, theta_d, phi, xi, psi, scratch):
-    _table_v(xi_m, v, theta_d, THETA_RANGE[0], THETA_RANGE[1], False, xi)
-    _table_v(xi_n, v, phi, -math.pi, math.pi, True, scratch)
+def _table_v3(tab, v, theta, phi, out):
+    """out[:3] = trilinear lookup of a (N_v, N_theta, N_phi, 3) table at (v, θ, φ) (§4.3: v, θ clamp, φ repeats)."""
+    a0, a1, fa = axis_cell(v, -1.0, 1.0, tab.shape[0], False)
+    b0, b1, fb = axis_cell(theta, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
+    c0, c1, fc = axis_cell(phi, -math.pi, math.pi, tab.shape[2], True)
     for ch in range(3):
-        xi[ch] *= scratch[ch]
-    _table_v(psi_gm, v, theta_i, THETA_RANGE[0], THETA_RANGE[1], False, psi)
-    _table_v(psi_gn, v, phi, -math.pi, math.pi, True, scratch)
+        lo = ((1.0 - fb) * ((1.0 - fc) * tab[a0, b0, c0, ch] + fc * tab[a0, b0, c1, ch])
+              + fb * ((1.0 - fc) * tab[a0, b1, c0, ch] + fc * tab[a0, b1, c1, ch]))
+        hi = ((1.0 - fb) * ((1.0 - fc) * tab[a1, b0, c0, ch] + fc * tab[a1, b0, c1, ch])
+              + fb * ((1.0 - fc) * tab[a1, b1, c0, ch] + fc * tab[a1, b1, c1, ch]))
+        out[ch] = (1.0 - fa) * lo + fa * hi
+
+
+@njit(cache=True)
+def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
+    """A correction or shadowing value: the full table when it has cells (``full.shape[0] > 0``), else the product
+    of the factor lookups (ASSET_PACK.md §6–7)."""
+    if full.shape[0] > 0:
+        _table_v3(full, v, theta, phi, out)
+        return
+    _table_v(m_tab, v, theta, THETA_RANGE[0], THETA_RANGE[1], False, out)
+    _table_v(n_tab, v, phi, -math.pi, math.pi, True, scratch)
     for ch in range(3):
-        psi[ch] *= scratch[ch]
+        out[ch] *= scratch[ch]
+
+
+@njit(cache=True)
+def _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, theta_d, phi, xi, psi, scratch):
+    _factored_or_full(xi_full, xi_m, xi_n, v, theta_d, phi, xi, scratch)
+    _factored_or_full(psi_full, psi_gm, psi_gn, v, theta_i, phi, psi, scratch)
 
 
 @njit(cache=True)
@@ -228,7 +250,7 @@ def _texture_tangent(tex, t, n, b, tf):
 
 @njit(parallel=True, cache=True)
 def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprint,
-                  params, ds, xi_m, xi_n, psi_gm, psi_gn,
+                  params, ds, xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn,
                   tan_data, tan_off, tan_rows, tan_cols, cov_data, cov_off, cov_rows, cov_cols,
                   period, half_width, n_occluded, n_cross,
                   light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis,
@@ -259,7 +281,8 @@ def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprin
             wi = light_dir[light]
             theta_i = _asin(_dot(wi, t))
             phi = -math.atan2(_dot(wi, b), _dot(wi, n))
-            _corrections(xi_m, xi_n, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi, xi, psi, scratch)
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
+                         xi, psi, scratch)
             fiber_lit = min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
             vis = light_vis[light, q]
             n_front = n_occluded + (1.0 - vis) * n_cross
@@ -272,7 +295,8 @@ def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprin
             wj = lobe_dir[j]
             theta_i = _asin(_dot(wj, t))
             phi = -math.atan2(_dot(wj, b), _dot(wj, n))
-            _corrections(xi_m, xi_n, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi, xi, psi, scratch)
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
+                         xi, psi, scratch)
             im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, theta_o_f, _asin(_dot(wj, tf)),
                       -_azimuth_difference(tf, wo, wj), lobe_lambda[j], im)
             for ch in range(3):

@@ -34,7 +34,7 @@ from numba import njit, prange
 
 from data_formats.stitch_mesh import LOOPS_CONSUMED
 
-from .numba_setup import FASTMATH
+from data_formats.numba_setup import FASTMATH
 from .stitch_templates import N_POINTS, ROLE_IN, ROLE_LOOP, ROLE_OUT, piece_ranges
 
 

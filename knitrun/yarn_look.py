@@ -7,8 +7,8 @@ flyaways, environment) and converts everything to the scene:
   ``entry.radius / pack radius`` (a scene may draw a yarn thicker or thinner than it was baked, ``SCENE.md``): the
   texture period and the flyaway strip half-width scale with it, so the fibers keep their proportions.
 * Colour: the entry's ``color`` multiplies the BCSDF lobe colours A_R, A_TT, A_D (as the reference path tracer does).
-  f is linear in those colours, so the dual-scattering averages ā_f, ā_b scale with the colour while the shifts
-  and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
+  f is linear in those colours, so I_M and the dual-scattering averages ā_f, ā_b scale with the colour while the
+  shifts and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
   correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked.
 * Fiber counts for the dual-scattering estimate at run time (no fibers are drawn): ``n_cross``, the mean number of
   fibers a chord through the yarn's centre crosses, 4·K·m·r_f/(π R) for K plies of m fibers of radius r_f in a yarn
@@ -34,6 +34,7 @@ from .texture_sampling import MipStack, mip_stack
 
 METRES = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
+FULL_TABLES = ("correction/xi", "shadowing/psi")  # schema 1.1; absent from older packs
 
 
 @dataclass
@@ -43,8 +44,10 @@ class YarnLook:
     name: str
     params: np.ndarray  # (N_PARAMS,) fiber BCSDF with the entry's colour
     ds: np.ndarray  # (5, N_theta, 3) dual-scattering tables (pack_tables order)
+    xi_full: np.ndarray  # (N_v, N_theta, N_phi, 3), or (0, 1, 1, 3) to use the factors
     xi_m: np.ndarray  # (N_v, N_theta, 3) or a (1, 1, 3) table of ones when corrections are not used
     xi_n: np.ndarray
+    psi_full: np.ndarray
     psi_gm: np.ndarray
     psi_gn: np.ndarray
     tangent: MipStack
@@ -55,12 +58,19 @@ class YarnLook:
     flyaway_half_width: float
     n_cross: float
     n_occluded: float
+    twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
     im: tuple | None  # (table (…, 3) float64, lo, hi, repeat, codes) for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
 
 
-def _ones():
+def ones_factor():
+    """A (1, 1, 3) factor table of ones: the term switched off."""
     return np.ones((1, 1, 3))
+
+
+def no_full_table():
+    """An empty full table: lookups use the factors."""
+    return np.zeros((0, 1, 1, 3))
 
 
 def _tinted_ds(tables, colour):
@@ -74,10 +84,12 @@ def _tinted_ds(tables, colour):
                         "dual_scattering/sigma_b": sigma_b})
 
 
-def load_look(pack_path, entry, units: str, *, corrections=True, flyaways=True, environment=False) -> YarnLook:
+def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
+              environment=False) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
-    serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement)."""
+    serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
+    ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them (schema 1.1), else the factors."""
     names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
     if corrections:
         names += list(CORRECTION_TABLES)
@@ -93,6 +105,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, flyaways=True, 
         raise ValueError(f"{pack_path}: pack baked for yarn {spec.name!r}, the scene draws {entry.spec.name!r}")
     stored = header.info
     missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
+    if corrections and full_tables:
+        names += [n for n in FULL_TABLES if n in stored]
     if missing:
         raise ValueError(f"{pack_path}: pack lacks {', '.join(missing)} (bake the yarn again without --only or --scene)")
     pack = read_pack(pack_path, tables=[k for k in stored if any(k == n or k.startswith(n + "/mip") for n in names)])
@@ -105,24 +119,26 @@ def load_look(pack_path, entry, units: str, *, corrections=True, flyaways=True, 
     scale = entry.radius / pack_radius
     geometry = spec.geometry
     n_cross = 4.0 * geometry.plies * geometry.fibers_per_ply * geometry.fiber_radius / (math.pi * spec.radius)
-    tables = {n: np.asarray(pack.tables[n], np.float64) for n in CORRECTION_TABLES} if corrections else {}
+    tables = {n: np.asarray(pack.tables[n], np.float64) for n in names if n in CORRECTION_TABLES + FULL_TABLES}
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:
         lo, hi, repeat, codes = kernel_axes(pack.info["environment/I_M"].axes)
-        im = (np.ascontiguousarray(pack.tables["environment/I_M"], np.float64), lo, hi, repeat, codes)
+        im = (np.ascontiguousarray(pack.tables["environment/I_M"] * colour, np.float64), lo, hi, repeat, codes)
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
                  if corrections}
     return YarnLook(
         name=spec.name, params=params, ds=_tinted_ds(pack.tables, colour),
-        xi_m=tables.get("correction/xi_M", _ones()), xi_n=tables.get("correction/xi_N", _ones()),
-        psi_gm=tables.get("shadowing/psi_GM", _ones()), psi_gn=tables.get("shadowing/psi_GN", _ones()),
+        xi_full=tables.get("correction/xi", no_full_table()), xi_m=tables.get("correction/xi_M", ones_factor()),
+        xi_n=tables.get("correction/xi_N", ones_factor()), psi_full=tables.get("shadowing/psi", no_full_table()),
+        psi_gm=tables.get("shadowing/psi_GM", ones_factor()), psi_gn=tables.get("shadowing/psi_GN", ones_factor()),
         tangent=mip_stack([pack.mip_chain("textures/tangent")]),
         coverage=mip_stack([pack.mip_chain("textures/coverage")]),
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
-        n_cross=n_cross, n_occluded=max(1.0, 0.5 * n_cross), im=im, residuals=residuals)
+        n_cross=n_cross, n_occluded=max(1.0, 0.5 * n_cross), twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
+        im=im, residuals=residuals)
 
 
 def _half_width(pack, base):

@@ -12,7 +12,8 @@ from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves
 from data_formats.yarn_spec import load_preset
 from data_formats.curve_eval import dense_curve, evaluate, rest_length
 from knitbake.fiber_set import KIND_REGULAR
-from knitbake.fiber_sweep import curve_frames, curve_seed, initial_normal, sweep_fibers
+from data_formats.curve_eval import curve_frames, initial_normal
+from knitbake.fiber_sweep import curve_seed, sweep_fibers
 from knitbake.procedural_yarn import generate_fibers
 from knitbake.stockinette import stockinette_curves, write_example_patch
 

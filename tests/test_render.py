@@ -26,6 +26,7 @@ from knitrun.srbf_fit import fit_srbf
 from knitrun.render import ABLATIONS, render
 from knitrun.strip_shading import resolve, shade_regular, variant_of
 from knitrun.texture_sampling import mip_stack, sample_mip
+from knitrun.yarn_look import no_full_table, ones_factor
 from tests.test_bake import TINY
 from tests.test_im_table import ROUGH, TEST_SHAPE
 
@@ -183,7 +184,8 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         fit = fit_srbf(sky, n_lobes=j, seed=0)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
         shade_regular(np.arange(n), np.zeros((n, 3)), view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3),
-                      ROUGH, np.ones((5, 4, 3)), *(np.ones((1, 1, 3)),) * 4, flat.data, flat.offset, flat.rows,
+                      ROUGH, np.ones((5, 4, 3)), no_full_table(), ones_factor(), ones_factor(), no_full_table(),
+                      ones_factor(), ones_factor(), flat.data, flat.offset, flat.rows,
                       flat.cols, full.data, full.offset, full.rows, full.cols, 1.0, 1.0, 0.0, 0.0,
                       np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)), fit.directions, fit.sharpness,
                       fit.weights, np.ones((j, n)), table, lo, hi, repeat, codes, rgb, alpha)
@@ -225,6 +227,7 @@ def test_ablations_change_the_image(tmp_path, pack):
     assert not np.array_equal(images["plain_ds"], images["xi"])
     assert not np.array_equal(images["xi"], images["xi_shadowing"])
     assert not np.array_equal(images["xi_shadowing"], images["full"])
+    assert not np.array_equal(images["full"], images["factored"])  # the tiny pack stores both forms
 
 
 def test_pack_errors_are_one_line(tmp_path, pack):
@@ -297,3 +300,18 @@ def test_resolve_weights_coverage_over_the_background():
     assert np.allclose(out[0], [0.5, 0.25, 0.25])  # 0.5 red + 0.25 green + (1 − 0.75) blue
     assert np.allclose(out[1], [0.2, 0.2, 0.2])
     assert math.isclose(out.sum(), 0.5 + 0.25 + 0.25 + 0.6)
+
+
+def test_yarn_colour_scales_environment_light_exactly(tmp_path, pack):
+    """Under environment light alone the shading is linear in the lobe colours (I_M and the flyaways' f are; ξ and
+    Ψ^Fiber are ratios), so a coloured yarn is the white one times its colour, channel by channel."""
+    white = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY, name="white")
+    tinted = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY, name="tinted")
+    for path in (white, tinted):
+        text = path.read_text().replace("background = [0.1, 0.2, 0.3]", "background = [0.0, 0.0, 0.0]")
+        if path == tinted:
+            text = text.replace('yarn = "cotton1"', 'yarn = "cotton1"\ncolor = [1.0, 0.5, 0.25]')
+        path.write_text(text)
+    a, b = _render(white, pack).image, _render(tinted, pack).image
+    assert a.max() > 0
+    np.testing.assert_allclose(b, a * np.array([1.0, 0.5, 0.25], np.float32), rtol=1e-5, atol=1e-7)

@@ -2,7 +2,8 @@
 
 * Compiled kernels are cached on disk (``cache=True``) so compile cost is paid once per machine. The cache lives in
   ``$NUMBA_CACHE_DIR`` if set, else in ``~/.cache/knit/numba`` (a writable folder even when the package is
-  installed read-only). This module must be imported before numba compiles anything; ``knitrun/__init__`` does.
+  installed read-only). This module must be imported before numba compiles anything; ``data_formats/__init__``
+  (the bottom layer, which every package imports first) does.
 * Kernels never turn on all of fastmath (that drops NaN/Inf checks); ``FASTMATH`` is the flag set that keeps them.
 """
 
