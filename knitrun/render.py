@@ -129,7 +129,7 @@ def _polylines(scene: Scene, samples_per_segment: int) -> _Polylines:
                       np.concatenate(normals))
 
 
-def _view_phase_arclength(points, lines, looks):
+def view_phase_arclength(points, lines, looks):
     """Rest arc length shifted so the texture shows the yarn as seen from the view's azimuth (module docstring)."""
     seg = points["segment"].astype(np.int64)
     s = points["arclength"].astype(np.float64)
@@ -270,7 +270,7 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
         idx = np.flatnonzero(points["yarn"] == k)
         im = look.im if look.im is not None else _NO_IM
         shade_regular(idx, points["position"], points["view_dir"], points["tangent"],
-                      _view_phase_arclength(points, lines, looks), points["v"].astype(np.float64), points["footprint"],
+                      view_phase_arclength(points, lines, looks), points["v"].astype(np.float64), points["footprint"],
                       look.params, look.ds, look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm,
                       look.psi_gn,
                       look.tangent.data, look.tangent.offset, look.tangent.rows, look.tangent.cols,
@@ -284,7 +284,7 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
             idx = np.flatnonzero(fly_points["yarn"] == k)
             im = look.im if look.im is not None else _NO_IM
             shade_flyaway(idx, fly_points["position"], fly_points["view_dir"], fly_points["tangent"],
-                          _view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
+                          view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
                           fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params,
                           look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,
                           look.period, look.flyaway_half_width, light_dir, light_e, light_vis[1], lobe_dir,

@@ -315,3 +315,20 @@ def test_yarn_colour_scales_environment_light_exactly(tmp_path, pack):
     a, b = _render(white, pack).image, _render(tinted, pack).image
     assert a.max() > 0
     np.testing.assert_allclose(b, a * np.array([1.0, 0.5, 0.25], np.float32), rtol=1e-5, atol=1e-7)
+
+
+def test_texture_phase_follows_the_view_azimuth_in_the_yarn_frame():
+    """A yarn along +x with yarn-frame normal N = +y: seen along N (γ = 0) the texture is read at s; seen from +z
+    (γ = +90°) a counter-clockwise-plied yarn is read a quarter period earlier, a clockwise one a quarter later."""
+    from types import SimpleNamespace
+
+    from knitrun.render import view_phase_arclength
+
+    lines = SimpleNamespace(rest=np.array([0.0, 1.0]), normal=np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]]))
+    views = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+    points = {"segment": np.zeros(3, np.int32), "arclength": np.full(3, 0.5, np.float32),
+              "tangent": np.tile([1.0, 0.0, 0.0], (3, 1)), "view_dir": views, "yarn": np.zeros(3, np.int64)}
+    for sign in (1.0, -1.0):
+        look = SimpleNamespace(twist_sign=sign, period=0.2)
+        s = view_phase_arclength(points, lines, [look])
+        np.testing.assert_allclose(s, [0.5, 0.5 - sign * 0.05, 0.5 - sign * 0.1], atol=1e-12)
