@@ -5,6 +5,7 @@ Thin: parse, call ``data_formats``/``knitbake``, report. Errors are one line on 
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -13,6 +14,7 @@ import click
 
 from cli.common import FriendlyGroup, echo_json, echo_tree, file_kind
 from data_formats import FormatError
+from data_formats.atomic import atomic_path
 from data_formats.yarn_spec import (FIELDS, SECTIONS, describe_spec, dumps_spec, load_preset, preset_names,
                                     resolve_yarn)
 
@@ -198,7 +200,7 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
 @main.command()
 @click.argument("scene_path", metavar="SCENE", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
-              help="Linear float32 EXR; a tone-mapped PNG preview is written next to it.")
+              help="Linear float32 EXR; a tone-mapped PNG preview and a JSON summary are written next to it.")
 @click.option("--spp", type=click.IntRange(min=1), default=None, help="Samples per pixel (default: the scene's).")
 @click.option("--seed", type=int, default=None, help="Random seed (default: the scene's).")
 @click.option("--max-depth", type=click.IntRange(min=1), default=None,
@@ -242,6 +244,8 @@ def reference(scene_path, output, spp, seed, max_depth, exposure, as_json):
                "height": built.camera.height, "spp": spp, "seed": seed, "max_depth": max_depth,
                "render_s": stats.seconds, "rays": stats.rays, "rays_per_s": stats.rays_per_second, **facts,
                "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
+    with atomic_path(Path(output).with_suffix(".json")) as tmp:  # read by `knitrun compare --reference`
+        Path(tmp).write_text(json.dumps(summary, indent=2, default=float))
     if as_json:
         echo_json(summary)
         return

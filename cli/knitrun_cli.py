@@ -176,7 +176,8 @@ def _pack_overrides(values):
 @click.option("--exr", "exr_path", type=click.Path(dir_okay=False), default=None, help="Also write the linear EXR.")
 @click.option("--pack", "pack_values", multiple=True, metavar="YARN=FILE",
               help="Asset pack for a yarn (its name or entry index); overrides the scene's `pack`. Repeatable.")
-@click.option("--ablation", type=click.Choice(["full", "plain_ds", "xi", "xi_shadowing"]), default="full",
+@click.option("--ablation", type=click.Choice(["full", "plain_ds", "xi", "xi_shadowing", "no_tables", "factored"]),
+              default="full",
               show_default=True, help="Which baked terms to use (seed 000 Fig. 7 ablation).")
 @click.option("--samples-per-segment", type=click.IntRange(1, 64), default=4, show_default=True,
               help="Polyline samples per segment of smooth (C0/BS/BZ) curves.")
@@ -250,6 +251,6 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, as_json)
         return
     for name, row in summary["ablations"].items():
         speed = f", {row['speedup']:.0f}x faster than the reference" if row["speedup"] else ""
-        click.echo(f"{ABLATION_LABELS[name]:26s} FLIP {row['flip']:.4f}  RMSE {row['rmse']:.4f}  "
+        click.echo(f"{ABLATION_LABELS[name]:30s} FLIP {row['flip']:.4f}  RMSE {row['rmse']:.4f}  "
                    f"relMSE {row['rel_mse']:.4f}  {row['ms']:.0f} ms{speed}")
     click.echo(f"report: {Path(out_dir) / 'report.md'}")

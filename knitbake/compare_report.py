@@ -2,11 +2,12 @@
 
 ``compare_scene`` renders the scene's reference (``knitbake.reference`` + ``path_tracer``, or reads one), then the
 strip renderer (``knitrun.render``) with each ablation of seed 000 Fig. 7 — plain DS, + ξ, + fiber-level shadowing,
-+ flyaways (= full) — and measures each against the reference with ``knitrun.image_metrics`` (LDR-FLIP after our
++ flyaways (= full) — plus the full renderer without the ξ and Ψ^Fiber tables and with the paper's rank-1 factors
+in place of the full tables, and measures each against the reference with ``knitrun.image_metrics`` (LDR-FLIP after our
 tone mapping, RMSE, relMSE). Strip times are the second of two renders (the first pays Numba's cache load);
 the reference time is its fiber build plus path tracing. The report folder holds ``reference.exr/.png``, per
 ablation ``strip_<name>.exr/.png``, ``flip_<name>.png`` (magma error map) and ``diff_<name>.png`` (|difference|,
-×4), ``side_by_side.png`` (reference | full | FLIP map), ``report.md`` and ``report.json``.
+×4), ``side_by_side.png`` (reference | full | FLIP map; stacked for wide images), ``report.md`` and ``report.json``.
 """
 
 from __future__ import annotations
@@ -23,9 +24,10 @@ from data_formats.scene import load_scene
 from knitrun.image_metrics import compare_images, flip_error
 from knitrun.render import ABLATIONS, render
 
-ABLATION_ORDER = ("plain_ds", "xi", "xi_shadowing", "full")
+ABLATION_ORDER = ("plain_ds", "xi", "xi_shadowing", "full", "no_tables", "factored")
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
-                   "full": "+ flyaways (full)"}
+                   "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
+                   "factored": "full, rank-1 factored ξ, Ψ"}
 
 
 def _reference(scene, spp, seed, progress):
@@ -44,10 +46,22 @@ def _srgb_to_linear(c):
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+def _sidecar_seconds(reference):
+    """Build + render seconds from the JSON summary `knitbake reference` writes next to its EXR; None without it."""
+    path = Path(reference).with_suffix(".json")
+    try:
+        facts = json.loads(path.read_text())
+        return float(facts["render_s"]) + sum(float(facts.get(k, 0.0)) for k in
+                                               ("sweep_s", "tessellate_s", "embree_build_s"))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exposure=0.0, ablations=ABLATION_ORDER,
                   progress=None) -> dict:
     """Compare the strip renderer with the reference on ``scene_path``; write the report into ``out_dir``.
-    ``reference``: an EXR to use instead of path tracing (its time is then unknown); ``spp``: reference samples
+    ``reference``: an EXR to use instead of path tracing (its time is read from the JSON summary `knitbake reference`
+    writes beside it, else unknown); ``spp``: reference samples
     per pixel (default: the scene's); ``packs``: yarn → pack overrides for the strip renderer. Returns the summary."""
     scene = load_scene(scene_path)
     out = Path(out_dir)
@@ -55,7 +69,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     say = progress or (lambda message: None)
     if reference is not None:
         ref = read_exr(reference)
-        ref_seconds, ref_facts = None, {"file": str(reference)}
+        ref_seconds, ref_facts = _sidecar_seconds(reference), {"file": str(reference)}
         if ref.shape[:2] != (scene.camera.height, scene.camera.width):
             raise ValueError(f"{reference}: {ref.shape[1]}x{ref.shape[0]} image, the scene renders "
                              f"{scene.camera.width}x{scene.camera.height}")
@@ -84,8 +98,9 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         full = read_exr(out / "strip_full.exr")
         _, error_map = flip_error(full, ref, exposure, magma=True)
         scale = 2.0 ** exposure
+        wide = ref.shape[1] > ref.shape[0]  # stack wide images vertically
         write_png(out / "side_by_side.png", np.concatenate([np.clip(ref * scale, 0, 1), np.clip(full * scale, 0, 1),
-                                                            _srgb_to_linear(error_map)], axis=1))
+                                                            _srgb_to_linear(error_map)], axis=0 if wide else 1))
     summary = {"scene": str(scene_path), "width": scene.camera.width, "height": scene.camera.height,
                "reference_seconds": ref_seconds, "reference": ref_facts, "exposure_stops": exposure,
                "flip_mode": next(iter(rows.values()))["flip_mode"] if rows else None,

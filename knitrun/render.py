@@ -75,6 +75,7 @@ ABLATIONS = {
     "xi": Features(xi=True, fiber_shadowing=False, flyaways=False),
     "xi_shadowing": Features(xi=True, fiber_shadowing=True, flyaways=False),
     "full": Features(),
+    "no_tables": Features(xi=False, fiber_shadowing=False),  # the full renderer without ξ and Ψ^Fiber
     "factored": Features(full_tables=False),
 }
 
