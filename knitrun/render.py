@@ -158,10 +158,13 @@ def _camera(scene: Scene) -> Camera:
 
 
 def _pack_path(k, entry, packs):
-    path = packs.get(entry.yarn, packs.get(str(k), entry.pack))
+    """The pack of yarn entry k: ``packs`` by the entry's index, its ``yarn`` as written or its spec's name, else
+    the scene's ``pack``."""
+    path = next((packs[key] for key in (str(k), entry.yarn, entry.spec.name) if key in packs), entry.pack)
     if path is None:
-        raise ValueError(f"yarns[{k}] ({entry.yarn}) has no asset pack: bake one (knitbake bake {entry.yarn} -o "
-                         f"{entry.yarn}.h5) and name it in the scene (pack = ...) or with --pack {entry.yarn}=FILE")
+        name = entry.spec.name
+        raise ValueError(f"yarns[{k}] ({name}) has no asset pack: bake one (knitbake bake {entry.yarn} -o "
+                         f"{name}.h5) and name it in the scene (pack = ...) or with --pack {name}=FILE")
     if not Path(path).is_file():
         raise ValueError(f"yarns[{k}] ({entry.yarn}): pack {path} does not exist")
     return path
@@ -188,7 +191,8 @@ def _visibility(lines, radius_of_curve, direction, size, angular_radius, receive
 
 def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,
            progress=None) -> RenderResult:
-    """Render ``scene``; ``packs`` maps a yarn name or an entry index (as a string) to a pack path, overriding the
+    """Render ``scene``; ``packs`` maps an entry index (as a string), a yarn as written in the scene or a yarn spec's
+    name to a pack path, overriding the
     scene's ``pack``; ``progress(name)`` is called as each pass starts. ValueError (one line) for a scene the
     renderer cannot draw (a missing pack, a pack for another yarn)."""
     packs = packs or {}
