@@ -72,15 +72,18 @@ def test_arclength_is_perspective_correct_and_linear_in_rest_length():
     assert np.allclose(g.arclength[rows, cols, samples], 1.0 + 6.0 * along, atol=2e-3)
 
 
-def test_v_spans_the_strip_from_minus_b_to_plus_b():
+@pytest.mark.parametrize("k", sorted(SAMPLE_PATTERNS))
+def test_v_spans_the_strip_from_minus_b_to_plus_b(k):
     cam = ortho_camera()
     radius = 0.3
-    g = single([[-1.0, 0.01, 0.0], [1.0, 0.01, 0.0]], cam, radius=radius, msaa=8)
-    # b = ω_o × t = z × x = +y: v = (y − 0.01) / radius at every covered sample.
+    g = single([[-1.0, 0.01, 0.0], [1.0, 0.01, 0.0]], cam, radius=radius, msaa=k)
+    # b = ω_o × t = z × x = +y: v = (y − 0.01) / radius at every covered sample, at the pattern's positions.
     rows, cols, samples = np.nonzero(g.coverage)
-    y = (1 - 2 * (rows + SAMPLE_PATTERNS[8][samples, 1]) / cam.height) * cam.ortho_height / 2
+    assert len(np.unique(samples)) == k
+    y = (1 - 2 * (rows + SAMPLE_PATTERNS[k][samples, 1]) / cam.height) * cam.ortho_height / 2
     assert np.allclose(g.v[rows, cols, samples], (y - 0.01) / radius, atol=1e-5)
-    assert g.v[g.coverage].min() < -0.95 and g.v[g.coverage].max() > 0.95
+    reach = 0.95 if k >= 4 else 0.7  # 1 and 2 samples per pixel sit up to half a pixel from a strip edge
+    assert g.v[g.coverage].min() < -reach and g.v[g.coverage].max() > reach
     assert np.allclose(g.depth[g.coverage], 5.0)
 
 
@@ -173,7 +176,7 @@ def test_degenerate_input_gives_finite_buffers():
     with pytest.raises(ValueError, match="curve 1"):
         rasterize_strips(bad, [0, 2, 5], [False, False], np.zeros(5), 0.1, [0, 0], cam)
     with pytest.raises(ValueError, match="msaa"):
-        single([[0, 0, 0], [1, 0, 0]], cam, msaa=2)
+        single([[0, 0, 0], [1, 0, 0]], cam, msaa=3)  # 1, 2, 4, 8, 16 are the patterns
 
 
 def test_frustum_culling_drops_only_invisible_segments():
