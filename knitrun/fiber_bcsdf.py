@@ -50,7 +50,7 @@ HALF_PI = 0.5 * math.pi
 INV_PI2 = 1.0 / (math.pi * math.pi)
 SQRT2 = math.sqrt(2.0)
 COS_FLOOR = 1e-12  # cos θ_i floor in the solid-angle pdf (θ_i = ±π/2 exactly)
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(48)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(32)  # Z to < 1e-9 relative for every σ ≥ 1e-4, μ
 
 
 def params_from_optics(optics) -> np.ndarray:
