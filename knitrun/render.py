@@ -292,7 +292,8 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
                           view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
                           fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params,
                           look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,
-                          look.period, look.flyaway_half_width, light_dir, light_e, light_vis[1], lobe_dir,
+                          look.period, look.flyaway_half_width, look.radius, look.psi_full, look.psi_gm,
+                          look.psi_gn, light_dir, light_e, light_vis[1], lobe_dir,
                           lobe_lambda, lobe_w, lobe_vis[1], *im, fly_rgb, fly_alpha)
     lap("shade")
 

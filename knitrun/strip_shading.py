@@ -32,8 +32,9 @@ weight W_j, visibility T̃_j from the lobe's shadow map), eq. 17:
 
 Flyaways (``shade_flyaway``): the variant of period ⌊s/period⌋ of curve c is ``variant_of(c, period)`` (a fixed
 integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the wider flyaway strip; the hair
-tangent from its RGB; single scattering, L_o = Σ E V f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j I_M (thin hairs: no
-multiple-scattering terms).
+tangent from its RGB; single scattering, L_o = Σ E V S f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j S_j I_M (thin hairs: no
+multiple-scattering terms), S = Ψ^Fiber_G(v_strip, ω_i) (mean RGB) where the hair lies over the yarn body
+(|v_strip| ≤ 1, v_strip = v·h_fly/r) — a hair on the surface is shadowed like the surface fibers — and 1 beyond.
 
 Resolve (``resolve``): C = Σ w α L + (1 − Σ w α)·background for the regular layer, then the flyaway layer over it:
 C ← Σ w A L_fly + (1 − Σ w A)·C. All radiances linear RGB in the units of E and W.
@@ -318,7 +319,7 @@ def variant_of(curve, period_index):
 
 @njit(parallel=True, cache=True)
 def shade_flyaway(idx, position, view_dir, tangent, arclength, v_coord, footprint, curve, params,
-                  fly_data, fly_off, fly_rows, fly_cols, period, half_width,
+                  fly_data, fly_off, fly_rows, fly_cols, period, half_width, radius, psi_full, psi_gm, psi_gn,
                   light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis,
                   im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):
     """Shade the flyaway-layer points ``idx`` of one yarn; writes rgb[idx], alpha[idx]."""
@@ -345,21 +346,39 @@ def shade_flyaway(idx, position, view_dir, tangent, arclength, v_coord, footprin
         if not _strip_frame(tf, wo, ny, b):
             continue
         c = context(params, np.array([_dot(wo, tf), _dot(wo, ny), 0.0]))
-        f, wl = np.empty(3), np.empty(3)
+        f, wl, psi, scratch = np.empty(3), np.empty(3), np.ones(3), np.empty(3)
+        # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
+        # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
+        v_strip = v * half_width / radius
+        on_body = abs(v_strip) <= 1.0
+        theta_o = _asin(_dot(wo, t))
         for light in range(light_dir.shape[0]):
             wi = light_dir[light]
             wl[0], wl[1], wl[2] = _dot(wi, tf), _dot(wi, ny), -_dot(wi, b)
             evaluate(params, c, wl, f)
             cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
+            lit = light_vis[light, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wi, psi,
+                                                     scratch)
             for ch in range(3):
-                rgb[q, ch] += light_e[light, ch] * light_vis[light, q] * f[ch] * cos_i
+                rgb[q, ch] += light_e[light, ch] * lit * f[ch] * cos_i
         theta_o_f = _asin(_dot(wo, tf))
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
             im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, theta_o_f, _asin(_dot(wj, tf)),
                       -_azimuth_difference(tf, wo, wj), lobe_lambda[j], f)
+            lit = lobe_vis[j, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wj, psi, scratch)
             for ch in range(3):
-                rgb[q, ch] += lobe_w[j, ch] * lobe_vis[j, q] * f[ch]
+                rgb[q, ch] += lobe_w[j, ch] * lit * f[ch]
+
+
+@njit(cache=True)
+def _body_shadow(on_body, psi_full, psi_gm, psi_gn, v, t, n, b, wi, psi, scratch):
+    """Ψ^Fiber_G (mean RGB, clamped to [0, 1]) at strip coordinate v toward ω_i, or 1 off the yarn body."""
+    if not on_body:
+        return 1.0
+    phi = -math.atan2(_dot(wi, b), _dot(wi, n))
+    _factored_or_full(psi_full, psi_gm, psi_gn, v, _asin(_dot(wi, t)), phi, psi, scratch)
+    return min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
 
 
 # --- resolve ---------------------------------------------------------------------------------------------------------
