@@ -332,3 +332,17 @@ def test_texture_phase_follows_the_view_azimuth_in_the_yarn_frame():
         look = SimpleNamespace(twist_sign=sign, period=0.2)
         s = view_phase_arclength(points, lines, [look])
         np.testing.assert_allclose(s, [0.5, 0.5 - sign * 0.05, 0.5 - sign * 0.1], atol=1e-12)
+
+
+def test_a_stitch_mesh_entry_is_simulated_at_rest_and_drawn(tmp_path, pack):
+    from data_formats.stitch_mesh import write_stitch_mesh
+    from knitrun.knit_chart import chart_to_mesh, pattern_chart
+
+    write_stitch_mesh(tmp_path / "m.h5", chart_to_mesh(pattern_chart("stockinette", 3, 3)))
+    camera = FRONT.replace("[0.0, 0.0, 1.0]", "[0.3, 0.25, 2.0]").replace("look_at = [0.0, 0.0, 0.0]",
+                                                                          "look_at = [0.3, 0.25, 0.0]")
+    path = write_scene(tmp_path, [straight()], camera=camera, lights=SUN)
+    path.write_text(path.read_text().replace('curves = "s.h5"', 'stitch_mesh = "m.h5"'))
+    result = _render(path, pack)
+    assert result.facts["curves"] >= 1 and result.facts["shading_points"] > 100
+    assert np.all(np.isfinite(result.image))
