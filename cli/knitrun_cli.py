@@ -205,7 +205,7 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
     if msaa is not None:
         scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, msaa=int(msaa)))
     result = render_scene(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
-                          progress=lambda name: click.echo(f"  {name} done", err=True))
+                          progress=lambda name, s: click.echo(f"  {name}: {s * 1e3:.0f} ms", err=True))
     write_png(output, result.image, exposure)
     if exr_path is not None:
         write_exr(exr_path, result.image)

@@ -192,19 +192,19 @@ def _visibility(lines, radius_of_curve, direction, size, angular_radius, receive
 def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,
            progress=None) -> RenderResult:
     """Render ``scene``; ``packs`` maps an entry index (as a string), a yarn as written in the scene or a yarn spec's
-    name to a pack path, overriding the
-    scene's ``pack``; ``progress(name)`` is called as each pass starts. ValueError (one line) for a scene the
-    renderer cannot draw (a missing pack, a pack for another yarn)."""
+    name to a pack path, overriding the scene's ``pack``; ``progress(name, seconds)`` is called as each pass ends.
+    ValueError (one line) for a scene the renderer cannot draw (a missing pack, a pack for another yarn)."""
     packs = packs or {}
     timings, facts = {}, {}
     clock = [time.perf_counter()]
 
     def lap(name):
         now = time.perf_counter()
+        start = clock[0]
         timings[name] = timings.get(name, 0.0) + now - clock[0]
         clock[0] = now
         if progress is not None:
-            progress(name)
+            progress(name, now - start)
 
     environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
     looks = [load_look(_pack_path(k, e, packs), e, scene.units, corrections=features.xi or features.fiber_shadowing,
@@ -261,6 +261,8 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
     lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
     lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
+    lobe_energy = 2.0 * np.pi / np.maximum(lobe_lambda, 1e-300) * -np.expm1(-2.0 * lobe_lambda)
+    lobe_energy[lobe_w.max(axis=1, initial=0.0) <= 0.0] = 0.0  # unused lobes
     lobe_vis = [np.empty((len(lobe_dir), len(s["weight"]))) for s in sets]
     for j, d in enumerate(lobe_dir):
         angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
@@ -281,7 +283,8 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
                       look.tangent.data, look.tangent.offset, look.tangent.rows, look.tangent.cols,
                       look.coverage.data, look.coverage.offset, look.coverage.rows, look.coverage.cols,
                       look.period, look.radius, look.n_occluded, look.n_cross,
-                      light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_vis[0], *im, rgb, alpha)
+                      light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_energy, lobe_vis[0], *im,
+                      rgb, alpha)
     if fly_points is not None:
         fly_rgb, fly_alpha = np.zeros((len(fly_points["weight"]), 3)), np.zeros(len(fly_points["weight"]))
         for k in drawn_fly:

@@ -30,6 +30,13 @@ weight W_j, visibility T̃_j from the lobe's shadow map), eq. 17:
 
     L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 
+plus, beyond the paper, each lobe's multiple scattering: eq. 17 has single scattering only (I_M integrates f),
+which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. The lobe
+acts as a distant light toward ω_j of irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}) for the smooth
+DS terms, with D = T̃_j Ψ^Fiber_G and n as for a directional light:
+
+    L_o += E_j · ξ · (D d_b f_back^direct + F_scatter) cos θ_j^f        (``ds_kernel`` terms; f itself is in I_M)
+
 Flyaways (``shade_flyaway``): the variant of period ⌊s/period⌋ of curve c is ``variant_of(c, period)`` (a fixed
 integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the wider flyaway strip; the hair
 tangent from its RGB; single scattering, L_o = Σ E V S f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j S_j I_M (thin hairs: no
@@ -47,7 +54,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .dual_scattering import D_B, D_F, K_TOTAL, ds_kernel
+from .dual_scattering import D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel
 from .fiber_bcsdf import context, evaluate
 from .im_lookup import im_kernel
 from .table_lookup import THETA_RANGE, axis_cell
@@ -254,9 +261,10 @@ def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprin
                   params, ds, xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn,
                   tan_data, tan_off, tan_rows, tan_cols, cov_data, cov_off, cov_rows, cov_cols,
                   period, half_width, n_occluded, n_cross,
-                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis,
+                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_energy, lobe_vis,
                   im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):
-    """Shade the points ``idx`` (indices into the point arrays) of one yarn; writes rgb[idx], alpha[idx]."""
+    """Shade the points ``idx`` (indices into the point arrays) of one yarn; writes rgb[idx], alpha[idx].
+    ``lobe_energy`` (J,): ∫ G_j dω per lobe (0 skips the lobe's multiple scattering)."""
     texel_u = period / tan_cols[0, 0]
     texel_v = 2.0 * half_width / tan_rows[0, 0]
     for m in prange(idx.shape[0]):
@@ -298,10 +306,20 @@ def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprin
             phi = -math.atan2(_dot(wj, b), _dot(wj, n))
             _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
                          xi, psi, scratch)
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, theta_o_f, _asin(_dot(wj, tf)),
-                      -_azimuth_difference(tf, wo, wj), lobe_lambda[j], im)
+            theta_j_f = _asin(_dot(wj, tf))
+            phi_f = _azimuth_difference(tf, wo, wj)
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, theta_o_f, theta_j_f, -phi_f, lobe_lambda[j], im)
+            vis = lobe_vis[j, q]
             for ch in range(3):
-                rgb[q, ch] += lobe_w[j, ch] * lobe_vis[j, q] * xi[ch] * psi[ch] * im[ch]
+                rgb[q, ch] += lobe_w[j, ch] * vis * xi[ch] * psi[ch] * im[ch]
+            if lobe_energy[j] > 0.0:  # multiple scattering: the lobe as a distant light of irradiance E_j
+                lit = vis * min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
+                ds_kernel(params, ds, theta_j_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B,
+                          lit, comp)
+                cos_j = math.cos(theta_j_f)
+                for ch in range(3):
+                    multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_j
+                    rgb[q, ch] += lobe_w[j, ch] * lobe_energy[j] * xi[ch] * multiple
 
 
 # --- flyaways --------------------------------------------------------------------------------------------------------
