@@ -58,6 +58,8 @@ BUILTIN_ENVIRONMENTS = {"sky": sky_image}
 SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
+MS_MERGE_DEG = 30.0  # lobes this close share one multiple-scattering evaluation
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass(frozen=True)
@@ -149,6 +151,37 @@ def view_phase_arclength(points, lines, looks):
     sign = np.array([look.twist_sign for look in looks])[points["yarn"]]
     period = np.array([look.period for look in looks])[points["yarn"]]
     return s - sign * gamma / (2.0 * np.pi) * period
+
+
+def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MERGE_DEG):
+    """Distant lights for the environment's multiple scattering (``strip_shading`` docstring): lobes in order of
+    decreasing irradiance luminance join the first cluster within ``merge_deg`` of them, else start one. Returns
+    (directions (C, 3), irradiance (C, 3), [visibility (C, N) per receiver set])."""
+    energy = np.asarray(lobe_w) * (2.0 * np.pi / np.maximum(lobe_lambda, 1e-300)
+                                   * -np.expm1(-2.0 * np.asarray(lobe_lambda)))[:, None]
+    luminance = energy @ LUMINANCE
+    cos_merge = math.cos(math.radians(merge_deg))
+    members, axes = [], []
+    for j in np.argsort(-luminance, kind="stable"):
+        if luminance[j] <= 0.0:
+            continue
+        k = next((k for k, a in enumerate(axes) if a @ lobe_dir[j] >= cos_merge), None)
+        if k is None:
+            members.append([j])
+            axes.append(np.asarray(lobe_dir[j], float))
+        else:
+            members[k].append(j)
+    dirs, irr, vis = [], [], [[] for _ in lobe_vis]
+    for group in members:
+        w = luminance[group] / luminance[group].sum()
+        d = (w[:, None] * lobe_dir[group]).sum(axis=0)
+        dirs.append(d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-12 else lobe_dir[group[0]])
+        irr.append(energy[group].sum(axis=0))
+        for out, v in zip(vis, lobe_vis):
+            out.append(w @ v[group])
+    n = [v.shape[1] for v in lobe_vis]
+    return (np.array(dirs, np.float64).reshape(-1, 3), np.array(irr, np.float64).reshape(-1, 3),
+            [np.array(v, np.float64) if v else np.zeros((0, m)) for v, m in zip(vis, n)])
 
 
 def _camera(scene: Scene) -> Camera:
@@ -261,14 +294,14 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
     lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
     lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
-    lobe_energy = 2.0 * np.pi / np.maximum(lobe_lambda, 1e-300) * -np.expm1(-2.0 * lobe_lambda)
-    lobe_energy[lobe_w.max(axis=1, initial=0.0) <= 0.0] = 0.0  # unused lobes
     lobe_vis = [np.empty((len(lobe_dir), len(s["weight"]))) for s in sets]
     for j, d in enumerate(lobe_dir):
         angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
         for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
                                                   receivers)):
             out[j] = vis
+    ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
+    facts["ms_lights"] = int(len(ms_dir))
     lap("shadow")
 
     h, w = camera.height, camera.width
@@ -283,8 +316,8 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
                       look.tangent.data, look.tangent.offset, look.tangent.rows, look.tangent.cols,
                       look.coverage.data, look.coverage.offset, look.coverage.rows, look.coverage.cols,
                       look.period, look.radius, look.n_occluded, look.n_cross,
-                      light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_energy, lobe_vis[0], *im,
-                      rgb, alpha)
+                      light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_vis[0], ms_dir, ms_e,
+                      ms_vis[0], *im, rgb, alpha)
     if fly_points is not None:
         fly_rgb, fly_alpha = np.zeros((len(fly_points["weight"]), 3)), np.zeros(len(fly_points["weight"]))
         for k in drawn_fly:

@@ -30,12 +30,14 @@ weight W_j, visibility T̃_j from the lobe's shadow map), eq. 17:
 
     L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 
-plus, beyond the paper, each lobe's multiple scattering: eq. 17 has single scattering only (I_M integrates f),
-which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. The lobe
-acts as a distant light toward ω_j of irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}) for the smooth
-DS terms, with D = T̃_j Ψ^Fiber_G and n as for a directional light:
+plus, beyond the paper, the environment's multiple scattering: eq. 17 has single scattering only (I_M integrates
+f), which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. Lobe j
+carries irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}); the lobes are merged into clusters (the
+renderer's ``ms_lights``: lobes within a fixed angle of a brighter cluster's direction join it; E summed, the
+direction and the visibility T̃ averaged with luminance weights), and each cluster c acts as a distant light for the
+smooth DS terms, with D = T̃_c Ψ^Fiber_G and n as for a directional light:
 
-    L_o += E_j · ξ · (D d_b f_back^direct + F_scatter) cos θ_j^f        (``ds_kernel`` terms; f itself is in I_M)
+    L_o += E_c · ξ · (D d_b f_back^direct + F_scatter) cos θ_c^f        (``ds_kernel`` terms; f itself is in I_M)
 
 Flyaways (``shade_flyaway``): the variant of period ⌊s/period⌋ of curve c is ``variant_of(c, period)`` (a fixed
 integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the wider flyaway strip; the hair
@@ -261,10 +263,11 @@ def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprin
                   params, ds, xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn,
                   tan_data, tan_off, tan_rows, tan_cols, cov_data, cov_off, cov_rows, cov_cols,
                   period, half_width, n_occluded, n_cross,
-                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_energy, lobe_vis,
+                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis, ms_dir, ms_e, ms_vis,
                   im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):
     """Shade the points ``idx`` (indices into the point arrays) of one yarn; writes rgb[idx], alpha[idx].
-    ``lobe_energy`` (J,): ∫ G_j dω per lobe (0 skips the lobe's multiple scattering)."""
+    ``ms_dir`` (C, 3), ``ms_e`` (C, 3), ``ms_vis`` (C, N): the environment's multiple-scattering lights (module
+    docstring)."""
     texel_u = period / tan_cols[0, 0]
     texel_v = 2.0 * half_width / tan_rows[0, 0]
     for m in prange(idx.shape[0]):
@@ -312,14 +315,21 @@ def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprin
             vis = lobe_vis[j, q]
             for ch in range(3):
                 rgb[q, ch] += lobe_w[j, ch] * vis * xi[ch] * psi[ch] * im[ch]
-            if lobe_energy[j] > 0.0:  # multiple scattering: the lobe as a distant light of irradiance E_j
-                lit = vis * min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
-                ds_kernel(params, ds, theta_j_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B,
-                          lit, comp)
-                cos_j = math.cos(theta_j_f)
-                for ch in range(3):
-                    multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_j
-                    rgb[q, ch] += lobe_w[j, ch] * lobe_energy[j] * xi[ch] * multiple
+        for c in range(ms_dir.shape[0]):  # multiple scattering: clusters of lobes as distant lights
+            wc = ms_dir[c]
+            theta_i = _asin(_dot(wc, t))
+            phi = -math.atan2(_dot(wc, b), _dot(wc, n))
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
+                         xi, psi, scratch)
+            vis = ms_vis[c, q]
+            lit = vis * min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
+            theta_c_f = _asin(_dot(wc, tf))
+            ds_kernel(params, ds, theta_c_f, theta_o_f, _azimuth_difference(tf, wo, wc),
+                      n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit, comp)
+            cos_c = math.cos(theta_c_f)
+            for ch in range(3):
+                multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
+                rgb[q, ch] += ms_e[c, ch] * xi[ch] * multiple
 
 
 # --- flyaways --------------------------------------------------------------------------------------------------------

@@ -162,8 +162,8 @@ def test_extremes_give_finite_images(tmp_path, pack, case):
 
 
 def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
-    """Eq. 17 in the shading kernel (I_M table lookups summed over J lobes, ξ = Ψ = 1, unshadowed, the lobes'
-    multiple-scattering term off: lobe_energy = 0) against direct
+    """Eq. 17 in the shading kernel (I_M table lookups summed over J lobes, ξ = Ψ = 1, unshadowed, no
+    multiple-scattering lights) against direct
     quadrature of the same fitted lobes, Σ_j W_j I_M^direct; and the 64-lobe result against brute-force
     integration of the sky itself."""
     table = im.bake_im_table(ROUGH, TEST_SHAPE, nodes=4)[0]
@@ -189,7 +189,8 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
                       ones_factor(), ones_factor(), flat.data, flat.offset, flat.rows,
                       flat.cols, full.data, full.offset, full.rows, full.cols, 1.0, 1.0, 0.0, 0.0,
                       np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)), fit.directions, fit.sharpness,
-                      fit.weights, np.zeros(j), np.ones((j, n)), table, lo, hi, repeat, codes, rgb, alpha)
+                      fit.weights, np.ones((j, n)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)), table, lo,
+                      hi, repeat, codes, rgb, alpha)
         theta_o = np.arcsin(np.sum(view * tangent, axis=1))
         direct = np.zeros((n, 3))
         for wj, lam, w in zip(fit.directions, fit.sharpness, fit.weights):
@@ -352,3 +353,23 @@ def test_a_stitch_mesh_entry_is_simulated_at_rest_and_drawn(tmp_path, pack):
     result = _render(path, pack)
     assert result.facts["curves"] >= 1 and result.facts["shading_points"] > 100
     assert np.all(np.isfinite(result.image))
+
+
+def test_multiple_scattering_lights_merge_close_lobes_and_keep_energy():
+    from knitrun.render import ms_lights
+
+    dirs = np.array([[0.0, 1.0, 0.0], [0.1, 0.995, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    lam = np.array([100.0, 50.0, 2.0, 1.0])
+    w = np.array([[1.0, 1.0, 1.0], [0.5, 0.5, 0.5], [0.2, 0.1, 0.0], [0.0, 0.0, 0.0]])  # the last lobe is unused
+    vis = [np.array([[1.0, 0.0], [0.0, 1.0], [0.5, 0.5], [1.0, 1.0]])]
+    d, e, v = ms_lights(dirs, lam, w, vis)
+    energy = w * (2 * np.pi / lam * (1 - np.exp(-2 * lam)))[:, None]
+    assert d.shape == (2, 3) and np.allclose(np.linalg.norm(d, axis=1), 1)
+    np.testing.assert_allclose(e.sum(axis=0), energy.sum(axis=0))  # no energy lost or made
+    pair = int(np.argmin(np.abs(e - (energy[0] + energy[1])).sum(axis=1)))
+    np.testing.assert_allclose(e[pair], energy[0] + energy[1])  # the two lobes 5.7° apart share one light
+    share = energy[0, 1] / (energy[0, 1] + energy[1, 1])
+    np.testing.assert_allclose(v[0][pair], [share, 1 - share], rtol=1e-6)
+    np.testing.assert_allclose(v[0][1 - pair], [0.5, 0.5])
+    assert np.all((v[0] >= 0) & (v[0] <= 1))
