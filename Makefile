@@ -31,7 +31,7 @@ demo: setup
 	$(BIN)/knitrun simulate $(OUT)/diamond.h5 --deform stretch-x=1.4 --frames 9 -o $(OUT)/diamond_yarns.h5
 	@printf '%s\n' 'format = "knit-scene"' 'version = "1.0"' 'name = "demo: stretched diamond patch"' \
 	  'units = "cm"' 'background = [0.02, 0.02, 0.03]' '[[yarns]]' 'curves = "diamond_yarns.h5"' 'yarn = "cotton1"' \
-	  'pack = "cotton1_draft.h5"' 'color = [0.85, 0.3, 0.25]' '[camera]' 'position = [1.5, -1.2, 6.5]' \
+	  'pack = "cotton1_draft.h5"' 'color = [0.85, 0.3, 0.25]' '[camera]' 'position = [1.5, -0.6, 5.0]' \
 	  'look_at = [1.5, 1.2, 0.0]' 'fov_deg = 38.0' 'width = 960' 'height = 720' '[[lights]]' 'type = "directional"' \
 	  'direction = [0.5, 0.4, 1.0]' 'irradiance = [2.5, 2.5, 2.5]' '[[lights]]' 'type = "environment"' \
 	  'builtin = "sky"' 'scale = [0.3, 0.3, 0.3]' '[render]' 'frame = 8' 'msaa = 4' > $(OUT)/demo_patch.toml
