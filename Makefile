@@ -51,6 +51,17 @@ bench: setup
 	$(BIN)/python benchmarks/bench_reference.py
 	$(BIN)/python benchmarks/bench_knots.py
 	$(BIN)/python benchmarks/bench_bake.py
+	$(BIN)/python benchmarks/bench_strip_raster.py
+	@mkdir -p out/bench/refs
+	$(BIN)/knitbake bake cotton1 --quality draft -o out/bench/cotton1_draft.h5
+	$(BIN)/knitbake bake cotton1 --quality standard -o out/bench/cotton1_standard.h5
+	$(BIN)/python benchmarks/bench_render.py --pack out/bench/cotton1_standard.h5
+	for s in straight_yarn_directional straight_yarn_sky knit_patch_directional knit_patch_sky; do \
+	  $(BIN)/knitbake reference examples/scenes/$$s.toml -o out/bench/refs/$$s.exr --spp 64 || exit 1; done
+	$(BIN)/python benchmarks/bench_compare.py --pack out/bench/cotton1_standard.h5 --reference-dir out/bench/refs \
+	  --out out/compare
+	$(BIN)/python benchmarks/bench_tradeoff.py --reference-dir out/bench/refs \
+	  --packs draft=out/bench/cotton1_draft.h5,standard=out/bench/cotton1_standard.h5
 
 # Regenerate data_formats/presets/ from ../shared/reference (the measured tables).
 presets: setup
