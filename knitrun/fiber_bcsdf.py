@@ -157,9 +157,15 @@ def _lobe_centre(alpha, sigma, sin_o):
 
 @njit(cache=True)
 def _cos2_normaliser(mu, sigma):
-    """Z = ∫_{−π/2}^{π/2} exp(−(θ − μ)²/(2σ²)) cos²θ dθ by Gauss–Legendre over the lobe's ±9σ window."""
-    lo = max(-HALF_PI, mu - 9.0 * sigma)
-    hi = min(HALF_PI, mu + 9.0 * sigma)
+    """Z = ∫_{−π/2}^{π/2} exp(−(θ − μ)²/(2σ²)) cos²θ dθ over the lobe's ±9σ window: in closed form,
+    ½√(2π)σ (1 + e^{−2σ²} cos 2μ) (cos²θ = (1 + cos 2θ)/2 against the Gaussian's characteristic function), when the
+    window lies inside [−π/2, π/2]; else by Gauss–Legendre over the window's part inside it."""
+    lo = mu - 9.0 * sigma
+    hi = mu + 9.0 * sigma
+    if lo >= -HALF_PI and hi <= HALF_PI:
+        return 0.5 * math.sqrt(2.0 * math.pi) * sigma * (1.0 + math.exp(-2.0 * sigma * sigma) * math.cos(2.0 * mu))
+    lo = max(-HALF_PI, lo)
+    hi = min(HALF_PI, hi)
     half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
     z = 0.0
     for k in range(_GL_X.shape[0]):

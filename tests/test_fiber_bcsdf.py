@@ -184,3 +184,20 @@ def test_params_are_checked():
         fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, 0.0, 0.1, 0.1)
     with pytest.raises(ValueError, match="BCSDF"):
         fb.params_from_values([0.3] * 3, [np.nan] * 3, [0.1] * 3, 0.1, 0.1, 0.1)
+
+
+def test_lobe_normaliser_matches_dense_quadrature_in_both_branches():
+    """Z(μ, σ) = ∫ exp(−(θ−μ)²/2σ²) cos²θ dθ over the ±9σ window inside [−π/2, π/2]: closed form when the window
+    fits, 32-node Gauss–Legendre when it is cut; both against 400 nodes."""
+    from knitrun.fiber_bcsdf import _cos2_normaliser
+
+    x, w = np.polynomial.legendre.leggauss(400)
+    worst, branches = 0.0, set()
+    for sigma in np.geomspace(1e-4, 3.0, 40):
+        for mu in np.linspace(-math.pi / 2 - 4 * sigma, math.pi / 2 + 4 * sigma, 31):
+            lo, hi = max(-math.pi / 2, mu - 9 * sigma), min(math.pi / 2, mu + 9 * sigma)
+            branches.add(lo == mu - 9 * sigma and hi == mu + 9 * sigma)
+            t = 0.5 * (hi + lo) + 0.5 * (hi - lo) * x
+            dense = 0.5 * (hi - lo) * np.sum(w * np.exp(-0.5 * ((t - mu) / sigma) ** 2) * np.cos(t) ** 2)
+            worst = max(worst, abs(_cos2_normaliser(mu, sigma) / dense - 1.0))
+    assert branches == {True, False} and worst < 1e-8
