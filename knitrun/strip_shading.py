@@ -256,6 +256,16 @@ def _texture_tangent(tex, t, n, b, tf):
     return True
 
 
+@njit(cache=True)
+def _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha):
+    """Clear point q's output and set up its strip frame (n, b); returns (drawn, u, v), drawn False when edge-on."""
+    rgb[q, :] = 0.0
+    alpha[q] = 0.0
+    if not _strip_frame(t, wo, n, b):
+        return False, 0.0, 0.0
+    return True, arclength[q] / period, min(max(v_coord[q], -1.0), 1.0)
+
+
 # --- regular fibers --------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
@@ -274,12 +284,9 @@ def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprin
         q = idx[m]
         t, wo = tangent[q], view_dir[q]
         n, b, tf = np.empty(3), np.empty(3), np.empty(3)
-        rgb[q, :] = 0.0
-        alpha[q] = 0.0
-        if not _strip_frame(t, wo, n, b):
+        drawn, u, v = _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha)
+        if not drawn:
             continue
-        u = arclength[q] / period
-        v = min(max(v_coord[q], -1.0), 1.0)
         level = mip_level(footprint[q], texel_u, texel_v)
         cov, tex = np.empty(1), np.empty(3)
         sample_mip(cov_data, cov_off, cov_rows, cov_cols, 0, level, u, v, cov)
@@ -357,12 +364,9 @@ def shade_flyaway(idx, position, view_dir, tangent, arclength, v_coord, footprin
         q = idx[m]
         t, wo = tangent[q], view_dir[q]
         n, b, tf = np.empty(3), np.empty(3), np.empty(3)
-        rgb[q, :] = 0.0
-        alpha[q] = 0.0
-        if not _strip_frame(t, wo, n, b):
+        drawn, u, v = _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha)
+        if not drawn:
             continue
-        u = arclength[q] / period
-        v = min(max(v_coord[q], -1.0), 1.0)
         texel = np.empty(4)
         sample_mip(fly_data, fly_off, fly_rows, fly_cols, variant_of(curve[q], int(math.floor(u))),
                    mip_level(footprint[q], texel_u, texel_v), u, v, texel)
