@@ -93,19 +93,18 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
     ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them (schema 1.1), else the factors."""
-    names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
-    if corrections:
-        names += list(CORRECTION_TABLES)
-    if flyaways:
-        names.append("textures/flyaway")
-    if environment:
-        names.append("environment/I_M")
-    if corrections:
-        names += ["correction/xi_residual", "shadowing/psi_residual"]
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
         raise ValueError(f"{pack_path}: pack baked for yarn {spec.name!r}, the scene draws {entry.spec.name!r}")
+    flyaways = flyaways and spec.has_flyaways  # a yarn without flyaways has no flyaway textures to draw
+    names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
+    if corrections:
+        names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
+    if flyaways:
+        names.append("textures/flyaway")
+    if environment:
+        names.append("environment/I_M")
     stored = header.info
     missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
     if corrections and full_tables:

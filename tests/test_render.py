@@ -15,7 +15,7 @@ from cli.knitrun_cli import main as knitrun
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
-from data_formats.yarn_spec import load_preset
+from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake import im_table as im
 from knitbake.bake import bake
 from knitrun import fiber_bcsdf as fb
@@ -373,3 +373,17 @@ def test_multiple_scattering_lights_merge_close_lobes_and_keep_energy():
     np.testing.assert_allclose(v[0][pair], [share, 1 - share], rtol=1e-6)
     np.testing.assert_allclose(v[0][1 - pair], [0.5, 0.5])
     assert np.all((v[0] >= 0) & (v[0] <= 1))
+
+
+def test_a_yarn_without_flyaways_renders_without_a_flyaway_layer(tmp_path):
+    spec = load_preset("cotton1")
+    spec = dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=15),
+                               flyaways=dataclasses.replace(spec.flyaways, hair_density=0.0, loop_density=0.0))
+    assert not spec.has_flyaways
+    bare = tmp_path / "bare.h5"
+    bake(spec, bare, overrides=TINY, seed=1, use_cache=False)  # bakes no flyaway textures
+    (tmp_path / "yarn.toml").write_text(dumps_spec(spec))
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    path.write_text(path.read_text().replace('yarn = "cotton1"', 'yarn = "yarn.toml"'))
+    result = render(load_scene(path), {"cotton1": str(bare)})
+    assert result.facts["flyaway_points"] == 0 and np.all(np.isfinite(result.image))
