@@ -15,9 +15,9 @@ flyaways, environment) and converts everything to the scene:
   of radius R (uniformly spread fibers; the spec is stored in the pack's provenance), and ``n_occluded`` =
   max(1, n_cross/2), the fiber count assumed between a visible fiber and the light when that fiber is in its own
   yarn's shadow (the bake counts it exactly per hit; the pack keeps only the shadowed fraction Ψ^Fiber_G). Checked
-  on the bake's straight yarn over 48 light/view directions: the bin-averaged DS with the exact lit fraction and
-  n_occluded = f·n_cross is off from the per-hit exact DS by a mean |error| of 11 % (cotton1) / 14 % (rayon1) at
-  f = ½, against 13–18 % / 11–30 % at f = 0.4–⅓ and 15 % / 24 % at 0.6.
+  on the bake's straight yarn over 48 light/view directions (``benchmarks/check_n_occluded.py``): the bin-averaged
+  DS with the exact lit fraction and n_occluded = f·n_cross is off from the per-hit exact DS by a mean |error| of
+  11 % (cotton1) / 14 % (rayon1) at f = ½, against 13–18 % / 11–30 % at f = 0.4–⅓ and 15 % / 24 % at 0.6.
 """
 
 from __future__ import annotations

@@ -1,0 +1,57 @@
+"""Check the renderer's n_occluded = n_cross/2 (``knitrun/yarn_look.py``): on the bake's straight yarn, the
+bin-averaged DS estimate the renderer uses (exact lit fraction, one fiber count f·n_cross for every shadowed hit)
+against the per-hit DS the bake divides by (each hit's own count of fibers toward the light), over 48 light/view
+directions. Prints the mean |error| relative to the exact DS for several f.
+
+    .venv/bin/python benchmarks/check_n_occluded.py [cotton1 rayon1 ...]
+"""
+
+import math
+import sys
+
+import numpy as np
+
+from data_formats.yarn_spec import load_preset
+from knitbake.correction_bake import (_primary_hits, _signed_azimuth, fiber_frames, fibers_toward, strip_camera,
+                                      yarn_direction, yarn_tracer)
+from knitbake.ds_precompute import precompute_dual_scattering
+from knitrun.dual_scattering import evaluate_ds
+from knitrun.fiber_bcsdf import params_from_optics
+
+FRACTIONS = (0.15, 0.25, 1 / 3, 0.4, 0.5, 0.6)
+
+
+def check(name):
+    spec = load_preset(name)
+    params = params_from_optics(spec.optics)
+    g = spec.geometry
+    n_cross = 4 * g.plies * g.fibers_per_ply * g.fiber_radius / (math.pi * spec.radius)
+    ds = {k: v[0] for k, v in precompute_dual_scattering(params, n_theta=32).items()}
+    geom = yarn_tracer(spec, 0)
+    err, total = np.zeros(len(FRACTIONS)), 0.0
+    for theta_o in (0.0, 0.5):
+        cam = strip_camera(spec, theta_o, 16)
+        _, points, prims, _ = _primary_hits(geom, cam, 0, 0)
+        t = fiber_frames(geom, prims)
+        wo = np.broadcast_to(-cam.basis()[0], t.shape)
+        th_o = np.arcsin(np.clip((wo * t).sum(-1), -1, 1))
+        for theta_i in (-0.6, 0.0, 0.6):
+            for phi in np.linspace(-math.pi, math.pi, 8, endpoint=False) + math.pi / 8:
+                light = yarn_direction(theta_i, -phi)
+                wi = np.broadcast_to(light, t.shape)
+                th_i = np.arcsin(np.clip((wi * t).sum(-1), -1, 1))
+                az = _signed_azimuth(t, wo, wi)
+                n = fibers_toward(geom, prims, points, light)
+                exact = evaluate_ds(ds, th_i, th_o, az, n, params=params)[:, 1].mean()
+                lit = float((n == 0).mean())
+                for k, f in enumerate(FRACTIONS):
+                    run = evaluate_ds(ds, th_i, th_o, az, f * n_cross, params=params, direct_fraction=lit)
+                    err[k] += abs(run[:, 1].mean() - exact)
+                total += exact
+    cells = ", ".join(f"f = {f:.2f}: {e:.3f}" for f, e in zip(FRACTIONS, err / total))
+    print(f"{name} (n_cross {n_cross:.2f}) mean |error| / exact DS — {cells}")
+
+
+if __name__ == "__main__":
+    for name in sys.argv[1:] or ["cotton1", "rayon1"]:
+        check(name)
