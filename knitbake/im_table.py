@@ -292,7 +292,7 @@ def im_axes(shape, lam_range=LAMBDA_RANGE) -> list:
                (math.log10(lam_range[0]), math.log10(lam_range[1]))]
     axes = []
     for name, (a, b), n in zip(("theta_o", "theta_j", "abs_phi_j_minus_phi_o", "log10_lambda"), domains, shape):
-        definition, units, _ = AXIS_VARIABLES[name]
+        definition, units = AXIS_VARIABLES[name]
         lo, hi = end_centred_range(a, b, n)
         axes.append({"name": name, "range": [lo, hi], "wrap": "clamp", "units": units, "definition": definition})
     return axes

@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .table_lookup import axis_cell
 
@@ -71,22 +71,15 @@ def sg(omega, omega_j, lam):
                                             - 1.0))
 
 
-def _abs_dphi(dphi):
-    return np.abs((np.asarray(dphi, float) + math.pi) % (2.0 * math.pi) - math.pi)
-
-
-# name → (definition written into the pack, units, the axis variable from (θ_o, θ_j, φ_j − φ_o, λ))
+# name → (definition written into the pack, units); the order is the axis code of ``im_kernel``
 AXIS_VARIABLES = {
-    "theta_o": ("θ_o = asin(ω_o·t), longitudinal angle of the view against the fiber tangent", "rad",
-                lambda theta_o, theta_j, dphi, lam: np.asarray(theta_o, float)),
-    "theta_j": ("θ_j = asin(ω_j·t), longitudinal angle of the SRBF centre against the fiber tangent", "rad",
-                lambda theta_o, theta_j, dphi, lam: np.asarray(theta_j, float)),
+    "theta_o": ("θ_o = asin(ω_o·t), longitudinal angle of the view against the fiber tangent", "rad"),
+    "theta_j": ("θ_j = asin(ω_j·t), longitudinal angle of the SRBF centre against the fiber tangent", "rad"),
     "abs_phi_j_minus_phi_o": ("|φ_j − φ_o| wrapped into [0, π]: azimuth of the SRBF centre minus azimuth of the view "
-                              "(I_M is even in it because f is even in φ)", "rad",
-                              lambda theta_o, theta_j, dphi, lam: _abs_dphi(dphi)),
-    "log10_lambda": ("log10 λ_j, λ_j the SRBF sharpness", "1",
-                     lambda theta_o, theta_j, dphi, lam: np.log10(np.asarray(lam, float))),
+                              "(I_M is even in it because f is even in φ)", "rad"),
+    "log10_lambda": ("log10 λ_j, λ_j the SRBF sharpness", "1"),
 }
+AXIS_CODES = {name: code for code, name in enumerate(AXIS_VARIABLES)}  # theta_o, theta_j, |Δφ|, log10 λ
 
 
 def _field(axis, key):
@@ -94,67 +87,10 @@ def _field(axis, key):
     return axis[key] if isinstance(axis, dict) else getattr(axis, key)
 
 
-def multilinear(table, ranges, wraps, coords):
-    """Multilinear interpolation of ``table`` over its leading sampled axes (ASSET_PACK.md §4.2–4.3).
-
-    table: (N_0, …, N_{k−1}, C); ranges: k pairs (lo, hi); wraps: k of "clamp"/"repeat"; coords: k arrays
-    (broadcast together) of axis-variable values. Returns (…, C) float64."""
-    table = np.asarray(table)
-    coords = np.broadcast_arrays(*[np.asarray(x, float) for x in coords])
-    corners = []  # per axis: (i0, i1, f)
-    for axis, (x, (lo, hi), wrap) in enumerate(zip(coords, ranges, wraps)):
-        n = table.shape[axis]
-        t = (x - lo) / (hi - lo) * n - 0.5
-        if wrap == "repeat":
-            t = t - n * np.floor(t / n)
-            i0 = np.minimum(np.floor(t).astype(np.int64), n - 1)
-            i1 = (i0 + 1) % n
-        elif wrap == "clamp":
-            t = np.clip(t, 0.0, n - 1)
-            i0 = np.floor(t).astype(np.int64)
-            i1 = np.minimum(i0 + 1, n - 1)
-        else:
-            raise ValueError(f"axis {axis}: wrap {wrap!r}, expected 'clamp' or 'repeat'")
-        corners.append((i0, i1, t - i0))
-    out = np.zeros(coords[0].shape + table.shape[len(coords):])
-    for bits in range(1 << len(coords)):
-        index, weight = [], 1.0
-        for axis, (i0, i1, f) in enumerate(corners):
-            high = (bits >> axis) & 1
-            index.append(i1 if high else i0)
-            weight = weight * (f if high else 1.0 - f)
-        out += np.asarray(weight)[..., None] * table[tuple(index)]
-    return out
-
-
-def im_lookup(table, axes, theta_o, theta_j, dphi, lam):
-    """I_M (RGB) from a baked table by multilinear interpolation; inputs broadcast, result (…, 3).
-
-    table: (N_a, N_b, N_c, N_d, 3); axes: the four sampled axes, as dicts with name, range, wrap (the axes_attrs of
-    ``knitbake.im_table.bake_im_table``) or as ``AxisInfo`` of a read pack (``pack.info['environment/I_M'].axes``;
-    the channel axis is ignored). θ_o, θ_j in [−π/2, π/2], dphi = φ_j − φ_o (any real), lam > 0 (values outside the
-    table's λ range take its end samples). A parameterisation with an axis not in ``AXIS_VARIABLES`` is refused."""
-    sampled = [a for a in axes if _field(a, "name") != "channel"]
-    names = [_field(a, "name") for a in sampled]
-    unknown = [n for n in names if n not in AXIS_VARIABLES]
-    if len(sampled) != 4 or unknown:
-        raise ValueError(f"I_M axes {names}: this renderer implements 4 axes from {sorted(AXIS_VARIABLES)} "
-                         f"(unknown: {unknown})")
-    if np.any(~(np.asarray(lam, float) > 0)):
-        raise ValueError("I_M lookup: λ must be > 0")
-    coords = [AXIS_VARIABLES[n][2](theta_o, theta_j, dphi, lam) for n in names]
-    return multilinear(table, [tuple(_field(a, "range")) for a in sampled], [_field(a, "wrap") for a in sampled],
-                       coords)
-
-
-# --- the same lookup inside Numba kernels (the strip renderer) ---------------------------------------------------
-
-AXIS_CODES = {name: code for code, name in enumerate(AXIS_VARIABLES)}  # theta_o, theta_j, |Δφ|, log10 λ
-
-
 def kernel_axes(axes):
     """(lo, hi, repeat, codes) arrays for ``im_kernel`` from the four sampled axes of an I_M table (dicts or
-    ``AxisInfo``); ValueError naming the axes for a parameterisation this renderer does not implement."""
+    ``AxisInfo``; the channel axis is ignored); ValueError naming the axes for a parameterisation this renderer
+    does not implement."""
     sampled = [a for a in axes if _field(a, "name") != "channel"]
     names = [_field(a, "name") for a in sampled]
     if len(sampled) != 4 or any(n not in AXIS_CODES for n in names):
@@ -164,9 +100,35 @@ def kernel_axes(axes):
             np.array([AXIS_CODES[n] for n in names], np.int64))
 
 
+def im_lookup(table, axes, theta_o, theta_j, dphi, lam):
+    """I_M (RGB) from a baked table by multilinear interpolation (ASSET_PACK.md §4.2–4.3, ``im_kernel``, the
+    renderer's own lookup); inputs broadcast, result (…, 3).
+
+    table: (N_a, N_b, N_c, N_d, 3); axes: the four sampled axes, as dicts with name, range, wrap (the axes_attrs of
+    ``knitbake.im_table.bake_im_table``) or as ``AxisInfo`` of a read pack (``pack.info['environment/I_M'].axes``;
+    the channel axis is ignored). θ_o, θ_j in [−π/2, π/2], dphi = φ_j − φ_o (any real), lam > 0 (values outside the
+    table's λ range take its end samples). A parameterisation with an axis not in ``AXIS_VARIABLES`` is refused."""
+    lo, hi, repeat, codes = kernel_axes(axes)
+    args = np.broadcast_arrays(*[np.asarray(x, np.float64) for x in (theta_o, theta_j, dphi, lam)])
+    if np.any(~(args[3] > 0)):
+        raise ValueError("I_M lookup: λ must be > 0")
+    flat = [np.ascontiguousarray(x.ravel()) for x in args]
+    out = _im_batch(np.ascontiguousarray(table, np.float64), lo, hi, repeat, codes, *flat)
+    return out.reshape(args[0].shape + (3,))
+
+
+@njit(parallel=True, cache=True)
+def _im_batch(table, lo, hi, repeat, codes, theta_o, theta_j, dphi, lam):
+    out = np.empty((theta_o.shape[0], 3))
+    for k in prange(theta_o.shape[0]):
+        im_kernel(table, lo, hi, repeat, codes, theta_o[k], theta_j[k], dphi[k], lam[k], out[k])
+    return out
+
+
 @njit(cache=True)
 def im_kernel(table, lo, hi, repeat, codes, theta_o, theta_j, dphi, lam, out):
-    """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0) by the rule of ``multilinear`` (one point, no allocation)."""
+    """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0) by multilinear interpolation over the table's four sampled axes
+    (the §4.3 rule per axis, ``table_lookup.axis_cell``)."""
     i0 = np.empty(4, np.int64)
     i1 = np.empty(4, np.int64)
     fr = np.empty(4)
