@@ -309,7 +309,7 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     for k, look in enumerate(looks):
         idx = np.flatnonzero(points["yarn"] == k)
         im = look.im if look.im is not None else _NO_IM
-        shade_regular(idx, points["position"], points["view_dir"], points["tangent"],
+        shade_regular(idx, points["view_dir"], points["tangent"],
                       view_phase_arclength(points, lines, looks), points["v"].astype(np.float64), points["footprint"],
                       look.params, look.ds, look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm,
                       look.psi_gn,
@@ -324,7 +324,7 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
             look = looks[k]
             idx = np.flatnonzero(fly_points["yarn"] == k)
             im = look.im if look.im is not None else _NO_IM
-            shade_flyaway(idx, fly_points["position"], fly_points["view_dir"], fly_points["tangent"],
+            shade_flyaway(idx, fly_points["view_dir"], fly_points["tangent"],
                           view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
                           fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params,
                           look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,

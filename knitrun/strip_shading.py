@@ -134,8 +134,8 @@ def shading_points(gbuffer, camera, pattern, mask=None):
     """Group a ``StripGBuffer``'s covered samples into shading points (module docstring). Returns a dict of arrays:
     ``start`` (H·W + 1,), ``pixel_sample`` (N, 3) (row, column, sample), ``weight`` (N,), ``position`` (N, 3) world,
     ``view_dir`` (N, 3) unit toward the camera, ``footprint`` (N,) pixel size at the point (scene units), and the
-    G-buffer attributes ``curve``, ``yarn``, ``segment``, ``arclength``, ``v``, ``tangent``, ``depth`` of each
-    point's sample."""
+    G-buffer attributes ``curve``, ``yarn``, ``segment``, ``arclength``, ``v``, ``tangent`` of each point's
+    sample."""
     use = gbuffer.coverage if mask is None else (gbuffer.coverage & mask)
     height, width, _ = use.shape
     counts = np.empty(height * width, np.int64)
@@ -154,7 +154,7 @@ def shading_points(gbuffer, camera, pattern, mask=None):
     i, j, a = pixel_sample.T
     points = {"start": start, "pixel_sample": pixel_sample, "weight": weight, "position": position,
               "view_dir": view_dir, "footprint": footprint}
-    for name in ("curve", "yarn", "segment", "arclength", "v", "depth"):
+    for name in ("curve", "yarn", "segment", "arclength", "v"):
         points[name] = getattr(gbuffer, name)[i, j, a]
     points["tangent"] = gbuffer.tangent[i, j, a].astype(np.float64)
     return points
@@ -269,7 +269,7 @@ def _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha):
 # --- regular fibers --------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
-def shade_regular(idx, position, view_dir, tangent, arclength, v_coord, footprint,
+def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
                   params, ds, xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn,
                   tan_data, tan_off, tan_rows, tan_cols, cov_data, cov_off, cov_rows, cov_cols,
                   period, half_width, n_occluded, n_cross,
@@ -353,7 +353,7 @@ def variant_of(curve, period_index):
 
 
 @njit(parallel=True, cache=True)
-def shade_flyaway(idx, position, view_dir, tangent, arclength, v_coord, footprint, curve, params,
+def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, params,
                   fly_data, fly_off, fly_rows, fly_cols, period, half_width, radius, psi_full, psi_gm, psi_gn,
                   light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis,
                   im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):

@@ -184,7 +184,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     for j in (1, 16, 64):
         fit = fit_srbf(sky, n_lobes=j, seed=0)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
-        shade_regular(np.arange(n), np.zeros((n, 3)), view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3),
+        shade_regular(np.arange(n), view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3),
                       ROUGH, np.ones((5, 4, 3)), no_full_table(), ones_factor(), ones_factor(), no_full_table(),
                       ones_factor(), ones_factor(), flat.data, flat.offset, flat.rows,
                       flat.cols, full.data, full.offset, full.rows, full.cols, 1.0, 1.0, 0.0, 0.0,
