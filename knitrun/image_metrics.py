@@ -33,11 +33,13 @@ def flip_error(test, reference, exposure_stops: float = 0.0, magma: bool = False
     return float(mean), error_map if magma else error_map.reshape(test.shape[:2])
 
 
-def compare_images(test, reference, exposure_stops: float = 0.0) -> dict:
-    """FLIP (tone-mapped, module docstring), RMSE and relMSE of ``test`` against ``reference``."""
+def compare_images(test, reference, exposure_stops: float = 0.0, flip_mean: float | None = None) -> dict:
+    """FLIP (tone-mapped, module docstring), RMSE and relMSE of ``test`` against ``reference``; ``flip_mean``: a
+    FLIP mean already computed by ``flip_error`` for these images and exposure (not computed again)."""
     test, reference = _checked(test, reference)
     diff = test.astype(np.float64) - reference
-    flip_mean, _ = flip_error(test, reference, exposure_stops)
+    if flip_mean is None:
+        flip_mean, _ = flip_error(test, reference, exposure_stops)
     return {"flip": flip_mean, "rmse": float(np.sqrt(np.mean(diff ** 2))),
             "rel_mse": float(np.mean(diff ** 2 / (reference.astype(np.float64) ** 2 + REL_MSE_EPSILON))),
             "flip_mode": f"LDR-FLIP after tone mapping at {exposure_stops:+g} stops (clamp, sRGB), 67 ppd"}
