@@ -132,7 +132,7 @@ def _group_fill(curve, use, depth, start, pattern, cam_pos, basis, tan_half, ort
 
 def shading_points(gbuffer, camera, pattern, mask=None):
     """Group a ``StripGBuffer``'s covered samples into shading points (module docstring). Returns a dict of arrays:
-    ``start`` (H·W + 1,), ``pixel_sample`` (N, 3) (row, column, sample), ``weight`` (N,), ``position`` (N, 3) world,
+    ``start`` (H·W + 1,), ``weight`` (N,), ``position`` (N, 3) world,
     ``view_dir`` (N, 3) unit toward the camera, ``footprint`` (N,) pixel size at the point (scene units), and the
     G-buffer attributes ``curve``, ``yarn``, ``segment``, ``arclength``, ``v``, ``tangent`` of each point's
     sample."""
@@ -152,7 +152,7 @@ def shading_points(gbuffer, camera, pattern, mask=None):
                 math.tan(math.radians(camera.fov_deg) / 2), float(camera.ortho_height), pixel_sample, weight,
                 position, view_dir, footprint)
     i, j, a = pixel_sample.T
-    points = {"start": start, "pixel_sample": pixel_sample, "weight": weight, "position": position,
+    points = {"start": start, "weight": weight, "position": position,
               "view_dir": view_dir, "footprint": footprint}
     for name in ("curve", "yarn", "segment", "arclength", "v"):
         points[name] = getattr(gbuffer, name)[i, j, a]

@@ -28,10 +28,6 @@ class MipStack:
     rows: np.ndarray
     cols: np.ndarray
 
-    @property
-    def channels(self) -> int:
-        return self.data.shape[1]
-
 
 def mip_stack(chains) -> MipStack:
     """A ``MipStack`` from a list of variants, each a list of levels (H, W) or (H, W, C), level 0 first."""
