@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from data_formats.asset_pack import read_pack
+from data_formats.scene import CM_PER_UNIT
 from data_formats.yarn_spec import loads_spec
 
 from .dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, pack_tables
@@ -35,7 +36,6 @@ from .fiber_bcsdf import P_A_D, P_A_R, P_A_TT, params_from_pack
 from .im_lookup import kernel_axes
 from .texture_sampling import MipStack, mip_stack
 
-METRES = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # schema 1.1; absent from older packs
 
@@ -116,7 +116,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     params = params_from_pack(pack.fiber_bcsdf)
     for base in (P_A_R, P_A_TT, P_A_D):
         params[base:base + 3] *= colour
-    to_scene = METRES[pack.yarn["units"]] / METRES[units]
+    to_scene = CM_PER_UNIT[pack.yarn["units"]] / CM_PER_UNIT[units]
     pack_radius = float(pack.yarn["radius"]) * to_scene
     scale = entry.radius / pack_radius
     geometry = spec.geometry
