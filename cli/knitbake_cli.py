@@ -120,6 +120,8 @@ def inspect(path, as_json):
             err = t.get("error_estimate")
             err_text = "—" if err is None else f"{err:.3g} ({t.get('error_statistic') or t.get('error_kind')})"
             click.echo(f"  {name:<36}{str(tuple(t['shape'])):<22}error {err_text}")
+            for key, value in t.get("notes", {}).items():
+                click.echo(f"  {'':<36}{key} {value:.3g}" if isinstance(value, float) else f"  {'':<36}{key} {value}")
 
 
 @main.command()

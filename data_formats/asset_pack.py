@@ -40,7 +40,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "1.1"
+SCHEMA_VERSION = "2.0"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
@@ -145,7 +145,7 @@ TABLES = (
     TableSpec("correction/xi_N", "correction", ("N_v", "N_phi", 3), ("v", "phi", "channel"), "1",
               "ξ_N(v, φ): azimuthal factor of the DS correction", value_range=(0.0, None)),
     TableSpec("correction/xi", "correction", ("N_v", "N_theta", "N_phi", 3), ("v", "theta_d", "phi", "channel"), "1",
-              "ξ(v, θ_d, φ) as baked, before factorization (schema 1.1)", value_range=(0.0, None)),
+              "ξ(v, θ_d, φ) as baked, before factorization (since schema 1.1)", value_range=(0.0, None)),
     TableSpec("correction/xi_residual", "correction", (), (), "1",
               "relative RMS residual of ξ ≈ ξ_M ξ_N over the whole baked grid", value_range=(0.0, None)),
     TableSpec("correction/xi_residual_by_v", "correction", ("N_v",), ("v",), "1",
@@ -155,7 +155,7 @@ TABLES = (
     TableSpec("shadowing/psi_GN", "shadowing", ("N_v", "N_phi", 3), ("v", "phi", "channel"), "1",
               "Ψ^Fiber_{G,N}(v, φ): azimuthal factor of fiber-level shadowing", value_range=(0.0, None)),
     TableSpec("shadowing/psi", "shadowing", ("N_v", "N_theta", "N_phi", 3), ("v", "theta_i", "phi", "channel"), "1",
-              "Ψ^Fiber_G(v, θ_i, φ) as baked, before factorization (schema 1.1)", value_range=(0.0, None)),
+              "Ψ^Fiber_G(v, θ_i, φ) as baked, before factorization (since schema 1.1)", value_range=(0.0, None)),
     TableSpec("shadowing/psi_residual", "shadowing", (), (), "1",
               "relative RMS residual of Ψ^Fiber_G ≈ Ψ_{G,M} Ψ_{G,N} over the whole baked grid",
               value_range=(0.0, None)),
@@ -175,9 +175,10 @@ TABLES = (
     TableSpec("textures/flyaway/mip{k}", "flyaway", (3, "H", "W", 4), ("variant", "v_tex", "u_tex", "channel"), "1",
               "three seamless flyaway textures: RGB coverage-premultiplied tangent, A coverage",
               channel_ranges=(*_TANGENT, (0.0, 1.0)), vector=3, mip=True),
-    TableSpec("environment/I_M", "environment", ("N_a", "N_b", "N_c", "N_d", 3),
+    TableSpec("environment/I_M_TT_D", "environment", ("N_a", "N_b", "N_c", "N_d", 3),
               ("cos_theta_j", "cos_theta_o", "cos_theta_j_minus_theta_o", "inv_lambda", "channel"), "1",
-              "I_M = ∫ G_j(ω_i) f(ω_i, ω_o) cos θ_i dω_i over a self-described 4-D parameterisation",
+              "I_M^{TT,D} = ∫ G_j(ω_i) (f_TT + f_D)(ω_i, ω_o) cos θ_i dω_i, the TT and D lobes of I_M (the consumer "
+              "integrates the R lobe, §9), over a self-described 4-D parameterisation",
               value_range=(0.0, None), axes_overridable=True),
 )
 _BY_NAME = {t.name: t for t in TABLES}
@@ -1059,8 +1060,18 @@ def describe(path) -> dict:
                       **({"range": list(a.range), "wrap": a.wrap, "units": a.units, "definition": a.definition}
                          if a.range else {})} for a in info.axes],
             "error_estimate": info.error_estimate, "error_kind": info.error_kind,
-            "error_statistic": info.error_statistic, "per_entry_errors": info.has_stderr}
+            "error_statistic": info.error_statistic, "per_entry_errors": info.has_stderr,
+            **({"notes": notes} if (notes := _extra_attrs(info.attrs)) else {})}
     return jsonable(out)
+
+
+_STANDARD_ATTRS = {"units", "description", "error_estimate", "error_kind", "error_statistic", "axes", "half_width",
+                   "error_of"}
+
+
+def _extra_attrs(attrs: dict) -> dict:
+    """A table's attributes beyond those §4.1 defines (a baker's extra figures, e.g. the I_M lookup error)."""
+    return {k: v for k, v in attrs.items() if k not in _STANDARD_ATTRS and not k.startswith("axis")}
 
 
 # --- documentation ------------------------------------------------------------------------------------------------

@@ -1,7 +1,11 @@
-"""Bake the environment-light table I_M (seed 000 §4.5, eq. 16; ASSET_PACK.md §9) by deterministic quadrature.
+"""Bake the environment-light table I_M^{TT,D} (seed 000 §4.5, eq. 16; ASSET_PACK.md §9) by deterministic quadrature,
+and integrate I_M directly (``im_direct``, the ground truth of the tests).
 
 I_M(θ_o, θ_j, Δφ, λ) = ∫ G(ω_i; ω_j, λ) f(ω_i, ω_o) cos θ_i dω_i with G = exp(λ(ω_i·ω_j − 1)), Δφ = φ_j − φ_o;
-parameterisation and lookup in ``knitrun.im_lookup``, BCSDF in ``knitrun.fiber_bcsdf`` (dω = cos θ dθ dφ).
+parameterisation and lookup in ``knitrun.im_lookup``, BCSDF in ``knitrun.fiber_bcsdf`` (dω = cos θ dθ dφ). The pack's
+table holds the TT and D lobes only: the renderer integrates the narrow R lobe itself (``im_lookup.r_lobe_integral``,
+the R formula below with a fixed 12-node rule), because no grid of practical size resolves a 1° R lobe under a sharp
+SRBF (see ``knitrun.im_lookup``).
 
 Quadrature
 ----------
@@ -41,9 +45,9 @@ from numba import njit, prange
 
 from data_formats.asset_pack import cell_centres
 from knitrun import fiber_bcsdf as fb
-from knitrun.im_lookup import AXIS_VARIABLES
+from knitrun.im_lookup import AXIS_VARIABLES, i0e
 
-DEFAULT_SHAPE = (24, 48, 24, 64)  # (θ_o, θ_j, |φ_j − φ_o|, log10 λ): see bake_im_table
+DEFAULT_SHAPE = (24, 48, 24, 96)  # (θ_o, θ_j, |φ_j − φ_o|, log10 λ): the standard quality; see bake_im_table
 LAMBDA_RANGE = (0.5, 1.0e4)
 NODES = 8  # Gauss–Legendre nodes per panel in the bake (error estimate: NODES // 2)
 TAIL = 30.0  # windows end where a factor falls below e^{−TAIL} of its peak
@@ -54,27 +58,6 @@ ERROR_KIND = ("quadrature error per entry: Σ_lobes A_p |J_p(n) − J_p(n/2)| of
               "the same panels, plus the TT azimuth-table interpolation error (conservative for the stored n-node "
               "value); interpolation between table samples is not included")
 HALF_PI = 0.5 * math.pi
-
-
-@njit(cache=True)
-def _i0e(x):
-    """Exponentially scaled modified Bessel function e^{−x} I_0(x) for x ≥ 0, to ~1e-15 relative: the power series
-    Σ (x²/4)^k/(k!)² (positive terms) for x ≤ 20, the asymptotic series (2πx)^{−1/2} Σ ((2k−1)!!)²/(k! (8x)^k)
-    beyond (its smallest term is ~e^{−2x})."""
-    if x <= 20.0:
-        q = 0.25 * x * x
-        term, total, k = 1.0, 1.0, 0
-        while term > 1e-17 * total:
-            k += 1
-            term *= q / (k * k)
-            total += term
-        return total * math.exp(-x)
-    term, total, k = 1.0, 1.0, 0
-    while term > 1e-17 * total and k < 2.0 * x:  # terms shrink while k < 2x
-        k += 1
-        term *= (2 * k - 1) ** 2 / (k * 8.0 * x)
-        total += term
-    return total / math.sqrt(2.0 * math.pi * x)
 
 
 @njit(cache=True)
@@ -176,22 +159,23 @@ def _theta_integral(lobe, c, theta_j, cos_j, lam, tt_centre, s, tt_tab, u_max, g
             kappa = lam * max(ct, 0.0) * cos_j
             w = ct * ct * math.exp(lam * (math.cos(t - theta_j) - 1.0))
             if lobe == 0:
-                w *= fb._gauss(t, mu, sigma) / z * _i0e(kappa)
+                w *= fb._gauss(t, mu, sigma) / z * i0e(kappa)
             elif lobe == 1:
                 phi = _azimuth_lookup(tt_tab, u_max, kappa) if tt_tab.shape[0] else _azimuth_tt(kappa, tt_centre, s,
                                                                                                   gx, gw, tail)
                 w *= fb._gauss(t, mu, sigma) / z * phi
             else:
-                w *= 2.0 / math.pi * _i0e(kappa)
+                w *= 2.0 / math.pi * i0e(kappa)
             total += half * gw[q] * w
     return total
 
 
 @njit(cache=True)
-def _lobe_integrals(p, c, theta_j, dphi, lam, tt_tab, u_max, gx, gw, tail, out):
+def _lobe_integrals(p, c, theta_j, dphi, lam, tt_tab, u_max, gx, gw, tail, first, out):
     """out[0:3] = the R, TT, D integrals J_p (I_M = Σ_p A_p J_p) for the view of context ``c`` (built with φ_o = 0),
     θ_j ∈ [−π/2, π/2] (clamped), Δφ = φ_j − φ_o. tt_tab: ``_azimuth_table`` for this Δφ (covering κ ≤ λ), or empty
-    for direct azimuthal quadrature. Lobes with zero albedo are skipped (J_p = 0)."""
+    for direct azimuthal quadrature. Lobes before ``first`` (0 R, 1 TT) and lobes with zero albedo are skipped
+    (J_p = 0)."""
     theta_j = min(max(theta_j, -HALF_PI), HALF_PI)
     cos_j = max(math.cos(theta_j), 0.0)
     tt_centre = fb._wrap(math.pi - dphi)  # N_TT peaks where φ_o − φ_i = π, i.e. Δ = π − Δφ
@@ -199,7 +183,7 @@ def _lobe_integrals(p, c, theta_j, dphi, lam, tt_tab, u_max, gx, gw, tail, out):
     for lobe in range(3):
         base = (fb.P_A_R, fb.P_A_TT, fb.P_A_D)[lobe]
         out[lobe] = 0.0
-        if max(p[base], p[base + 1], p[base + 2]) > 0.0:
+        if lobe >= first and max(p[base], p[base + 1], p[base + 2]) > 0.0:
             out[lobe] = _theta_integral(lobe, c, theta_j, cos_j, lam, tt_centre, s, tt_tab, u_max, gx, gw, tail)
 
 
@@ -227,20 +211,20 @@ def _azimuth_tables(dphi, s, u_max, n, gx, gw, tail):
 
 @njit(parallel=True, cache=True)
 def _bake_slab(p, theta_o, theta_j, dphi, lam, tt_tabs, tt_eps, u_max, gx, gw, gx_half, gw_half, tail, table, err):
-    """One θ_o: table[j, k, l] = I_M(θ_o, θ_j[j], dphi[k], lam[l]) with n nodes; err = Σ_p A_p |J_p(n) − J_p(n/2)|
-    plus the azimuth-table error A_TT ε_k (∫ M_TT cos²θ_i S dθ_i ≤ 1 bounds its weight)."""
+    """One θ_o: table[j, k, l] = I_M^{TT,D}(θ_o, θ_j[j], dphi[k], lam[l]) with n nodes; err = Σ_p A_p |J_p(n) −
+    J_p(n/2)| over TT and D plus the azimuth-table error A_TT ε_k (∫ M_TT cos²θ_i S dθ_i ≤ 1 bounds its weight)."""
     c = _view_context(p, theta_o)
     nj, nk, nl = theta_j.shape[0], dphi.shape[0], lam.shape[0]
     for e in prange(nj * nk * nl):
         j, rest = e // (nk * nl), e % (nk * nl)
         k, l = rest // nl, rest % nl
         fine, coarse = np.empty(3), np.empty(3)
-        _lobe_integrals(p, c, theta_j[j], dphi[k], lam[l], tt_tabs[k], u_max, gx, gw, tail, fine)
-        _lobe_integrals(p, c, theta_j[j], dphi[k], lam[l], tt_tabs[k], u_max, gx_half, gw_half, tail, coarse)
+        _lobe_integrals(p, c, theta_j[j], dphi[k], lam[l], tt_tabs[k], u_max, gx, gw, tail, 1, fine)
+        _lobe_integrals(p, c, theta_j[j], dphi[k], lam[l], tt_tabs[k], u_max, gx_half, gw_half, tail, 1, coarse)
         for ch in range(3):
             table[j, k, l, ch] = 0.0
             err[j, k, l, ch] = p[fb.P_A_TT + ch] * tt_eps[k]
-            for lobe in range(3):
+            for lobe in range(1, 3):
                 albedo = p[(fb.P_A_R, fb.P_A_TT, fb.P_A_D)[lobe] + ch]
                 table[j, k, l, ch] += albedo * fine[lobe]
                 err[j, k, l, ch] += albedo * abs(fine[lobe] - coarse[lobe])
@@ -252,7 +236,7 @@ def _direct_batch(p, theta_o, theta_j, dphi, lam, gx, gw, tail, out):
     for n in prange(theta_o.shape[0]):
         c = _view_context(p, min(max(theta_o[n], -HALF_PI), HALF_PI))
         j = np.empty(3)
-        _lobe_integrals(p, c, theta_j[n], dphi[n], lam[n], no_table, 1.0, gx, gw, tail, j)
+        _lobe_integrals(p, c, theta_j[n], dphi[n], lam[n], no_table, 1.0, gx, gw, tail, 0, j)
         for ch in range(3):
             out[n, ch] = p[fb.P_A_R + ch] * j[0] + p[fb.P_A_TT + ch] * j[1] + p[fb.P_A_D + ch] * j[2]
 
@@ -299,11 +283,12 @@ def im_axes(shape, lam_range=LAMBDA_RANGE) -> list:
 
 
 def bake_im_table(params, shape=DEFAULT_SHAPE, nodes: int = NODES, lam_range=LAMBDA_RANGE, progress=None):
-    """Bake I_M for the fiber BCSDF ``params`` (``knitrun.fiber_bcsdf`` vector) on the grid of ``im_axes(shape)``.
+    """Bake I_M^{TT,D} (the TT and D lobes of I_M) for the fiber BCSDF ``params`` (``knitrun.fiber_bcsdf`` vector) on
+    the grid of ``im_axes(shape)``.
 
-    shape: samples along (θ_o, θ_j, |φ_j − φ_o|, log10 λ), each ≥ 2. The default (24, 48, 24, 64) — 1.77 M entries,
-    21 MB as float32 plus 21 MB of per-entry errors — puts 7.8° between θ_o and |Δφ| samples, 3.8° between θ_j
-    samples and 0.068 decades between λ samples; it bakes in 15–32 s on 2 shared cores. The lookup accuracy this buys
+    shape: samples along (θ_o, θ_j, |φ_j − φ_o|, log10 λ), each ≥ 2. The default (24, 48, 24, 96) — 2.65 M entries,
+    32 MB as float32 plus as much for the per-entry errors — puts 7.8° between θ_o and |Δφ| samples, 3.8° between
+    θ_j samples and 0.045 decades between λ samples; it bakes in 15–25 s on 2 cores. The lookup accuracy this buys
     depends on the lobe widths: see ``knitrun.im_lookup`` (Accuracy). nodes: Gauss–Legendre nodes per panel (even;
     the error estimate uses nodes // 2; 8 gives ~1e-8 relative, 4 ~1e-4 at half the cost). lam_range: the λ
     domain (the end samples lie on it). progress(done, total) is called after each θ_o slab. Returns (table (N_a, N_b, N_c, N_d, 3) float64, per-entry error (same shape, ≥ 0),
@@ -327,3 +312,38 @@ def bake_im_table(params, shape=DEFAULT_SHAPE, nodes: int = NODES, lam_range=LAM
         if progress is not None:
             progress(i + 1, len(theta_o))
     return table, err, axes
+
+
+def lookup_accuracy(table, axes, params, n: int = 2000, seed: int = 0) -> dict:
+    """The accuracy of I_M as a renderer evaluates it (``knitrun.im_lookup.im_lookup``: this table plus the R-lobe
+    rule) against ``im_direct``, at ``n`` points: θ_o, θ_j uniform, |Δφ| uniform, λ log-uniform over the table's λ
+    range, with 10 % at each λ end, 10 % on the R ridge θ_j ≈ 2α_R − θ_o and 10 % within 1e-3 rad of the poles.
+    Returns {"lookup_rel_error": max relative error where I_M > 1 % of its largest value over the points,
+    "lookup_error_per_decade": max over λ decades of (max error / that decade's largest I_M)} (worst channel).
+    Deterministic for a seed; costs about as much as baking a table of 10⁵ entries."""
+    from knitrun.im_lookup import im_lookup
+
+    p = np.asarray(params, float)
+    lam_axis = next(a for a in axes if a["name"] == "log10_lambda")
+    lo, hi = cell_centres(*lam_axis["range"], table.shape[3])[[0, -1]]
+    rng = np.random.default_rng(seed)
+    theta_o, theta_j = rng.uniform(-HALF_PI, HALF_PI, n), rng.uniform(-HALF_PI, HALF_PI, n)
+    dphi, log_lam = rng.uniform(0.0, math.pi, n), rng.uniform(lo, hi, n)
+    k = n // 10
+    log_lam[:k], log_lam[k:2 * k] = lo, hi
+    width = np.sqrt((2.0 * p[fb.P_BETA_R]) ** 2 + 10.0 ** -log_lam[2 * k:3 * k])
+    theta_j[2 * k:3 * k] = np.clip(2.0 * p[fb.P_ALPHA_R] - theta_o[2 * k:3 * k] + rng.normal(0.0, 2.0, k) * width,
+                                   -HALF_PI, HALF_PI)
+    pole = HALF_PI * np.sign(rng.normal(size=k)) * (1.0 - rng.uniform(0.0, 1e-3 / HALF_PI, k))
+    theta_o[3 * k:3 * k + k // 2], theta_j[3 * k + k // 2:4 * k] = pole[:k // 2], pole[k // 2:]
+    lam = 10.0 ** log_lam
+    ref = im_direct(p, theta_o, theta_j, dphi, lam)
+    got = im_lookup(table, axes, p, theta_o, theta_j, dphi, lam)
+    peak = ref.max(axis=0)
+    counted = ref > 0.01 * peak
+    rel = np.abs(got - ref) / np.where(counted, ref, 1.0)
+    decade = np.floor(log_lam - lo + 1e-9)
+    per_decade = max(float(np.max(np.abs(got[m] - ref[m]) / np.maximum(ref[m].max(axis=0), 1e-300)))
+                     for m in (decade == d for d in np.unique(decade)))
+    return {"lookup_rel_error": float(rel[counted].max()) if counted.any() else 0.0,
+            "lookup_error_per_decade": per_decade}

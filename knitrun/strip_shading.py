@@ -30,6 +30,8 @@ weight W_j, visibility T̃_j from the lobe's shadow map), eq. 17:
 
     L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 
+(I_M = the pack's I_M^{TT,D} table + the R lobe integrated per lookup, ``im_lookup.im_kernel``)
+
 plus, beyond the paper, the environment's multiple scattering: eq. 17 has single scattering only (I_M integrates
 f), which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. Lobe j
 carries irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}); the lobes are merged into clusters (the
@@ -310,6 +312,9 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
             for ch in range(3):
                 rgb[q, ch] += light_e[light, ch] * xi[ch] * comp[K_TOTAL, ch]
         im = np.empty(3)
+        # the BCSDF context of the fiber-frame view, for I_M's R lobe
+        c_f = context(params, np.array([math.sin(theta_o_f), math.cos(theta_o_f), 0.0])) if lobe_dir.shape[0] \
+            else np.empty(0)
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
             theta_i = _asin(_dot(wj, t))
@@ -318,7 +323,8 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
                          xi, psi, scratch)
             theta_j_f = _asin(_dot(wj, tf))
             phi_f = _azimuth_difference(tf, wo, wj)
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, theta_o_f, theta_j_f, -phi_f, lobe_lambda[j], im)
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c_f, theta_o_f, theta_j_f, -phi_f,
+                      lobe_lambda[j], im)
             vis = lobe_vis[j, q]
             for ch in range(3):
                 rgb[q, ch] += lobe_w[j, ch] * vis * xi[ch] * psi[ch] * im[ch]
@@ -396,7 +402,7 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
         theta_o_f = _asin(_dot(wo, tf))
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, theta_o_f, _asin(_dot(wj, tf)),
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c, theta_o_f, _asin(_dot(wj, tf)),
                       -_azimuth_difference(tf, wo, wj), lobe_lambda[j], f)
             lit = lobe_vis[j, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wj, psi, scratch)
             for ch in range(3):

@@ -37,7 +37,7 @@ from .im_lookup import kernel_axes
 from .texture_sampling import MipStack, mip_stack
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
-FULL_TABLES = ("correction/xi", "shadowing/psi")  # schema 1.1; absent from older packs
+FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
 
 
 @dataclass
@@ -62,7 +62,7 @@ class YarnLook:
     n_cross: float
     n_occluded: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
-    im: tuple | None  # (table (…, 3) float64, lo, hi, repeat, codes) for ``im_lookup.im_kernel``
+    im: tuple | None  # (I_M^{TT,D} table (…, 3) float64, lo, hi, repeat, codes) for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
 
 
@@ -92,7 +92,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
-    ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them (schema 1.1), else the factors."""
+    ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
@@ -104,7 +104,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     if flyaways:
         names.append("textures/flyaway")
     if environment:
-        names.append("environment/I_M")
+        names.append("environment/I_M_TT_D")
     stored = header.info
     missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
     if corrections and full_tables:
@@ -125,8 +125,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:
-        lo, hi, repeat, codes = kernel_axes(pack.info["environment/I_M"].axes)
-        im = (np.ascontiguousarray(pack.tables["environment/I_M"] * colour, np.float64), lo, hi, repeat, codes)
+        lo, hi, repeat, codes = kernel_axes(pack.info["environment/I_M_TT_D"].axes)
+        im = (np.ascontiguousarray(pack.tables["environment/I_M_TT_D"] * colour, np.float64), lo, hi, repeat, codes)
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
                  if corrections}
     return YarnLook(

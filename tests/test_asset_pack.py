@@ -69,7 +69,7 @@ def full_tables(seed=0, levels=3):
                 errors[name] = 0.002
     for k in range(levels):
         attrs[f"textures/flyaway/mip{k}"] = {"half_width": 0.09, "error_kind": "exact (deterministic ray casting)"}
-    attrs["environment/I_M"] = {"axes": [
+    attrs["environment/I_M_TT_D"] = {"axes": [
         {"name": "cos_theta_j", "range": [0, 1], "definition": "cos θ_j"},
         {"name": "sin_theta_o", "range": [-1, 1], "definition": "sin θ_o", "units": "1"},
         {"name": "phi_j_minus_phi_o", "range": [-math.pi, math.pi], "wrap": "repeat", "units": "rad",
@@ -124,7 +124,7 @@ def test_round_trip_every_table(tmp_path):
     assert [a.name for a in xi.axes] == ["v", "theta_d", "channel"]
     assert xi.axes[1].range == pytest.approx((-math.pi / 2, math.pi / 2)) and xi.axes[1].wrap == "clamp"
     np.testing.assert_allclose(xi.attrs["axis1_samples"], ap.cell_centres(-math.pi / 2, math.pi / 2, SIZES["N_theta"]))
-    im = pack.info["environment/I_M"]
+    im = pack.info["environment/I_M_TT_D"]
     assert [a.name for a in im.axes] == ["cos_theta_j", "sin_theta_o", "phi_j_minus_phi_o", "log10_lambda", "channel"]
     assert im.axes[2].wrap == "repeat" and im.axes[3].range == (-0.5, 4.0)
     assert pack.info["correction/xi_N"].axes[1].wrap == "repeat"
@@ -256,17 +256,18 @@ def test_wrong_format_name(tmp_path):
 def test_unknown_major_version_fails_closed_higher_minor_accepted(tmp_path):
     path = tmp_path / "p.h5"
     write_full(path, levels=1)
+    for other in ("3.0", "1.1"):  # a newer major, and the last 1.x (whose I_M held every lobe)
+        with h5py.File(path, "r+") as f:
+            f.attrs["schema_version"] = other
+        _expect_bad(path, rf"unknown major version {other[0]}; this reader supports 2\.x")
     with h5py.File(path, "r+") as f:
-        f.attrs["schema_version"] = "2.0"
-    _expect_bad(path, r"unknown major version 2; this reader supports 1\.x")
-    with h5py.File(path, "r+") as f:
-        f.attrs["schema_version"] = "1.7"
+        f.attrs["schema_version"] = "2.7"
         f.create_dataset("textures/new_thing", data=np.zeros(3))  # a member a later minor version added
         f.create_group("future_group")
     assert ap.validate(path) == []
-    assert ap.read_pack(path).schema_version == "1.7"
+    assert ap.read_pack(path).schema_version == "2.7"
     with h5py.File(path, "r+") as f:
-        f.attrs["schema_version"] = "1.0"
+        f.attrs["schema_version"] = "2.0"
     _expect_bad(path, r"textures/new_thing: unknown dataset")
     with h5py.File(path, "r+") as f:
         f.attrs["schema_version"] = "one"
@@ -309,8 +310,8 @@ def test_missing_error_estimate_and_bad_axes(tmp_path):
     path = tmp_path / "p.h5"
     write_full(path, levels=1)
     with h5py.File(path, "r+") as f:
-        del f["environment/I_M"].attrs["error_estimate"]
-    _expect_bad(path, r"environment/I_M: attr error_estimate is missing")
+        del f["environment/I_M_TT_D"].attrs["error_estimate"]
+    _expect_bad(path, r"environment/I_M_TT_D: attr error_estimate is missing")
     write_full(path, levels=1)
     with h5py.File(path, "r+") as f:
         del f["textures/ao/mip0"].attrs["error_kind"]
@@ -363,8 +364,8 @@ def test_writer_refuses_nan_and_leaves_nothing(tmp_path):
 @pytest.mark.parametrize("mutate, pattern", [
     (lambda t, e, a: e.pop("correction/xi_N"), r"correction/xi_N: no error estimate"),
     (lambda t, e, a: e.__setitem__("correction/xi_M", np.zeros((2, 2))), r"correction/xi_M_stderr: shape \(2, 2\)"),
-    (lambda t, e, a: e.__setitem__("environment/I_M", -1.0), r"errors\['environment/I_M'\] is -1\.0"),
-    (lambda t, e, a: e.__setitem__("environment/I_M", float("nan")), r"errors\['environment/I_M'\] is nan"),
+    (lambda t, e, a: e.__setitem__("environment/I_M_TT_D", -1.0), r"errors\['environment/I_M_TT_D'\] is -1\.0"),
+    (lambda t, e, a: e.__setitem__("environment/I_M_TT_D", float("nan")), r"errors\['environment/I_M_TT_D'\] is nan"),
     (lambda t, e, a: t.__setitem__("correction/xi_M", np.ones((5, 7, 4))), r"does not match \(N_v, N_theta, 3\)"),
     (lambda t, e, a: t.__setitem__("correction/xi_M", np.ones((5, 7, 3), np.int64)), r"dtype is int64"),
     (lambda t, e, a: t.__setitem__("dual_scattering/a_f", np.full((7, 3), 1e39)), r"overflow float32"),
@@ -372,8 +373,8 @@ def test_writer_refuses_nan_and_leaves_nothing(tmp_path):
     (lambda t, e, a: t.__setitem__("textures/unknown/mip0", np.ones((3, 8))), r"'textures/unknown/mip0' is not in"),
     (lambda t, e, a: a["textures/flyaway/mip0"].pop("half_width"), r"half_width'\] is missing"),
     (lambda t, e, a: a.__setitem__("correction/xi_M", {"axes": []}), r"axes of correction/xi_M are fixed"),
-    (lambda t, e, a: a["environment/I_M"]["axes"][1].__setitem__("wrap", "mirror"), r"axis1_wrap is 'mirror'"),
-    (lambda t, e, a: a["environment/I_M"]["axes"][0].__setitem__("range", [1, 0]), r"axis0_range is \[1\.0, 0\.0\]"),
+    (lambda t, e, a: a["environment/I_M_TT_D"]["axes"][1].__setitem__("wrap", "mirror"), r"axis1_wrap is 'mirror'"),
+    (lambda t, e, a: a["environment/I_M_TT_D"]["axes"][0].__setitem__("range", [1, 0]), r"axis0_range is \[1\.0, 0\.0\]"),
     (lambda t, e, a: t["textures/tangent/mip0"].__setitem__((0, 0), [2.0, 0, 0]), r"tangent/mip0 channel 0: value 2"),
 ])
 def test_writer_refuses_bad_tables(tmp_path, mutate, pattern):
@@ -416,7 +417,7 @@ def test_failed_write_leaves_existing_pack_untouched(tmp_path, monkeypatch):
     before = path.read_bytes()
     # refused before writing
     tables, errors, attrs = full_tables(seed=1, levels=1)
-    tables["environment/I_M"][0, 0, 0, 0, 0] = np.nan
+    tables["environment/I_M_TT_D"][0, 0, 0, 0, 0] = np.nan
     with pytest.raises(FormatError):
         ap.write_pack(path, YARN, provenance(), BCSDF, tables, errors, attrs)
     assert path.read_bytes() == before and _no_files(tmp_path) == ["p.h5"]
