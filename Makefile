@@ -55,13 +55,14 @@ bench: setup
 	@mkdir -p out/bench/refs
 	$(BIN)/knitbake bake cotton1 --quality draft -o out/bench/cotton1_draft.h5
 	$(BIN)/knitbake bake cotton1 --quality standard -o out/bench/cotton1_standard.h5
+	$(BIN)/knitbake bake cotton1 --quality final -o out/bench/cotton1_final.h5
 	$(BIN)/python benchmarks/bench_render.py --pack out/bench/cotton1_standard.h5
 	for s in straight_yarn_directional straight_yarn_sky knit_patch_directional knit_patch_sky; do \
 	  $(BIN)/knitbake reference examples/scenes/$$s.toml -o out/bench/refs/$$s.exr --spp 64 || exit 1; done
 	$(BIN)/python benchmarks/bench_compare.py --pack out/bench/cotton1_standard.h5 --reference-dir out/bench/refs \
 	  --out out/compare
-	$(BIN)/python benchmarks/bench_tradeoff.py --reference-dir out/bench/refs \
-	  --packs draft=out/bench/cotton1_draft.h5,standard=out/bench/cotton1_standard.h5
+	$(BIN)/python benchmarks/bench_tradeoff.py --reference-dir out/bench/refs --work-dir out/bench/tradeoff \
+	  --packs draft=out/bench/cotton1_draft.h5,standard=out/bench/cotton1_standard.h5,final=out/bench/cotton1_final.h5
 
 # Regenerate data_formats/presets/ from ../shared/reference (the measured tables).
 presets: setup

@@ -2,7 +2,9 @@
 
 Bakes one preset yarn at each quality with the stage cache disabled (a warm-up draft bake first pays the Numba
 compile/cache load), and prints one row per (quality, stage): seconds, number of tables, the largest error
-estimate among its tables and, for the factored tables, the factorization residual.
+estimate among its tables and, for the factored tables, the factorization residual; for the environment stage the
+I_M lookup error against direct quadrature that the bake measures and stores (relative where I_M > 1% of its
+maximum / relative to each λ decade's maximum).
 
     .venv/bin/python benchmarks/bench_bake.py [--yarn cotton1] [--qualities draft,standard]
 """
@@ -35,10 +37,14 @@ def main():
             summary = bake(spec, out, quality, use_cache=False)
             total = time.perf_counter() - t0
             pack = read_pack(out, tables=["correction/xi_residual", "shadowing/psi_residual"])
-            residual = {"correction": float(pack.tables["correction/xi_residual"]),
-                        "shadowing": float(pack.tables["shadowing/psi_residual"])}
+            residual = {"correction": f'{float(pack.tables["correction/xi_residual"]):.3f}',
+                        "shadowing": f'{float(pack.tables["shadowing/psi_residual"]):.3f}'}
+            im = pack.info.get("environment/I_M_TT_D")
+            if im is not None:
+                residual["environment"] = (f"lookup {im.attrs['lookup_rel_error']:.4f} / "
+                                           f"{im.attrs['lookup_error_per_decade']:.4f}")
             for stage, row in summary.items():
-                res = f"{residual[stage]:.3f}" if stage in residual else ""
+                res = residual.get(stage, "")
                 print(f"{quality:<10}{stage:<17}{row['seconds']:>9.1f}{row['tables']:>8}  "
                       f"{row['error_estimate']:>10.3g}  {res}")
             problems = validate(out)

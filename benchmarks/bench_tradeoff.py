@@ -1,19 +1,28 @@
 """The speed/accuracy trade of the strip renderer: bake quality × runtime knobs → (time, error against the
 reference), with the Pareto front marked, as a Markdown table and a scatter plot (PNG).
 
-Knobs swept: the pack's bake quality (one pack per quality, ``--packs``), MSAA samples and the shadow-map size.
-Scenes: the example straight yarn and 6 × 6 patch under the directional light, against references rendered earlier
-(``--reference-dir``: ``<scene>.exr`` as written by `knitbake reference`). The SRBF count matters only under an
-environment light and the Gauss–Newton iterations only for a simulated stitch mesh; neither applies to these scenes.
+Three sweeps, each against path-traced references (``--reference-dir``: ``<scene>.exr`` as `knitbake reference`
+writes them; missing ones are rendered there at ``--spp``):
+
+* ``quality``: the pack's bake quality (one pack per quality, ``--packs``) × MSAA samples × shadow-map size, on the
+  example straight yarn and 6 × 6 patch under the directional light.
+* ``srbf``: the SRBF count J fitted to the built-in sky, on the same two scenes under the sky (standard pack).
+* ``gn``: the knot simulator's Gauss–Newton iterations per frame. A 6 × 6 stockinette stitch mesh is stretched
+  1.4× in x in one frame (the hardest step: no warm start from a nearby frame) and simulated with k iterations;
+  the reference is the path-traced patch of the k = 16 curves (converged: the points move < 1e-6 cm from k = 8).
+  Time = the simulated frame's solve + assembly (median of three runs) + the render.
+
 Time: the whole ``render`` call, median of two after a warm-up call. A configuration is on the Pareto front when
 no other configuration of the same scene is at least as fast with at most its FLIP (and better in one).
 
-    .venv/bin/python benchmarks/bench_tradeoff.py --packs draft=d.h5,standard=s.h5 --reference-dir DIR
-                                                  [--plot tradeoff.png]
+    .venv/bin/python benchmarks/bench_tradeoff.py --packs draft=d.h5,standard=s.h5,final=f.h5 --reference-dir DIR
+                                                  [--sweeps quality,srbf,gn] [--spp 64] [--plot docs/tradeoff.png]
 """
 
 import argparse
 import dataclasses
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -22,22 +31,132 @@ from PIL import Image, ImageDraw
 
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
+from data_formats.yarn_curves import write_yarn_curves
+from knitrun.deformations import deformation_frames, parse_deformation
 from knitrun.image_metrics import compare_images
+from knitrun.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.render import render
+from knitrun.simulate import simulate
 
-SCENES = ("straight_yarn_directional", "knit_patch_directional")
+ROOT = Path(__file__).resolve().parent.parent
+QUALITY_SCENES = ("straight_yarn_directional", "knit_patch_directional")
+SKY_SCENES = ("straight_yarn_sky", "knit_patch_sky")
 MSAA = (1, 4, 8)
 SHADOW = (512, 2048)
+SRBF = (1, 4, 16, 64)
+GN = (0, 1, 2, 4, 8)
+GN_CONVERGED = 16
+GN_SCENE = "simulated_patch_directional"
+GN_SCENE_TOML = """format = "knit-scene"
+version = "1.0"
+name = "6 x 6 stockinette stitch mesh stretched 1.4x in one frame, {iterations} Gauss-Newton iterations"
+units = "cm"
+background = [0.05, 0.05, 0.05]
+
+[[yarns]]
+curves = "{curves}"
+yarn = "cotton1"
+color = [0.9, 0.25, 0.2]
+
+[camera]
+position = [{cx:.4f}, {cy:.4f}, 5.0]
+look_at = [{cx:.4f}, {cy:.4f}, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_deg = 24.0
+width = 512
+height = 384
+
+[[lights]]
+type = "directional"
+direction = [0.4, 0.6, 1.0]
+irradiance = [3.0, 3.0, 3.0]
+
+[render]
+spp = 64
+seed = 0
+msaa = 4
+"""
 
 
-def measure(scene, pack, reference):
-    render(scene, {"cotton1": pack})
-    runs = []
+def timed_render(scene, packs):
+    """(median seconds of two renders after a warm-up, image)."""
+    render(scene, packs)
+    runs, image = [], None
     for _ in range(2):
         t0 = time.perf_counter()
-        image = render(scene, {"cotton1": pack}).image
+        image = render(scene, packs).image
         runs.append(time.perf_counter() - t0)
-    return float(np.median(runs)), compare_images(image, reference)
+    return float(np.median(runs)), image
+
+
+def reference_for(name, scene_path, reference_dir: Path, spp: int):
+    """The reference image of a scene, path traced with `knitbake reference` into ``reference_dir`` if missing."""
+    path = reference_dir / f"{name}.exr"
+    if not path.is_file():
+        reference_dir.mkdir(parents=True, exist_ok=True)
+        subprocess.run([str(Path(sys.executable).parent / "knitbake"), "reference", str(scene_path), "-o", str(path),
+                        "--spp", str(spp)], check=True)
+    return read_exr(path)
+
+
+def sweep_quality(packs, reference_dir, spp):
+    rows = []
+    for name in QUALITY_SCENES:
+        path = ROOT / "examples" / "scenes" / f"{name}.toml"
+        base, reference = load_scene(path), reference_for(name, path, reference_dir, spp)
+        for quality, pack in packs.items():
+            for msaa in MSAA:
+                for shadow in SHADOW:
+                    scene = dataclasses.replace(base, render=dataclasses.replace(base.render, msaa=msaa,
+                                                                                 shadow_map_size=shadow))
+                    seconds, image = timed_render(scene, {"cotton1": pack})
+                    rows.append({"scene": name, "quality": quality, "knob": f"MSAA {msaa}, shadow {shadow}²",
+                                 "msaa": msaa, "ms": 1e3 * seconds, **metrics(image, reference)})
+    return rows
+
+
+def sweep_srbf(pack, reference_dir, spp):
+    rows = []
+    for name in SKY_SCENES:
+        path = ROOT / "examples" / "scenes" / f"{name}.toml"
+        base, reference = load_scene(path), reference_for(name, path, reference_dir, spp)
+        for j in SRBF:
+            scene = dataclasses.replace(base, render=dataclasses.replace(base.render, srbf_count=j))
+            seconds, image = timed_render(scene, {"cotton1": pack})
+            rows.append({"scene": name, "quality": "standard", "knob": f"J = {j}", "label": str(j),
+                         "ms": 1e3 * seconds, **metrics(image, reference)})
+    return rows
+
+
+def sweep_gn(pack, reference_dir, spp, work: Path):
+    """Simulate, write one scene per iteration count into ``work``, render each against the converged reference."""
+    work.mkdir(parents=True, exist_ok=True)
+    mesh = chart_to_mesh(pattern_chart("stockinette", 6, 6), where="pattern stockinette")
+    frames = deformation_frames(mesh.vertices, [parse_deformation("stretch-x=1.4")], 1)
+    scenes, sim_ms, energy, centre = {}, {}, {}, None
+    for k in (GN_CONVERGED, *GN):  # the converged curves first: they set the one camera every k shares
+        times = []
+        for _ in range(3):
+            curves, report = simulate(mesh, frames, iterations=k)
+            times.append(report["ms_per_frame_median"])
+        sim_ms[k], energy[k] = float(np.median(times)), report["final_energy"]
+        write_yarn_curves(work / f"gn{k}.h5", curves)
+        if centre is None:
+            centre = 0.5 * (curves.points[-1].min(axis=0) + curves.points[-1].max(axis=0))
+        scenes[k] = work / f"gn{k}.toml"
+        scenes[k].write_text(GN_SCENE_TOML.format(iterations=k, curves=f"gn{k}.h5", cx=centre[0], cy=centre[1]))
+    reference = reference_for(GN_SCENE, scenes[GN_CONVERGED], reference_dir, spp)
+    rows = []
+    for k in GN:
+        seconds, image = timed_render(load_scene(scenes[k]), {"cotton1": pack})
+        rows.append({"scene": GN_SCENE, "quality": "standard", "knob": f"{k} GN iterations (energy {energy[k]:.6g})",
+                     "label": str(k), "ms": 1e3 * seconds + sim_ms[k], **metrics(image, reference)})
+    return rows
+
+
+def metrics(image, reference):
+    m = compare_images(image, reference)
+    return {"flip": m["flip"], "rmse": m["rmse"]}
 
 
 def pareto(rows):
@@ -48,13 +167,14 @@ def pareto(rows):
 
 
 def plot(path, by_scene):
-    """Scatter of FLIP against ms per scene (one panel each), Pareto front joined; PIL only."""
+    """Scatter of FLIP against ms per scene (one panel each, two rows), Pareto front joined; PIL only."""
     w, h, pad = 480, 320, 48
-    canvas = Image.new("RGB", (w * len(by_scene), h), "white")
+    cols = (len(by_scene) + 1) // 2
+    canvas = Image.new("RGB", (w * cols, h * 2), "white")
     draw = ImageDraw.Draw(canvas)
     colours = {"draft": (220, 90, 40), "standard": (40, 90, 220), "final": (40, 160, 60)}
     for k, (name, rows) in enumerate(by_scene.items()):
-        x0 = k * w
+        x0, y0 = (k % cols) * w, (k // cols) * h
         ms = np.array([r["ms"] for r in rows])
         fl = np.array([r["flip"] for r in rows])
         lo_x, hi_x = ms.min() * 0.9, ms.max() * 1.1
@@ -62,55 +182,62 @@ def plot(path, by_scene):
 
         def xy(m, f):
             return (x0 + pad + (m - lo_x) / (hi_x - lo_x) * (w - 2 * pad),
-                    h - pad - (f - lo_y) / (hi_y - lo_y) * (h - 2 * pad))
+                    y0 + h - pad - (f - lo_y) / (hi_y - lo_y) * (h - 2 * pad))
 
-        draw.rectangle([x0 + pad, pad, x0 + w - pad, h - pad], outline="black")
-        draw.text((x0 + pad, 8), f"{name}: FLIP vs ms", fill="black")
-        draw.text((x0 + pad, h - pad + 6), f"{lo_x:.0f} ms", fill="black")
-        draw.text((x0 + w - pad - 60, h - pad + 6), f"{hi_x:.0f} ms", fill="black")
-        draw.text((x0 + 2, pad), f"{hi_y:.3f}", fill="black")
-        draw.text((x0 + 2, h - pad - 10), f"{lo_y:.3f}", fill="black")
+        draw.rectangle([x0 + pad, y0 + pad, x0 + w - pad, y0 + h - pad], outline="black")
+        draw.text((x0 + pad, y0 + 8), f"{name}: FLIP vs ms", fill="black")
+        draw.text((x0 + pad, y0 + h - pad + 6), f"{lo_x:.0f} ms", fill="black")
+        draw.text((x0 + w - pad - 60, y0 + h - pad + 6), f"{hi_x:.0f} ms", fill="black")
+        draw.text((x0 + 2, y0 + pad), f"{hi_y:.3f}", fill="black")
+        draw.text((x0 + 2, y0 + h - pad - 10), f"{lo_y:.3f}", fill="black")
         front = sorted((r for r in rows if r["pareto"]), key=lambda r: r["ms"])
-        draw.line([xy(r["ms"], r["flip"]) for r in front], fill=(120, 120, 120), width=2)
+        if len(front) > 1:
+            draw.line([xy(r["ms"], r["flip"]) for r in front], fill=(120, 120, 120), width=2)
         for r in rows:
             cx, cy = xy(r["ms"], r["flip"])
-            size = 2 + r["msaa"]
+            size = 2 + r.get("msaa", 2)
             draw.ellipse([cx - size, cy - size, cx + size, cy + size], outline=colours.get(r["quality"], "black"),
-                         width=2 if r["shadow"] == 2048 else 1)
-        draw.text((x0 + pad + 4, pad + 4), "orange draft, blue standard, green final; size: MSAA; thick: 2048 px shadow map",
-                  fill="black")
+                         width=2 if "2048" in r["knob"] or "label" in r else 1)
+            if "label" in r:
+                draw.text((cx + 6, cy - 6), r["label"], fill="black")
+        legend = ("orange draft, blue standard, green final; size: MSAA; thick: 2048² shadow map"
+                  if name in QUALITY_SCENES else "labels: SRBF count J" if name in SKY_SCENES
+                  else "labels: Gauss-Newton iterations (time includes the solve)")
+        draw.text((x0 + pad + 4, y0 + pad + 4), legend, fill="black")
     canvas.save(path)
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--packs", required=True, help="quality=pack.h5,... e.g. draft=d.h5,standard=s.h5")
+    parser.add_argument("--packs", required=True, help="quality=pack.h5,... e.g. draft=d.h5,standard=s.h5 (the "
+                                                       "SRBF and GN sweeps use the standard pack)")
     parser.add_argument("--reference-dir", required=True)
+    parser.add_argument("--sweeps", default="quality,srbf,gn")
+    parser.add_argument("--spp", type=int, default=64, help="samples per pixel of references rendered here")
+    parser.add_argument("--work-dir", default="out/bench/tradeoff", help="the GN sweep's curves and scenes")
     parser.add_argument("--plot", default="docs/tradeoff.png")
     args = parser.parse_args()
     packs = dict(item.split("=", 1) for item in args.packs.split(","))
-    root = Path(__file__).resolve().parent.parent / "examples" / "scenes"
+    sweeps = args.sweeps.split(",")
+    reference_dir = Path(args.reference_dir)
+    rows = []
+    if "quality" in sweeps:
+        rows += sweep_quality(packs, reference_dir, args.spp)
+    if "srbf" in sweeps:
+        rows += sweep_srbf(packs["standard"], reference_dir, args.spp)
+    if "gn" in sweeps:
+        rows += sweep_gn(packs["standard"], reference_dir, args.spp, Path(args.work_dir))
     by_scene = {}
-    for name in SCENES:
-        base = load_scene(root / f"{name}.toml")
-        reference = read_exr(Path(args.reference_dir) / f"{name}.exr")
-        rows = []
-        for quality, pack in packs.items():
-            for msaa in MSAA:
-                for shadow in SHADOW:
-                    scene = dataclasses.replace(base, render=dataclasses.replace(base.render, msaa=msaa,
-                                                                                 shadow_map_size=shadow))
-                    seconds, metrics = measure(scene, pack, reference)
-                    rows.append({"quality": quality, "msaa": msaa, "shadow": shadow, "ms": 1e3 * seconds,
-                                 "flip": metrics["flip"], "rmse": metrics["rmse"]})
-        pareto(rows)
-        by_scene[name] = rows
-    print("| scene | bake | MSAA | shadow map | ms | FLIP | RMSE | Pareto |")
-    print("|---|---|---|---|---|---|---|---|")
-    for name, rows in by_scene.items():
-        for r in sorted(rows, key=lambda r: r["ms"]):
-            print(f"| {name} | {r['quality']} | {r['msaa']} | {r['shadow']}² | {r['ms']:.0f} | {r['flip']:.4f} | "
-                  f"{r['rmse']:.4f} | {'**yes**' if r['pareto'] else ''} |")
+    for r in rows:
+        by_scene.setdefault(r["scene"], []).append(r)
+    for scene_rows in by_scene.values():
+        pareto(scene_rows)
+    print("| scene | bake | knob | ms | FLIP | RMSE | Pareto |")
+    print("|---|---|---|---|---|---|---|")
+    for name, scene_rows in by_scene.items():
+        for r in sorted(scene_rows, key=lambda r: r["ms"]):
+            print(f"| {name} | {r['quality']} | {r['knob']} | {r['ms']:.0f} | {r['flip']:.4f} | {r['rmse']:.4f} | "
+                  f"{'**yes**' if r['pareto'] else ''} |")
     plot(args.plot, by_scene)
     print(f"\nplot: {args.plot}")
 

@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from cli.knitbake_cli import main as knitbake
-from data_formats.asset_pack import read_pack, validate
+from data_formats.asset_pack import describe, read_pack, validate
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import STAGE_ORDER, bake, scene_needs, stages_for
 
@@ -48,6 +48,10 @@ def test_pack_is_valid_finite_and_error_barred(tiny_pack):
     assert set(prov["timings"]) == set(STAGE_ORDER) and prov["seed"] == 3
     assert prov["sample_counts"]["correction"]["batches"] == 2
     assert "correction/xi_residual" in pack.tables and "shadowing/psi_residual" in pack.tables
+    im = pack.info["environment/I_M_TT_D"]  # the lookup's measured error travels with the table
+    assert all(0 < im.attrs[k] < np.inf for k in ("lookup_rel_error", "lookup_error_per_decade"))  # a 3-sample grid
+    notes = describe(out)["tables"]["environment/I_M_TT_D"]["notes"]
+    assert notes["lookup_rel_error"] == im.attrs["lookup_rel_error"]
 
 
 def test_same_seed_same_pack_whatever_the_thread_count(tiny_pack, tmp_path):
