@@ -1,7 +1,8 @@
-"""Check the renderer's n_occluded = n_cross/2 (``knitrun/yarn_look.py``): on the bake's straight yarn, the
-bin-averaged DS estimate the renderer uses (exact lit fraction, one fiber count f·n_cross for every shadowed hit)
-against the per-hit DS the bake divides by (each hit's own count of fibers toward the light), over 48 light/view
-directions. Prints the mean |error| relative to the exact DS for several f.
+"""Check the renderer's n_occluded = n_cross/2 (``knitrun.dual_scattering.fiber_counts``): on the bake's straight
+yarn, the bin-averaged DS estimate the renderer uses (exact lit fraction, one fiber count f·n_cross for every
+shadowed hit) against the per-hit DS with each hit's own count of fibers toward the light, over 48 light/view
+directions. Prints the mean |error| relative to the per-hit DS for several f. (ξ divides by the renderer's estimate,
+so this error matters where ξ is not applied: the no-tables ablation and the environment's multiple scattering.)
 
     .venv/bin/python benchmarks/check_n_occluded.py [cotton1 rayon1 ...]
 """
@@ -15,7 +16,7 @@ from data_formats.yarn_spec import load_preset
 from knitbake.correction_bake import (_primary_hits, _signed_azimuth, fiber_frames, fibers_toward, strip_camera,
                                       yarn_direction, yarn_tracer)
 from knitbake.ds_precompute import precompute_dual_scattering
-from knitrun.dual_scattering import evaluate_ds
+from knitrun.dual_scattering import evaluate_ds, fiber_counts
 from knitrun.fiber_bcsdf import params_from_optics
 
 FRACTIONS = (0.15, 0.25, 1 / 3, 0.4, 0.5, 0.6)
@@ -24,8 +25,7 @@ FRACTIONS = (0.15, 0.25, 1 / 3, 0.4, 0.5, 0.6)
 def check(name):
     spec = load_preset(name)
     params = params_from_optics(spec.optics)
-    g = spec.geometry
-    n_cross = 4 * g.plies * g.fibers_per_ply * g.fiber_radius / (math.pi * spec.radius)
+    n_cross = fiber_counts(spec.geometry, spec.radius)[0]
     ds = {k: v[0] for k, v in precompute_dual_scattering(params, n_theta=32).items()}
     geom = yarn_tracer(spec, 0)
     err, total = np.zeros(len(FRACTIONS)), 0.0

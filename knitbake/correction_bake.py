@@ -14,8 +14,9 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
 * **Correction** ξ(v; θ_d, φ) = Ψ_*/Ψ_DS: the camera looks from θ_o = θ_d, the light comes from θ_i = −θ_d,
   φ_i = −φ (so (θ_o − θ_i)/2 = θ_d). Ψ_* is the path-traced radiance of the hits in the bin (multiple scattering
   inside the yarn, ``yarn_only_radius``), Ψ_DS the dual-scattering estimate of the same hits
-  (``knitrun.dual_scattering``) with the fiber count toward the light measured on the explicit fibers; ξ of a
-  bin = Σ Ψ_* / Σ Ψ_DS. ξ's factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
+  (``knitrun.dual_scattering``) as the renderer evaluates it: lit or not by the explicit fibers, and a shadowed hit
+  behind the renderer's n_occluded fibers (``dual_scattering.fiber_counts``), not its own count, so that
+  ξ·Ψ_DS^renderer reproduces Ψ_* whatever the error of that count; ξ of a bin = Σ Ψ_* / Σ Ψ_DS. ξ's factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
   ξ·Ψ_DS that shading produces: a bin where the DS estimate is tiny (an edge bin lit from the far side) has a
   ratio far from the others that an unweighted fit lets distort every other direction of that v.
 
@@ -38,6 +39,7 @@ from knitbake.procedural_yarn import generate_fibers
 from knitbake.stage_result import StageResult
 from knitbake.tessellate import tessellate_fibers
 from knitrun.camera import Camera, tan_half_fov
+from knitrun.dual_scattering import evaluate_ds, fiber_counts
 from knitrun.fiber_bcsdf import params_from_optics
 
 
@@ -244,11 +246,13 @@ def _signed_azimuth(t, w_o, w_i):
     return np.arctan2((np.cross(i, o) * t).sum(-1), (i * o).sum(-1))
 
 
-def _ds_image(tracer, cam, light, spp, seed, ds_tables, params):
+def _ds_image(tracer, cam, light, spp, seed, ds_tables, params, n_occluded=None):
     """Per pixel: mean DS radiance per unit irradiance (``knitrun.dual_scattering.evaluate_ds``) of the pixel's
-    fiber hits, fiber angles in each hit fiber's frame, n_front counted on the explicit fibers (misses add 0)."""
-    from knitrun.dual_scattering import evaluate_ds
-
+    fiber hits (misses add 0), fiber angles in each hit fiber's frame. ``n_occluded`` None: Zinke's estimate, each
+    hit behind its own count of fibers toward the light (D = 1 iff none). A number: as the renderer evaluates it, a
+    hit is lit directly (D = 1) iff the explicit fibers leave it a clear path to the light, else D = 0 with
+    ``n_occluded`` fibers toward the light; DS is linear in D at fixed n, so a bin's mean is then the renderer's DS
+    at D = the bin's lit fraction."""
     fwd = cam.basis()[0]
     img = np.zeros((cam.height * cam.width, 3))
     for sample in range(spp):
@@ -258,8 +262,12 @@ def _ds_image(tracer, cam, light, spp, seed, ds_tables, params):
         w_i = np.broadcast_to(light, t.shape)
         theta_o = np.arcsin(np.clip((w_o * t).sum(-1), -1, 1))
         theta_i = np.arcsin(np.clip((w_i * t).sum(-1), -1, 1))
-        n_front = fibers_toward(tracer, prims, points, light)
-        img[idx] += evaluate_ds(ds_tables, theta_i, theta_o, _signed_azimuth(t, w_o, w_i), n_front, params=params)
+        if n_occluded is None:
+            n_front = fibers_toward(tracer, prims, points, light)
+        else:
+            n_front = np.where(fibers_toward(tracer, prims, points, light, max_fibers=1) == 0, 0.0, n_occluded)
+        img[idx] += evaluate_ds(ds_tables, theta_i, theta_o, _signed_azimuth(t, w_o, w_i), n_front, params=params,
+                                direct_fraction=(n_front == 0).astype(float))
     return (img / spp).reshape(cam.height, cam.width, 3)
 
 
@@ -270,6 +278,7 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
     thetas = cell_centres(-math.pi / 2, math.pi / 2, n_theta)
     phis = cell_centres(-math.pi, math.pi, n_phi)
     params = params_from_optics(spec.optics)
+    n_occluded = fiber_counts(spec.geometry, spec.radius)[1]
     samples = np.ones((batches, n_v, n_theta, n_phi, 3))
     weights = np.zeros((batches, n_v, n_theta, n_phi, 3))
     rows = max(rows, n_v)
@@ -284,7 +293,7 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
                                   light_irradiance=np.ones((1, 3)), ray_scene=geometry.ray_scene)
                 s = seed + 1000 * b + 37 * k + m
                 traced, _ = render(lit, cam, spp, seed=s, max_depth=max_depth)
-                ds = _ds_image(geometry, cam, light, spp, s, ds_tables, params)
+                ds = _ds_image(geometry, cam, light, spp, s, ds_tables, params, n_occluded)
                 num, _ = _bins(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
                 den, _ = _bins(ds, np.ones(ds.shape[:2]), row_v(rows), n_v)
                 ok = np.all(den > 1e-12 * max(den.max(), 1e-300), axis=1)

@@ -10,19 +10,12 @@ flyaways, environment) and converts everything to the scene:
   f is linear in those colours, so I_M and the dual-scattering averages ā_f, ā_b scale with the colour while the
   shifts and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
   correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked.
-* Fiber counts for the dual-scattering estimate at run time (no fibers are drawn): ``n_cross``, the mean number of
-  fibers a chord through the yarn's centre crosses, 4·K·m·r_f/(π R) for K plies of m fibers of radius r_f in a yarn
-  of radius R (uniformly spread fibers; the spec is stored in the pack's provenance), and ``n_occluded`` =
-  max(1, n_cross/2), the fiber count assumed between a visible fiber and the light when that fiber is in its own
-  yarn's shadow (the bake counts it exactly per hit; the pack keeps only the shadowed fraction Ψ^Fiber_G). Checked
-  on the bake's straight yarn over 48 light/view directions (``benchmarks/check_n_occluded.py``): the bin-averaged
-  DS with the exact lit fraction and n_occluded = f·n_cross is off from the per-hit exact DS by a mean |error| of
-  11 % (cotton1) / 14 % (rayon1) at f = ½, against 13–18 % / 11–30 % at f = 0.4–⅓ and 15 % / 24 % at 0.6.
+* Fiber counts for the dual-scattering estimate at run time: ``dual_scattering.fiber_counts`` (n_cross, n_occluded)
+  from the yarn spec stored in the pack's provenance.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +24,7 @@ from data_formats.asset_pack import read_pack
 from data_formats.scene import CM_PER_UNIT
 from data_formats.yarn_spec import loads_spec
 
-from .dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, pack_tables
+from .dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables
 from .fiber_bcsdf import P_A_D, P_A_R, P_A_TT, params_from_pack
 from .im_lookup import kernel_axes
 from .texture_sampling import MipStack, mip_stack
@@ -120,7 +113,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     pack_radius = float(pack.yarn["radius"]) * to_scene
     scale = entry.radius / pack_radius
     geometry = spec.geometry
-    n_cross = 4.0 * geometry.plies * geometry.fibers_per_ply * geometry.fiber_radius / (math.pi * spec.radius)
+    n_cross, n_occluded = fiber_counts(geometry, spec.radius)
     tables = {n: np.asarray(pack.tables[n], np.float64) for n in names if n in CORRECTION_TABLES + FULL_TABLES}
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
@@ -139,7 +132,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
-        n_cross=n_cross, n_occluded=max(1.0, 0.5 * n_cross), twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
+        n_cross=n_cross, n_occluded=n_occluded, twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
         im=im, residuals=residuals)
 
 
