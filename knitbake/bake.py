@@ -33,7 +33,7 @@ from data_formats.asset_pack import write_pack
 from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.correction_bake import bake_correction_stage, bake_shadowing_stage
 from knitbake.ds_precompute import bake_dual_scattering_stage
-from knitbake.im_table import bake_im_table, lookup_accuracy
+from knitbake.im_table import ERROR_KIND, LOOKUP_CHECK_POINTS, bake_im_table, lookup_accuracy
 from knitbake.stage_result import StageResult
 from knitbake.texture_bake import bake_flyaway_stage, bake_regular_stage
 
@@ -115,14 +115,10 @@ def bake_environment_stage(spec, settings, seed, progress=None) -> StageResult:
     del seed
     params = params_from_optics(spec.optics)
     table, err, axes = bake_im_table(params, shape=tuple(settings["shape"]), progress=progress)
-    kind = ("quadrature, max over entries of |I(n) − I(n/2)| between Gauss–Legendre rules with n and n/2 nodes per "
-            "panel (per-entry values not stored: deterministic and far below the interpolation error); the lookup's "
-            "interpolation error, measured against direct quadrature at 2000 points, is in lookup_rel_error "
-            "(where I_M > 1% of its maximum) and lookup_error_per_decade (relative to each λ decade's maximum)")
     accuracy = lookup_accuracy(table, axes, params)
     return StageResult({"environment/I_M_TT_D": table}, {"environment/I_M_TT_D": float(err.max())},
-                       {"environment/I_M_TT_D": {"axes": axes, "error_kind": kind, **accuracy}},
-                       {"shape": list(settings["shape"]), "lookup_check_points": 2000})
+                       {"environment/I_M_TT_D": {"axes": axes, "error_kind": ERROR_KIND, **accuracy}},
+                       {"shape": list(settings["shape"]), "lookup_check_points": LOOKUP_CHECK_POINTS})
 
 
 STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
