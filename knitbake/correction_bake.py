@@ -16,7 +16,8 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
   inside the yarn, ``yarn_only_radius``), Ψ_DS the dual-scattering estimate of the same hits
   (``knitrun.dual_scattering``) as the renderer evaluates it: lit or not by the explicit fibers, and a shadowed hit
   behind the renderer's n_occluded fibers (``dual_scattering.fiber_counts``), not its own count, so that
-  ξ·Ψ_DS^renderer reproduces Ψ_* whatever the error of that count; ξ of a bin = Σ Ψ_* / Σ Ψ_DS. ξ's factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
+  ξ·Ψ_DS^renderer reproduces Ψ_* whatever the error of that count; ξ of a bin = Σ Ψ_* / Σ Ψ_DS. ξ's
+  factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
   ξ·Ψ_DS that shading produces: a bin where the DS estimate is tiny (an edge bin lit from the far side) has a
   ratio far from the others that an unweighted fit lets distort every other direction of that v.
 

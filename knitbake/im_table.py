@@ -60,7 +60,7 @@ LOOKUP_CHECK_POINTS = 2000  # random points at which ``lookup_accuracy`` checks 
 ERROR_KIND = ("quadrature, max over entries of Σ_lobes A_p |J_p(n) − J_p(n/2)| between Gauss–Legendre rules with n "
               "and n/2 nodes per panel plus the TT azimuth-table error (per-entry values not stored: deterministic "
               "and far below the interpolation error); the lookup's interpolation error, measured against direct "
-              "quadrature at 2000 points, is in lookup_rel_error (where I_M > 1% of its maximum) and "
+              f"quadrature at {LOOKUP_CHECK_POINTS} points, is in lookup_rel_error (where I_M > 1% of its maximum) and "
               "lookup_error_per_decade (relative to each λ decade's maximum)")
 HALF_PI = 0.5 * math.pi
 
