@@ -13,7 +13,7 @@ import time
 import numba
 
 from data_formats.yarn_spec import load_preset
-from knitbake.procedural_yarn import generate_fibers
+from knitbake.fibers.procedural_yarn import generate_fibers
 
 
 def best_time(fn, repeats):

@@ -21,16 +21,16 @@ import numba
 import numpy as np
 from scipy.optimize import least_squares
 
-from knitrun.deformations import deform, deformation_frames
-from knitrun.knit_chart import chart_to_mesh, pattern_chart
-from knitrun.simulate import (control_segment_lengths, course_knot_spacing, face_problem, prepare, solve_frame,
+from knitrun.sim.deformations import deform, deformation_frames
+from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
+from knitrun.sim.simulate import (control_segment_lengths, course_knot_spacing, face_problem, prepare, solve_frame,
                               yarn_points)
 
 COMPILE_SNIPPET = """
 import time
 t0 = time.perf_counter()
-from knitrun.knit_chart import chart_to_mesh, pattern_chart
-from knitrun.simulate import prepare, solve_frame, yarn_points
+from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
+from knitrun.sim.simulate import prepare, solve_frame, yarn_points
 mesh = chart_to_mesh(pattern_chart("eyelet", 4, 4))
 model = prepare(mesh)
 yarn_points(model, solve_frame(model, mesh.vertices).points)

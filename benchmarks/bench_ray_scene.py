@@ -14,13 +14,13 @@ import time
 
 import numpy as np
 
-from knitbake.ray_scene import RayScene
-from knitbake.tessellate import tessellate_fibers
+from knitbake.trace.ray_scene import RayScene
+from knitbake.fibers.tessellate import tessellate_fibers
 
 
 def preset_fibers(name, seed):
     from data_formats.yarn_spec import load_preset
-    from knitbake.procedural_yarn import generate_fibers
+    from knitbake.fibers.procedural_yarn import generate_fibers
 
     return generate_fibers(load_preset(name), seed=seed)
 

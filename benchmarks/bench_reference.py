@@ -18,9 +18,9 @@ import numpy as np
 
 from data_formats.images import write_exr, write_png
 from data_formats.scene import load_scene
-from knitbake.path_tracer import render
-from knitbake.reference import build_reference
-from knitbake.stockinette import write_example_patch
+from knitbake.trace.path_tracer import render
+from knitbake.trace.reference import build_reference
+from knitrun.sim.crane_stockinette import write_example_patch
 
 SCENE = """format = "knit-scene"
 version = "1.0"

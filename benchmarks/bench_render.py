@@ -1,7 +1,7 @@
 """Strip renderer: ms per frame and per pass for a stockinette patch, under a directional light and under the
 built-in sky fitted with 16 SRBFs, and how the cost grows with control points and pixels.
 
-Patch: ``knitbake.stockinette.stockinette_curves(rows, 21)`` (48 points per stitch, yarn radius 0.03 cm; 60 rows
+Patch: ``knitrun.sim.crane_stockinette.stockinette_curves(rows, 21)`` (48 points per stitch, yarn radius 0.03 cm; 60 rows
 ≈ 60K control points, about 5 × 10 cm), cotton1, seen from the front (pinhole, fov 40°, whole patch in view),
 MSAA 4, shadow maps 2048² (lobes 512²). Every figure is the median of ``--frames`` renders after one warm-up
 render (which pays Numba's compile or cache load). ``load`` re-reads the pack and re-evaluates the curves each
@@ -24,8 +24,8 @@ from data_formats.scene import load_scene
 from data_formats.yarn_curves import write_yarn_curves
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
-from knitbake.stockinette import stockinette_curves
-from knitrun.render import render
+from knitrun.sim.crane_stockinette import stockinette_curves
+from knitrun.render.pipeline import render
 
 SCENE = """format = "knit-scene"
 version = "1.0"

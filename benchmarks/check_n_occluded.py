@@ -1,4 +1,4 @@
-"""Check the renderer's n_occluded = n_cross/2 (``knitrun.dual_scattering.fiber_counts``): on the bake's straight
+"""Check the renderer's n_occluded = n_cross/2 (``knitrun.shading.dual_scattering.fiber_counts``): on the bake's straight
 yarn, the bin-averaged DS estimate the renderer uses (exact lit fraction, one fiber count f·n_cross for every
 shadowed hit) against the per-hit DS with each hit's own count of fibers toward the light, over 48 light/view
 directions. Prints the mean |error| relative to the per-hit DS for several f. (ξ divides by the renderer's estimate,
@@ -13,11 +13,11 @@ import sys
 import numpy as np
 
 from data_formats.yarn_spec import load_preset
-from knitbake.correction_bake import (_primary_hits, _signed_azimuth, fiber_frames, fibers_toward, strip_camera,
+from knitbake.stages.correction import (_primary_hits, _signed_azimuth, fiber_frames, fibers_toward, strip_camera,
                                       yarn_direction, yarn_tracer)
-from knitbake.ds_precompute import precompute_dual_scattering
-from knitrun.dual_scattering import evaluate_ds, fiber_counts
-from knitrun.fiber_bcsdf import params_from_optics
+from knitbake.stages.ds_precompute import precompute_dual_scattering
+from knitrun.shading.dual_scattering import evaluate_ds, fiber_counts
+from knitrun.shading.fiber_bcsdf import params_from_optics
 
 FRACTIONS = (0.15, 0.25, 1 / 3, 0.4, 0.5, 0.6)
 

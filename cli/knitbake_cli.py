@@ -166,8 +166,8 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
     """
     from data_formats.bcc import write_bcc
     from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
-    from knitbake.fiber_set import KIND_NAMES
-    from knitbake.procedural_yarn import generate_fibers
+    from knitbake.fibers.fiber_set import KIND_NAMES
+    from knitbake.fibers.procedural_yarn import generate_fibers
 
     suffix = Path(output).suffix.lower()
     if suffix not in (".h5", ".hdf5", ".bcc"):
@@ -186,7 +186,7 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
                "length": fib.z_end - fib.z_start, "units": spec.units, "seed": seed, "generate_s": t_gen,
                "fiber_pitch_change_mean": fib.info["fiber_pitch_change_mean"]}
     if preview:
-        from knitbake.preview import preview as write_preview
+        from knitbake.trace.preview import preview as write_preview
 
         summary["preview"] = {"path": preview, **write_preview(fib, spec.radius, preview)}
     if as_json:
@@ -216,8 +216,8 @@ def reference(scene_path, output, spp, seed, max_depth, exposure, as_json):
     """
     from data_formats.images import write_exr, write_png
     from data_formats.scene import load_scene
-    from knitbake.path_tracer import render
-    from knitbake.reference import build_reference
+    from knitbake.trace.path_tracer import render
+    from knitbake.trace.reference import build_reference
 
     if not output.lower().endswith(".exr"):
         raise FormatError(f"{output}: output must end in .exr")

@@ -77,7 +77,7 @@ def pattern(source, rows, cols, output, as_json):
       knitrun pattern my_chart.txt -o patch.obj
     """
     from data_formats.stitch_mesh import summary, write_obj_stitch_mesh, write_stitch_mesh
-    from knitrun.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
+    from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
 
     suffix = Path(output).suffix.lower()
     if suffix not in (".h5", ".hdf5", ".obj"):
@@ -132,8 +132,8 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     from data_formats import stitch_mesh
     from data_formats.bcc import write_bcc
     from data_formats.yarn_curves import write_yarn_curves
-    from knitrun.deformations import deformation_frames, parse_deformation, read_obj_frames
-    from knitrun.simulate import simulate as run_simulation
+    from knitrun.sim.deformations import deformation_frames, parse_deformation, read_obj_frames
+    from knitrun.sim.simulate import simulate as run_simulation
 
     suffix = Path(output).suffix.lower()
     if suffix not in (".h5", ".hdf5", ".bcc"):
@@ -194,8 +194,8 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
 
     from data_formats.images import write_exr, write_png
     from data_formats.scene import load_scene
-    from knitrun.render import ABLATIONS
-    from knitrun.render import render as render_scene
+    from knitrun.render.pipeline import ABLATIONS
+    from knitrun.render.pipeline import render as render_scene
 
     if not output.lower().endswith(".png"):
         raise FormatError(f"{output}: output must end in .png")
@@ -240,7 +240,7 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, as_json)
 
     Example: knitrun compare examples/scenes/straight_yarn_directional.toml --pack cotton1=cotton1.h5 --spp 64 -o report/
     """
-    from knitbake.compare_report import ABLATION_LABELS, compare_scene
+    from knitbake.compare.report import ABLATION_LABELS, compare_scene
 
     if reference is not None and spp is not None:
         raise FormatError("--reference and --spp exclude each other (--spp sets the reference's samples)")

@@ -31,11 +31,11 @@ import numpy as np
 
 from data_formats.asset_pack import write_pack
 from data_formats.yarn_spec import YarnSpec, dumps_spec
-from knitbake.correction_bake import bake_correction_stage, bake_shadowing_stage
-from knitbake.ds_precompute import bake_dual_scattering_stage
-from knitbake.im_table import ERROR_KIND, LOOKUP_CHECK_POINTS, bake_im_table, lookup_accuracy
-from knitbake.stage_result import StageResult
-from knitbake.texture_bake import bake_flyaway_stage, bake_regular_stage
+from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
+from knitbake.stages.ds_precompute import bake_dual_scattering_stage
+from knitbake.stages.im_table import ERROR_KIND, LOOKUP_CHECK_POINTS, bake_im_table, lookup_accuracy
+from knitbake.stages.stage_result import StageResult
+from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage
 
 CODE_VERSION = "0.1.0"
 STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment")
@@ -110,7 +110,7 @@ def _load_stage(path: Path) -> StageResult | None:
 
 def bake_environment_stage(spec, settings, seed, progress=None) -> StageResult:
     """Stage ``environment``: the I_M^{TT,D} table by deterministic quadrature (the seed is unused); settings: shape."""
-    from knitrun.fiber_bcsdf import params_from_optics
+    from knitrun.shading.fiber_bcsdf import params_from_optics
 
     del seed
     params = params_from_optics(spec.optics)

@@ -12,7 +12,7 @@ Conversions (each stated in the preset's provenance):
 * ``rho_max = 1`` (R_max = 1 in the source). Fiber radius is not in the tables: typical diameters per fiber family.
 * Optics by fiber family from Khungurn et al. 2015: cotton → cotton, polyester → polyester, silk → silk, rayon
   (regenerated-cellulose filament, smooth and lustrous) → silk. Our lobes are energy-normalised (the fiber albedo
-  is A_R + A_TT + A_D ≤ 1 per channel; knitrun/fiber_bcsdf.py), Khungurn's were not: R and TT colours are scaled
+  is A_R + A_TT + A_D ≤ 1 per channel; knitrun/shading/fiber_bcsdf.py), Khungurn's were not: R and TT colours are scaled
   by one factor per material so that the brightest channel of R + TT is ``FIBER_ALBEDO`` — hue and the R:TT ratio
   are kept. The D lobe and the lobe shifts are not in the source: D colour = 0 and shifts = 0.
 """

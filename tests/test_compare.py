@@ -7,7 +7,7 @@ import pytest
 from click.testing import CliRunner
 
 from cli.knitrun_cli import main as knitrun
-from knitrun.image_metrics import compare_images, flip_error
+from knitbake.compare.image_metrics import compare_images, flip_error
 from tests.test_render import FRONT, SUN, pack, straight, write_scene  # noqa: F401  (pack is a fixture)
 
 

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from data_formats.yarn_spec import load_preset
-from knitbake import correction_bake as cb
-from knitbake.ds_precompute import precompute_dual_scattering
-from knitbake.fiber_set import FiberSet
-from knitbake.path_tracer import Camera, TracerScene, render
-from knitbake.tessellate import tessellate_fibers
-from knitrun import fiber_bcsdf as fb
+from knitbake.stages import correction as cb
+from knitbake.stages.ds_precompute import precompute_dual_scattering
+from knitbake.fibers.fiber_set import FiberSet
+from knitbake.trace.path_tracer import Camera, TracerScene, render
+from knitbake.fibers.tessellate import tessellate_fibers
+from knitrun.shading import fiber_bcsdf as fb
 
 DEG = math.pi / 180
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from data_formats import asset_pack as ap
-from knitbake.ds_precompute import ERROR_KIND, precompute_dual_scattering
-from knitrun import dual_scattering as ds
-from knitrun import fiber_bcsdf as fb
-from knitrun.table_lookup import lookup_axis, lookup_theta
+from knitbake.stages.ds_precompute import ERROR_KIND, precompute_dual_scattering
+from knitrun.shading import dual_scattering as ds
+from knitrun.shading import fiber_bcsdf as fb
+from knitrun.shading.table_lookup import lookup_axis, lookup_theta
 
 DEG = math.pi / 180
 COLOURS = ([0.05, 0.1, 0.2], [0.3, 0.5, 0.7], [0.0, 0.1, 0.05])  # absorbing; D = 0 in the red channel

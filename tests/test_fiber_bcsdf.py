@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import special, stats
 
-from knitrun import fiber_bcsdf as fb
+from knitrun.shading import fiber_bcsdf as fb
 
 DEG = math.pi / 180
 THETA_O = [0.0, 30 * DEG, -60 * DEG, 85 * DEG, -89.9 * DEG]
@@ -189,7 +189,7 @@ def test_params_are_checked():
 def test_lobe_normaliser_matches_dense_quadrature_in_both_branches():
     """Z(μ, σ) = ∫ exp(−(θ−μ)²/2σ²) cos²θ dθ over the ±9σ window inside [−π/2, π/2]: closed form when the window
     fits, 32-node Gauss–Legendre when it is cut; both against 400 nodes."""
-    from knitrun.fiber_bcsdf import _cos2_normaliser
+    from knitrun.shading.fiber_bcsdf import _cos2_normaliser
 
     x, w = np.polynomial.legendre.leggauss(400)
     worst, branches = 0.0, set()

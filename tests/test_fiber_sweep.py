@@ -1,4 +1,4 @@
-"""Fibers swept along yarn curves (knitbake.fiber_sweep), curve evaluation and the closed-form stockinette curves."""
+"""Fibers swept along yarn curves (knitbake.fibers.fiber_sweep), curve evaluation and the closed-form stockinette curves."""
 
 import dataclasses
 from pathlib import Path
@@ -11,11 +11,11 @@ from scipy.spatial.transform import Rotation
 from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves
 from data_formats.yarn_spec import load_preset
 from data_formats.curve_eval import dense_curve, evaluate, rest_length
-from knitbake.fiber_set import KIND_REGULAR
+from knitbake.fibers.fiber_set import KIND_REGULAR
 from data_formats.curve_eval import curve_frames, initial_normal
-from knitbake.fiber_sweep import curve_seed, sweep_fibers
-from knitbake.procedural_yarn import generate_fibers
-from knitbake.stockinette import stockinette_curves, write_example_patch
+from knitbake.fibers.fiber_sweep import curve_seed, sweep_fibers
+from knitbake.fibers.procedural_yarn import generate_fibers
+from knitrun.sim.crane_stockinette import stockinette_curves, write_example_patch
 
 COTTON = load_preset("cotton1")
 LIGHT = dataclasses.replace(COTTON, geometry=dataclasses.replace(COTTON.geometry, fibers_per_ply=12))

@@ -9,10 +9,10 @@ from scipy import integrate, special
 
 from data_formats import asset_pack as ap
 from data_formats.yarn_spec import load_preset
-from knitbake import im_table as im
+from knitbake.stages import im_table as im
 from knitbake.bake import QUALITY
-from knitrun import fiber_bcsdf as fb
-from knitrun.im_lookup import i0e, im_lookup, r_lobe_integral, sg
+from knitrun.shading import fiber_bcsdf as fb
+from knitrun.shading.im_lookup import i0e, im_lookup, r_lobe_integral, sg
 from tests.test_asset_pack import BCSDF, YARN, provenance
 
 DEG = math.pi / 180
@@ -218,7 +218,7 @@ def test_cotton1_standard_quality_meets_the_lookup_target():
     the R-lobe rule) against direct quadrature, max relative error < 2% wherever I_M > 1% of its maximum, and < 1% of
     each λ decade's maximum, at random points including λ = 0.5, λ = 10⁴, the R ridge and θ within 1e-3 of ±π/2.
     (Measured: 1.2% and 0.24%; silk1 and polyester1, β_TT = 10°, reach 5.3% and 3.6% relative at this shape: see
-    knitrun.im_lookup, Accuracy.)"""
+    knitrun.shading.im_lookup, Accuracy.)"""
     params = fb.params_from_optics(load_preset("cotton1").optics)
     table, _, axes = im.bake_im_table(params, QUALITY["standard"]["environment"]["shape"], nodes=4)
     accuracy = im.lookup_accuracy(table, axes, params)

@@ -1,4 +1,4 @@
-"""Tests of knitrun.knit_chart: chart parsing, chart → StitchMesh, named patterns."""
+"""Tests of knitrun.sim.knit_chart: chart parsing, chart → StitchMesh, named patterns."""
 
 from pathlib import Path
 
@@ -7,7 +7,7 @@ import pytest
 
 from data_formats.errors import FormatError
 from data_formats.stitch_mesh import STITCH_TYPES, validate_stitch_mesh
-from knitrun.knit_chart import PATTERNS, chart_to_mesh, parse_chart, pattern_chart
+from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, parse_chart, pattern_chart
 from tests.test_stitch_mesh import assert_same, sample
 
 KNIT, PURL, YO, K2TOG, SSK = range(5)

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from data_formats.yarn_spec import load_preset
-from knitbake.env_light import env_from_image, env_pdf, env_sample, uniform_env
-from knitbake.fiber_set import FiberSet
-from knitbake.path_tracer import Camera, TracerScene, render
-from knitbake.procedural_yarn import generate_fibers
-from knitbake.tessellate import tessellate_fibers
-from knitrun import equirect
-from knitrun import fiber_bcsdf as fb
+from knitbake.trace.env_light import env_from_image, env_pdf, env_sample, uniform_env
+from knitbake.fibers.fiber_set import FiberSet
+from knitbake.trace.path_tracer import Camera, TracerScene, render
+from knitbake.fibers.procedural_yarn import generate_fibers
+from knitbake.fibers.tessellate import tessellate_fibers
+from knitrun.shading import equirect
+from knitrun.shading import fiber_bcsdf as fb
 
 DEG = math.pi / 180
 LOSSLESS = fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, 5 * DEG, 10 * DEG, 25 * DEG, -3 * DEG, 1.5 * DEG)

@@ -9,8 +9,8 @@ import pytest
 from scipy import integrate, stats
 
 from data_formats.yarn_spec import load_preset, preset_names
-from knitbake.fiber_set import KIND_HAIR, KIND_LOOP, KIND_REGULAR
-from knitbake.procedural_yarn import density, generate_fibers, sample_radii
+from knitbake.fibers.fiber_set import KIND_HAIR, KIND_LOOP, KIND_REGULAR
+from knitbake.fibers.procedural_yarn import density, generate_fibers, sample_radii
 
 
 def with_geometry(spec, **changes):

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from knitbake.fiber_set import FiberSet
-from knitbake.ray_scene import RayScene
-from knitbake.tessellate import radial_band, tessellate_fibers
+from knitbake.fibers.fiber_set import FiberSet
+from knitbake.trace.ray_scene import RayScene
+from knitbake.fibers.tessellate import radial_band, tessellate_fibers
 
 SIDES = 6
 R = 1e-3

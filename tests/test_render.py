@@ -1,4 +1,4 @@
-"""The strip renderer end to end (knitrun.render and `knitrun render`): determinism, finite images at the extremes
+"""The strip renderer end to end (knitrun.render.pipeline and `knitrun render`): determinism, finite images at the extremes
 (camera inside a yarn, grazing views, zero-length segments, an empty view), SRBF counts 1/16/64, ablations, pack
 errors; plus the texture sampler, the flyaway variant hash and the resolve."""
 
@@ -16,17 +16,17 @@ from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import dumps_spec, load_preset
-from knitbake import im_table as im
+from knitbake.stages import im_table as im
 from knitbake.bake import bake
-from knitrun import fiber_bcsdf as fb
-from knitrun.builtin_sky import sky_image
-from knitrun.equirect import texel_directions
-from knitrun.im_lookup import kernel_axes
-from knitrun.srbf_fit import fit_srbf
-from knitrun.render import ABLATIONS, render
-from knitrun.strip_shading import resolve, shade_regular, variant_of
-from knitrun.texture_sampling import mip_stack, sample_mip
-from knitrun.yarn_look import no_full_table, ones_factor
+from knitrun.shading import fiber_bcsdf as fb
+from knitrun.shading.builtin_sky import sky_image
+from knitrun.shading.equirect import texel_directions
+from knitrun.shading.im_lookup import kernel_axes
+from knitrun.shading.srbf_fit import fit_srbf
+from knitrun.render.pipeline import ABLATIONS, render
+from knitrun.render.strip_shading import resolve, shade_regular, variant_of
+from knitrun.render.texture_sampling import mip_stack, sample_mip
+from knitrun.render.yarn_look import no_full_table, ones_factor
 from tests.test_bake import TINY
 from tests.test_im_table import ROUGH, TEST_SHAPE
 
@@ -329,7 +329,7 @@ def test_texture_phase_follows_the_view_azimuth_in_the_yarn_frame():
     (γ = +90°) a counter-clockwise-plied yarn is read a quarter period earlier, a clockwise one a quarter later."""
     from types import SimpleNamespace
 
-    from knitrun.render import view_phase_arclength
+    from knitrun.render.pipeline import view_phase_arclength
 
     lines = SimpleNamespace(rest=np.array([0.0, 1.0]), normal=np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]]))
     views = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -343,7 +343,7 @@ def test_texture_phase_follows_the_view_azimuth_in_the_yarn_frame():
 
 def test_a_stitch_mesh_entry_is_simulated_at_rest_and_drawn(tmp_path, pack):
     from data_formats.stitch_mesh import write_stitch_mesh
-    from knitrun.knit_chart import chart_to_mesh, pattern_chart
+    from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 
     write_stitch_mesh(tmp_path / "m.h5", chart_to_mesh(pattern_chart("stockinette", 3, 3)))
     camera = FRONT.replace("[0.0, 0.0, 1.0]", "[0.3, 0.25, 2.0]").replace("look_at = [0.0, 0.0, 0.0]",
@@ -356,7 +356,7 @@ def test_a_stitch_mesh_entry_is_simulated_at_rest_and_drawn(tmp_path, pack):
 
 
 def test_multiple_scattering_lights_merge_close_lobes_and_keep_energy():
-    from knitrun.render import ms_lights
+    from knitrun.render.pipeline import ms_lights
 
     dirs = np.array([[0.0, 1.0, 0.0], [0.1, 0.995, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)

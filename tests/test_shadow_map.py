@@ -5,7 +5,7 @@ import numba
 import numpy as np
 import pytest
 
-from knitrun.shadow_map import build_shadow_map, shadow_visibility
+from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 
 R = 0.1  # yarn radius
 BIAS = 1.5 * R

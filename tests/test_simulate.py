@@ -15,12 +15,12 @@ from data_formats.bcc import read_bcc
 from data_formats.errors import FormatError
 from data_formats.stitch_mesh import read_obj_stitch_mesh, read_stitch_mesh, write_obj_stitch_mesh
 from data_formats.yarn_curves import control_polygon_arclength, read_yarn_curves
-from knitrun.deformations import deform, deformation_frames, frame_amounts, parse_deformation, read_obj_frames
-from knitrun.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
-from knitrun.simulate import (control_segment_lengths, course_knot_spacing, prepare, simulate, solve_frame,
+from knitrun.sim.deformations import deform, deformation_frames, frame_amounts, parse_deformation, read_obj_frames
+from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
+from knitrun.sim.simulate import (control_segment_lengths, course_knot_spacing, prepare, simulate, solve_frame,
                               yarn_points)
-from knitrun.stitch_templates import ROLE_IN, ROLE_OUT, piece_ranges
-from knitrun.yarn_assembly import face_point_offsets
+from knitrun.sim.stitch_templates import ROLE_IN, ROLE_OUT, piece_ranges
+from knitrun.sim.yarn_assembly import face_point_offsets
 
 
 @functools.lru_cache(maxsize=None)

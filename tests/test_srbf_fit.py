@@ -1,12 +1,12 @@
-"""SRBF environment fit (knitrun.srbf_fit): recovery of known lobes, the built-in sky, determinism, edge cases."""
+"""SRBF environment fit (knitrun.shading.srbf_fit): recovery of known lobes, the built-in sky, determinism, edge cases."""
 
 import numpy as np
 import pytest
 
-from knitrun.builtin_sky import sky_image
-from knitrun.equirect import texel_directions
-from knitrun.im_lookup import sg
-from knitrun.srbf_fit import lambda_max, evaluate_srbf, fit_srbf, srbf_image
+from knitrun.shading.builtin_sky import sky_image
+from knitrun.shading.equirect import texel_directions
+from knitrun.shading.im_lookup import sg
+from knitrun.shading.srbf_fit import lambda_max, evaluate_srbf, fit_srbf, srbf_image
 
 
 def _sg_image(directions, sharpness, weights, h=48, w=96):

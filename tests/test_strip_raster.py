@@ -5,8 +5,8 @@ import numba
 import numpy as np
 import pytest
 
-from knitrun.camera import Camera, project, tan_half_fov
-from knitrun.strip_raster import SAMPLE_PATTERNS, rasterize_strips
+from knitrun.render.camera import Camera, project, tan_half_fov
+from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
 
 Z_UP = np.array([0.0, 0.0, 1.0])
 Y_UP = np.array([0.0, 1.0, 0.0])

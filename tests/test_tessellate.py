@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from knitbake.fiber_set import FiberSet
-from knitbake.tessellate import MERGE_TOL, radial_band, ring_radius_factor, tessellate_fibers, tube_counts
+from knitbake.fibers.fiber_set import FiberSet
+from knitbake.fibers.tessellate import MERGE_TOL, radial_band, ring_radius_factor, tessellate_fibers, tube_counts
 
 
 def fiber_set(polylines, radius):

@@ -1,0 +1,1 @@
+"""The strip renderer against the reference: image metrics and the comparison report."""

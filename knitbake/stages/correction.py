@@ -1,0 +1,332 @@
+"""Bake the per-yarn corrections of seed 000 §4.3: the DS correction ξ ≈ ξ_M(v, θ_d) ξ_N(v, φ) and the fiber-level
+shadowing Ψ^Fiber_G ≈ Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ), each with a rank-1 factorization residual and per-entry
+standard errors from independent sample batches.
+
+Set-up (the conventions of ``data_formats/ASSET_PACK.md`` §3): one straight yarn of the spec, regular fibers only,
+along t = +z over three periods; the strip normal n = +x (toward the camera at θ_o = 0), b = n × t = −y, v = w/h
+with w the coordinate along b and h = spec.radius. A direction with longitudinal angle θ and azimuth φ (from n
+toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell (θ-index k, φ-index m):
+
+* **Shadowing** Ψ^Fiber_G(v; θ_i, φ): the camera looks along −n (θ_o = 0, φ_o = 0); the light comes from θ_i,
+  φ_i = −φ. For every camera sample that hits a fiber, visibility of the light from the far side of that fiber
+  (``path_tracer._leave_point``) through the other fibers: 1 or 0. Ψ^Fiber_G of a v-bin = mean visibility of the
+  hits in it.
+* **Correction** ξ(v; θ_d, φ) = Ψ_*/Ψ_DS: the camera looks from θ_o = θ_d, the light comes from θ_i = −θ_d,
+  φ_i = −φ (so (θ_o − θ_i)/2 = θ_d). Ψ_* is the path-traced radiance of the hits in the bin (multiple scattering
+  inside the yarn, ``yarn_only_radius``), Ψ_DS the dual-scattering estimate of the same hits
+  (``knitrun.shading.dual_scattering``) as the renderer evaluates it: lit or not by the explicit fibers, and a shadowed hit
+  behind the renderer's n_occluded fibers (``dual_scattering.fiber_counts``), not its own count, so that
+  ξ·Ψ_DS^renderer reproduces Ψ_* whatever the error of that count; ξ of a bin = Σ Ψ_* / Σ Ψ_DS. ξ's
+  factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
+  ξ·Ψ_DS that shading produces: a bin where the DS estimate is tiny (an edge bin lit from the far side) has a
+  ratio far from the others that an unweighted fit lets distort every other direction of that v.
+
+Each quantity is measured B times with independent seeds; tables hold the batch mean, ``*_stderr`` the standard
+error s/√B. The factorization X[k, m] ≈ a[k]·c[m] per (v, channel) is the leading singular pair of X (non-negative),
+scaled so that c has mean 1 over m; the residual is ‖X − a cᵀ‖_F / ‖X‖_F. Bins without any hit (beyond the fibers)
+get the value 1 and error 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from data_formats.yarn_spec import YarnSpec, dumps_spec
+from knitbake.fibers.fiber_set import KIND_REGULAR
+from knitbake.trace.path_tracer import TracerScene, _camera_rays, leave_points, render
+from knitbake.fibers.procedural_yarn import generate_fibers
+from knitbake.stages.stage_result import StageResult
+from knitbake.fibers.tessellate import tessellate_fibers
+from knitrun.render.camera import Camera, tan_half_fov
+from knitrun.shading.dual_scattering import evaluate_ds, fiber_counts
+from knitrun.shading.fiber_bcsdf import params_from_optics
+
+
+def cell_centres(lo, hi, n):
+    return lo + (np.arange(n) + 0.5) * (hi - lo) / n
+
+
+def yarn_direction(theta, phi):
+    """World direction (x = n, y = −b, z = t) of longitudinal angle θ and azimuth φ (from n toward b)."""
+    return np.array([math.cos(theta) * math.cos(phi), -math.cos(theta) * math.sin(phi), math.sin(theta)])
+
+
+_GEOMETRY_MEMO: dict = {}
+
+
+def yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
+    """Regular fibers of three periods, z ∈ [−P, 2P], as an unlit tracer scene (memoised per spec and seed, so
+    the correction and shadowing stages of one bake build each batch's geometry once)."""
+    key = (dumps_spec(spec), seed)
+    if key not in _GEOMETRY_MEMO:
+        if len(_GEOMETRY_MEMO) >= 8:
+            _GEOMETRY_MEMO.clear()
+        _GEOMETRY_MEMO[key] = _build_yarn_tracer(spec, seed)
+    return _GEOMETRY_MEMO[key]
+
+
+def _build_yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
+    period = spec.geometry.ply_pitch
+    fibers = generate_fibers(spec, length=3 * period, z_start=-period, seed=seed, flyaways=False)
+    fibers = fibers.select(fibers.kind == KIND_REGULAR)
+    mesh = tessellate_fibers(fibers, sides=6)
+    return TracerScene(mesh, np.zeros(fibers.n_fibers, np.int32), params_from_optics(spec.optics)[None])
+
+
+def strip_camera(spec: YarnSpec, theta_o: float, rows: int) -> Camera:
+    """Orthographic camera from direction θ_o (φ_o = 0) framing v ∈ [−1, 1] in ``rows`` rows and ≥ one period."""
+    h = spec.radius
+    period = spec.geometry.ply_pitch
+    wo = yarn_direction(theta_o, 0.0)
+    centre = np.array([0.0, 0.0, period / 2])
+    width = max(1, math.ceil(rows * period * math.cos(theta_o) / (2 * h)))
+    # image up = +y = −b, so image row r has v = −(1 − 2 (r + ½)/rows)
+    return Camera(centre + 4 * h * wo, centre, np.array([0.0, 1.0, 0.0]), width, rows, ortho_height=2 * h)
+
+
+def row_v(rows: int) -> np.ndarray:
+    return -(1 - 2 * (np.arange(rows) + 0.5) / rows)
+
+
+def factor_rank1(x: np.ndarray, weight: np.ndarray | None = None, iterations: int = 30):
+    """x (N_v, K, M, 3) → a (N_v, K, 3), c (N_v, M, 3) with x ≈ a c per (v, channel), c of mean 1 over M; plus the
+    relative residual ‖x − a cᵀ‖_F/‖x‖_F per v and overall (unweighted, ASSET_PACK.md §6).
+
+    Without ``weight``: the leading singular pair (non-negative). With ``weight`` (same shape, ≥ 0): the weighted
+    least-squares rank-1 fit min Σ w (x − a c)², by alternating exact updates a_k = Σ_m w x c / Σ_m w c² (and
+    likewise c) from the singular pair, ``iterations`` times, a and c kept ≥ 0."""
+    n_v, n_k, n_m, _ = x.shape
+    a = np.ones((n_v, n_k, 3))
+    c = np.ones((n_v, n_m, 3))
+    approx = np.empty_like(x)
+    for i in range(n_v):
+        for ch in range(3):
+            u, s, vt = np.linalg.svd(x[i, :, :, ch])
+            av, cv = np.abs(u[:, 0]) * s[0], np.abs(vt[0])
+            if weight is not None and np.any(weight[i, :, :, ch] > 0):
+                w, xi = weight[i, :, :, ch], x[i, :, :, ch]
+                for _ in range(iterations):
+                    av = np.maximum((w * xi) @ cv / np.maximum(w @ (cv * cv), 1e-300), 0.0)
+                    cv = np.maximum(av @ (w * xi) / np.maximum((av * av) @ w, 1e-300), 0.0)
+            scale = cv.mean()
+            if scale > 0:
+                a[i, :, ch], c[i, :, ch] = av * scale, cv / scale
+            approx[i, :, :, ch] = np.outer(a[i, :, ch], c[i, :, ch])
+    err = ((x - approx) ** 2).sum(axis=(1, 2, 3))
+    norm = (x ** 2).sum(axis=(1, 2, 3))
+    by_v = np.sqrt(err / np.maximum(norm, 1e-300))
+    total = math.sqrt(err.sum() / max(norm.sum(), 1e-300))
+    return a, c, by_v, total
+
+
+def _bins(values, weights, rows_v, n_v):
+    """Per-v-bin sums of ``values`` (rows, cols, ...) and counts of ``weights`` (rows, cols) > 0."""
+    idx = np.clip(((rows_v + 1) / 2 * n_v).astype(int), 0, n_v - 1)
+    sums = np.zeros((n_v,) + values.shape[2:])
+    counts = np.zeros(n_v)
+    for r, b in enumerate(idx):
+        sums[b] += values[r].sum(axis=0)
+        counts[b] += weights[r].sum()
+    return sums, counts
+
+
+def _factored_tables(samples, prefix, names, weights=None):
+    """Batch samples (B, N_v, K, M, 3) → the full table (batch mean), its factors, per-entry stderr of each, and
+    the residuals; ``weights``
+    (same shape) makes each factorization the weighted fit of ``factor_rank1``."""
+    if weights is None:
+        weights = [None] * len(samples)
+    factors = [factor_rank1(s, w) for s, w in zip(samples, weights)]
+    a = np.stack([f[0] for f in factors])
+    c = np.stack([f[1] for f in factors])
+    b = samples.shape[0]
+    mean_factors = factor_rank1(samples.mean(axis=0), None if weights[0] is None else np.mean(weights, axis=0))
+    full = names[2].split("_")[0]  # "xi" or "psi": the unfactorized table
+    tables = {f"{prefix}/{full}": samples.mean(axis=0),
+              f"{prefix}/{names[0]}": mean_factors[0], f"{prefix}/{names[1]}": mean_factors[1],
+              f"{prefix}/{names[2]}": np.float64(mean_factors[3]), f"{prefix}/{names[2]}_by_v": mean_factors[2]}
+    errors = {f"{prefix}/{full}": samples.std(axis=0, ddof=1) / math.sqrt(b),
+              f"{prefix}/{names[0]}": a.std(axis=0, ddof=1) / math.sqrt(b),
+              f"{prefix}/{names[1]}": c.std(axis=0, ddof=1) / math.sqrt(b),
+              f"{prefix}/{names[2]}": float(np.std([f[3] for f in factors], ddof=1) / math.sqrt(b)),
+              f"{prefix}/{names[2]}_by_v": np.stack([f[2] for f in factors]).std(axis=0, ddof=1) / math.sqrt(b)}
+    return tables, errors
+
+
+def bake_shadowing(spec: YarnSpec, n_v=8, n_theta=8, n_phi=8, rows=32, spp=4, batches=4, seed=0, progress=None):
+    """Ψ^Fiber_{G,M}, Ψ^Fiber_{G,N} and residuals (see module docstring); returns (tables, errors)."""
+    thetas = cell_centres(-math.pi / 2, math.pi / 2, n_theta)
+    phis = cell_centres(-math.pi, math.pi, n_phi)
+    samples = np.ones((batches, n_v, n_theta, n_phi, 3))
+    rows = max(rows, n_v)
+    total, done = batches * n_theta * n_phi, 0
+    for b in range(batches):
+        tracer = yarn_tracer(spec, seed + b)
+        cam = strip_camera(spec, 0.0, rows)
+        for k, th in enumerate(thetas):
+            for m, ph in enumerate(phis):
+                light = yarn_direction(th, -ph)
+                vis, hit = _visibility_image(tracer, cam, light, spp, seed + 1000 * b + 37 * k + m)
+                sums, counts = _bins(vis[..., None], hit, row_v(rows), n_v)
+                ok = counts > 0
+                samples[b, ok, k, m, :] = (sums[ok] / counts[ok][:, None])
+                done += 1
+                if progress:
+                    progress(done, total)
+    return _factored_tables(samples, "shadowing", ("psi_GM", "psi_GN", "psi_residual"))
+
+
+def _primary_hits(tracer, cam, seed, sample):
+    """Camera sample ``sample`` of every pixel — exactly the primary rays ``path_tracer.render`` traces for this
+    seed, so the path-traced and DS images share their hits (common random numbers: the ratio ξ loses the
+    coverage noise). Returns (hit mask (H, W), hit points (n, 3), prims (n,), flat pixel indices (n,))."""
+    fwd, right, up = cam.basis()
+    h, w = cam.height, cam.width
+    org, dirs = np.empty((h * w, 3)), np.empty((h * w, 3))
+    _camera_rays(np.asarray(cam.position, float), fwd, right, up, w, h, tan_half_fov(cam),
+                 float(cam.ortho_height), seed, sample, 1, org, dirs)
+    hits = tracer.ray_scene.intersect(org, dirs)
+    idx = np.flatnonzero(hits.hit)
+    return hits.hit.reshape(h, w), org[idx] + hits.t[idx, None] * dirs[idx], hits.prim[idx].astype(np.int64), idx
+
+
+def _visibility_image(tracer, cam, light, spp, seed):
+    """Per pixel: summed visibility of the light over the pixel's fiber hits, and the number of hits (spp samples).
+    Shadow rays leave each hit fiber by the tracer's own rule (``leave_points``)."""
+    mesh = tracer.mesh
+    vis = np.zeros((cam.height, cam.width))
+    hits_n = np.zeros((cam.height, cam.width))
+    for sample in range(spp):
+        mask, points, prims, idx = _primary_hits(tracer, cam, seed, sample)
+        dirs = np.tile(light, (prims.size, 1))
+        start = np.empty_like(points)
+        leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
+        v = np.zeros(mask.size)
+        v[idx] = ~tracer.ray_scene.occluded(start, dirs, np.inf)
+        vis += v.reshape(mask.shape)
+        hits_n += mask
+    return vis, hits_n
+
+
+def fibers_toward(tracer, prims, points, light, max_fibers=256):
+    """Number of fibers a ray from each hit (leaving its own fiber) toward ``light`` crosses before escaping."""
+    mesh = tracer.mesh
+    dirs = np.tile(light, (prims.size, 1))
+    start = np.empty_like(points)
+    leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
+    count = np.zeros(prims.size, np.int64)
+    live = np.arange(prims.size)
+    for _ in range(max_fibers):
+        if live.size == 0:
+            break
+        hits = tracer.ray_scene.intersect(start[live], dirs[live])
+        live, start_live = live[hits.hit], start[live][hits.hit]
+        count[live] += 1
+        p = start_live + hits.t[hits.hit, None] * dirs[live]
+        nxt = np.empty_like(p)
+        leave_points(hits.prim[hits.hit].astype(np.int64), p, dirs[live], mesh.tri_fiber, mesh.tri_segment,
+                     mesh.axis_points, mesh.tube_radius, nxt)
+        start[live] = nxt
+    return count
+
+
+def fiber_frames(tracer, prims):
+    """Unit fiber tangents at hit triangles (from their axis segments)."""
+    mesh = tracer.mesh
+    seg = mesh.tri_segment[prims]
+    t = mesh.axis_points[seg + 1] - mesh.axis_points[seg]
+    return t / np.linalg.norm(t, axis=1, keepdims=True)
+
+
+def _signed_azimuth(t, w_o, w_i):
+    """φ = φ_o − φ_i about unit tangents t (rows), for unit directions w_o, w_i (rows or one vector)."""
+    o = w_o - (w_o * t).sum(-1, keepdims=True) * t
+    i = w_i - (w_i * t).sum(-1, keepdims=True) * t
+    return np.arctan2((np.cross(i, o) * t).sum(-1), (i * o).sum(-1))
+
+
+def _ds_image(tracer, cam, light, spp, seed, ds_tables, params, n_occluded=None):
+    """Per pixel: mean DS radiance per unit irradiance (``knitrun.shading.dual_scattering.evaluate_ds``) of the pixel's
+    fiber hits (misses add 0), fiber angles in each hit fiber's frame. ``n_occluded`` None: Zinke's estimate, each
+    hit behind its own count of fibers toward the light (D = 1 iff none). A number: as the renderer evaluates it, a
+    hit is lit directly (D = 1) iff the explicit fibers leave it a clear path to the light, else D = 0 with
+    ``n_occluded`` fibers toward the light; DS is linear in D at fixed n, so a bin's mean is then the renderer's DS
+    at D = the bin's lit fraction."""
+    fwd = cam.basis()[0]
+    img = np.zeros((cam.height * cam.width, 3))
+    for sample in range(spp):
+        _, points, prims, idx = _primary_hits(tracer, cam, seed, sample)
+        t = fiber_frames(tracer, prims)
+        w_o = np.broadcast_to(-fwd, t.shape)
+        w_i = np.broadcast_to(light, t.shape)
+        theta_o = np.arcsin(np.clip((w_o * t).sum(-1), -1, 1))
+        theta_i = np.arcsin(np.clip((w_i * t).sum(-1), -1, 1))
+        if n_occluded is None:
+            n_front = fibers_toward(tracer, prims, points, light)
+        else:
+            n_front = np.where(fibers_toward(tracer, prims, points, light, max_fibers=1) == 0, 0.0, n_occluded)
+        img[idx] += evaluate_ds(ds_tables, theta_i, theta_o, _signed_azimuth(t, w_o, w_i), n_front, params=params,
+                                direct_fraction=(n_front == 0).astype(float))
+    return (img / spp).reshape(cam.height, cam.width, 3)
+
+
+def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, rows=32, spp=8, batches=4,
+                    max_depth=16, seed=0, progress=None):
+    """ξ_M, ξ_N and residuals (see module docstring); ``ds_tables``: the baked ``dual_scattering/*`` arrays.
+    Returns (tables, errors)."""
+    thetas = cell_centres(-math.pi / 2, math.pi / 2, n_theta)
+    phis = cell_centres(-math.pi, math.pi, n_phi)
+    params = params_from_optics(spec.optics)
+    n_occluded = fiber_counts(spec.geometry, spec.radius)[1]
+    samples = np.ones((batches, n_v, n_theta, n_phi, 3))
+    weights = np.zeros((batches, n_v, n_theta, n_phi, 3))
+    rows = max(rows, n_v)
+    total, done = batches * n_theta * n_phi, 0
+    for b in range(batches):
+        geometry = yarn_tracer(spec, seed + b)
+        for k, th_d in enumerate(thetas):
+            cam = strip_camera(spec, th_d, rows)
+            for m, ph in enumerate(phis):
+                light = yarn_direction(-th_d, -ph)
+                lit = TracerScene(geometry.mesh, geometry.fiber_type, geometry.params, light_dirs=light[None],
+                                  light_irradiance=np.ones((1, 3)), ray_scene=geometry.ray_scene)
+                s = seed + 1000 * b + 37 * k + m
+                traced, _ = render(lit, cam, spp, seed=s, max_depth=max_depth)
+                ds = _ds_image(geometry, cam, light, spp, s, ds_tables, params, n_occluded)
+                num, _ = _bins(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
+                den, _ = _bins(ds, np.ones(ds.shape[:2]), row_v(rows), n_v)
+                ok = np.all(den > 1e-12 * max(den.max(), 1e-300), axis=1)
+                samples[b, ok, k, m] = num[ok] / den[ok]
+                weights[b, :, k, m] = den ** 2
+                done += 1
+                if progress:
+                    progress(done, total)
+    return _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"), weights)
+
+
+def bake_shadowing_stage(spec, settings, seed, progress=None) -> StageResult:
+    """Stage ``shadowing`` of ``knitbake.bake``: settings n_v, n_theta, n_phi, rows, spp, batches."""
+    tables, errors = bake_shadowing(spec, seed=seed, progress=progress, **settings)
+    kind = (f"standard error of the mean over {settings['batches']} independent batches (fiber geometry and "
+            f"pixel jitter reseeded)")
+    return StageResult(tables, errors, {name: {"error_kind": kind} for name in tables},
+                       {"batches": settings["batches"], "directions": settings["n_theta"] * settings["n_phi"],
+                        "camera_samples_per_pixel": settings["spp"]})
+
+
+def bake_correction_stage(spec, settings, seed, progress=None) -> StageResult:
+    """Stage ``correction`` of ``knitbake.bake``: settings n_v, n_theta, n_phi, rows, spp, batches, and ``ds`` —
+    the dual-scattering quadrature settings, the same as the pack's own dual_scattering stage, since ξ divides by
+    the DS estimate the runtime computes from those tables."""
+    from knitbake.stages.ds_precompute import precompute_dual_scattering
+
+    ds = {k: v[0] for k, v in precompute_dual_scattering(params_from_optics(spec.optics), **settings["ds"]).items()}
+    tables, errors = bake_correction(spec, ds, seed=seed, progress=progress,
+                                     **{k: v for k, v in settings.items() if k != "ds"})
+    kind = (f"standard error of the mean over {settings['batches']} independent batches (fiber geometry, paths and "
+            f"pixel jitter reseeded)")
+    return StageResult(tables, errors, {name: {"error_kind": kind} for name in tables},
+                       {"batches": settings["batches"], "paths_per_pixel": settings["spp"],
+                        "directions": settings["n_theta"] * settings["n_phi"]})

@@ -1,0 +1,464 @@
+"""Regular-fiber and flyaway textures of one yarn period by orthographic ray casting (seed 000 §4.2–4.4, §5.1;
+asset pack ``/textures``, ASSET_PACK.md §3 and §8).
+
+Conventions
+-----------
+* Yarn space of ``procedural_yarn`` (lengths in the spec's unit, cm for every preset): the yarn axis is +z. The
+  camera is orthographic and looks along −x, so the strip frame of ASSET_PACK.md §3 is t = +z (yarn tangent),
+  n = +x (toward the camera), b = n × t = −y. A vector (x, y, z) of yarn space has strip components
+  (·t, ·b, ·n) = (z, −y, x) (``to_strip``).
+* Strip coordinates: u = z / period, v = w / h with w = p·b = −y, so a point of the strip is (x, y, z) =
+  (·, −v h, u P). Texel (i, j) of an H × W level covers v ∈ −1 + [i, i + 1]·2/H (row i), u ∈ [j, j + 1]/W
+  (column j); its S × S sub-sample rays sit at the centres of an S × S grid of sub-cells (``texel_rays``).
+  Every texture covers z ∈ [0, P] and is cast against fibers of z ∈ [−P, 2P] (regular fibers are P-periodic,
+  ``generate_fibers``), so fibers and occluders of the neighbouring periods are present at the seam.
+* h (``half_width``): the yarn radius ``spec.radius`` for the regular textures; for the flyaway textures the
+  farthest tube vertex of any drawn flyaway from the yarn axis (≥ the yarn radius).
+* Fibers are tessellated as ``TUBE_SIDES``-sided tubes (perimeter fit: unbiased projected width, hence coverage).
+* ``normal``: the outward normal of the first fiber hit, from the ray's intersection with the true cylinder
+  (radius = fiber radius) around the hit segment's axis, so it does not depend on the polygon (facet normal on end
+  caps). ``tangent``: the unit direction of the hit segment, signed so that its t-component is ≥ 0. Both are
+  coverage-premultiplied: a texel holds the mean over its sub-samples with misses counted as 0 (length ≤ coverage).
+* ``coverage``: fraction of sub-samples that hit a regular fiber.
+* ``ao``: ambient visibility of the visible fiber points: from each hit, ``ao_rays`` rays cosine-distributed about
+  its cylinder normal, starting on the tube's circumscribed cylinder (so none re-enters its own tube), counted
+  visible when they leave without hitting any regular fiber of the same yarn (no distance limit; flyaways do not
+  occlude). A texel holds the mean over its covered sub-samples, 1 where none is covered. The random numbers of a
+  sub-sample depend only on (seed, its texel column in the period), so a bake of a shifted window sees the same
+  rays.
+* ``flyaway`` (3, H, W, 4): RGB the coverage-premultiplied flyaway tangent (as ``tangent``), A the fraction of
+  sub-samples that see a flyaway nearer than every regular fiber (depth test at bake time: a flyaway hidden by
+  the regular fibers of the same yarn is removed).
+* Mip levels down to 1 × 1 (width and height must be powers of two); level k + 1 is the 2 × 2 box reduction of
+  level k (2 × 1 once one dimension is 1): plain mean for normal, tangent, coverage and flyaway; for ao the
+  coverage-weighted mean, computed exactly from the pooled ray counts.
+
+Regular seam
+------------
+The regular fibers are exactly P-periodic and the margins hold the neighbouring periods, so the texture is the
+view of an endless yarn: u = 1 continues into u = 0. The tubes are not exactly periodic: a tube's polygon turns
+along the fiber (rotation-minimising frame), so at the seam the polygons of the two sides are turned against
+each other and sub-samples within the tessellation error r·(1 − cos(π/sides)) of a silhouette, or of two
+crossing fibers, may see another fiber. ``regular_seam_error`` measures this (cotton1 at 256 × 64, S = 4: 0.08 %
+of the sub-samples change coverage, mean |Δ normal| 0.006).
+
+Flyaway seam design (three variants that tile in any order)
+-----------------------------------------------------------
+Flyaways are generated for one long yarn (``generate_fibers``, one seed). Each flyaway has the z-range
+[a, b] of its tube. A **band** of half-width δ (``band`` mip-0 columns, δ = band·P/W) surrounds every period
+boundary mP. A flyaway is a *boundary* flyaway if its tube meets some band; its *first* band is the leftmost one it
+meets. Variant k (k = 0, 1, 2) draws
+
+* the flyaways lying inside (kP + δ, (k + 1)P − δ), moved by −kP (private to variant k), and
+* every boundary flyaway whose first band is the one at z = 0, copied to every shift mP (m integer) where the copy
+  meets [0, P] (shared, identical in all three variants).
+
+Seam: inside the bands, i.e. in the first and last ``band`` columns of mip 0, every variant draws exactly the same
+geometry (private flyaways stay out of the bands), and the shared flyaways are drawn periodically, so the seam
+k → j looks exactly like the seam k → k, which is the continuous periodic drawing: texture k's right edge continues
+into any texture j's left edge. ``flyaway_seam_error`` measures the band disagreement (0 by construction).
+Statistics: the private sets and the shared set are disjoint classes of one Poisson process, hence independent,
+and since the first band of a boundary flyaway is unique, every point of the strip sees the flyaway density of the
+infinite yarn (boundary flyaways are correlated between the two ends of a tile, which is what the seam requires).
+Flyaways as long as a period (cotton1 loops follow a host fiber for one migration cycle, 0.8 P) are mostly boundary
+flyaways, so the three variants share most loops and differ mostly in hairs; ``flyaway_variants`` reports counts.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from data_formats.yarn_spec import YarnSpec
+from knitbake.stages.stage_result import StageResult
+from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
+from knitbake.fibers.procedural_yarn import generate_fibers
+from knitbake.trace.ray_scene import RayScene
+from knitbake.fibers.tessellate import TubeMesh, ring_radius_factor, tessellate_fibers
+
+TUBE_SIDES = 8
+FLYAWAY_BAND_TEXELS = 2  # default half-width of the shared band around each period boundary, in mip-0 columns
+VARIANTS = 3
+_AO_RAYS_PER_BLOCK = 1 << 20  # occlusion rays per batch (memory bound)
+_REGULAR = ("normal", "tangent", "ao", "coverage")
+_QUANTISATION_KIND = ("deterministic orthographic ray casting, {s}x{s} regular sub-samples per mip-0 texel; "
+                      "error_estimate = 1/(2 n), n the sub-samples per texel of this level: half the step of a "
+                      "sub-sample count (not a bound on geometric aliasing)")
+_AO_KIND = ("Monte Carlo ambient visibility, {k} cosine-weighted rays per covered sub-sample ({s}x{s} per mip-0 "
+            "texel); error_estimate = max over covered texels of the binomial standard-error bound "
+            "sqrt(p(1-p)/N), N the rays pooled in the texel, p = (visible + 1/2)/(N + 1)")
+
+
+def to_strip(vec: np.ndarray) -> np.ndarray:
+    """Strip components (·t, ·b, ·n) = (z, −y, x) of yarn-space vectors (..., 3)."""
+    return np.stack([vec[..., 2], -vec[..., 1], vec[..., 0]], axis=-1)
+
+
+def texel_rays(width: int, height: int, samples: int, period: float, half_width: float, x0: float,
+               column_offset: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Orthographic sub-sample rays of an H × W texture of the strip with half-width ``half_width``: origins
+    (H·S·W·S, 3) at x = ``x0`` in the order (row, sub-row, column, sub-column), all directions (−1, 0, 0).
+    Column j of the texture covers u ∈ [j + column_offset, j + column_offset + 1]/W (z = u·period)."""
+    v = -1.0 + (np.arange(height * samples) + 0.5) * (2.0 / (height * samples))
+    u = (column_offset * samples + np.arange(width * samples) + 0.5) / (width * samples)
+    org = np.empty((v.size, u.size, 3))
+    org[..., 0] = x0
+    org[..., 1] = -v[:, None] * half_width
+    org[..., 2] = u[None, :] * period
+    org = org.reshape(-1, 3)
+    dirs = np.zeros_like(org)
+    dirs[:, 0] = -1.0
+    return org, dirs
+
+
+def regular_fibers(spec: YarnSpec, seed: int = 0) -> FiberSet:
+    """The regular fibers of z ∈ [−P, 2P] (P = ply pitch): the texture period [0, P] and one period either side."""
+    period = spec.geometry.ply_pitch
+    return generate_fibers(spec, length=3 * period, z_start=-period, seed=seed, flyaways=False)
+
+
+def regular_scene(spec: YarnSpec, seed: int = 0) -> tuple[TubeMesh, RayScene]:
+    """Tubes and Embree scene of ``regular_fibers``: the camera-ray target and the AO / depth-test occluders."""
+    mesh = tessellate_fibers(regular_fibers(spec, seed), sides=TUBE_SIDES)
+    return mesh, RayScene(mesh)
+
+
+def _texel_sum(grid: np.ndarray, height: int, width: int, samples: int) -> np.ndarray:
+    """Sum over each texel's S × S sub-samples of per-sub-sample values (H·S·W·S, ...) → (H, W, ...)."""
+    return grid.reshape(height, samples, width, samples, *grid.shape[1:]).sum(axis=(1, 3))
+
+
+def _segment_directions(mesh: TubeMesh, prim: np.ndarray) -> np.ndarray:
+    """Unit axis direction (yarn space) of the segment each triangle in ``prim`` belongs to, signed with z ≥ 0."""
+    seg = mesh.tri_segment[prim]
+    d = mesh.axis_points[seg + 1] - mesh.axis_points[seg]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return np.where(d[:, 2:3] < 0, -d, d)
+
+
+def _fiber_surface(mesh: TubeMesh, prim: np.ndarray, origins: np.ndarray, dirs: np.ndarray, points: np.ndarray,
+                   facet: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals and AO ray origins for rays (``origins``, unit ``dirs``) that hit triangles ``prim`` at
+    ``points`` with facet normals ``facet``. On a wall, the ray is intersected with the fiber's true cylinder (radius
+    r = ring radius / ``ring_radius_factor``) around the hit segment's axis: the normal there (the silhouette normal
+    where the ray passes the polygon but misses the cylinder), and the AO origin on the tube's circumscribed
+    cylinder (ring radius) along that normal, which contains the tube, so a ray leaving into the normal's
+    hemisphere does not re-enter it. Neither depends on how the polygon is turned. On an end cap (facet within 60°
+    of the axis): the facet normal, and the hit moved ``eps`` along it."""
+    seg = mesh.tri_segment[prim]
+    a = mesh.axis_points[seg]
+    d = mesh.axis_points[seg + 1] - a
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    ring = mesh.tube_radius[mesh.tri_fiber[prim]][:, None]
+    radius = ring / ring_radius_factor(TUBE_SIDES, "perimeter")
+    rel = origins - a
+    rel_p = rel - np.sum(rel * d, axis=1, keepdims=True) * d  # ray and axis projected across the axis
+    dir_p = dirs - np.sum(dirs * d, axis=1, keepdims=True) * d
+    dd = np.sum(dir_p * dir_p, axis=1, keepdims=True)
+    cap = (np.abs(np.sum(facet * d, axis=1, keepdims=True)) > 0.5) | (dd < 1e-12)
+    dd = np.where(cap, 1.0, dd)
+    t0 = -np.sum(rel_p * dir_p, axis=1, keepdims=True) / dd  # closest approach to the axis
+    closest = rel_p + t0 * dir_p
+    t = t0 - np.sqrt(np.maximum(radius * radius - np.sum(closest * closest, axis=1, keepdims=True), 0.0) / dd)
+    radial = rel_p + t * dir_p
+    length = np.linalg.norm(radial, axis=1, keepdims=True)
+    cap |= length == 0
+    normal = np.where(cap, facet, radial / np.where(cap, 1.0, length))
+    axial = np.sum((rel + t * dirs) * d, axis=1, keepdims=True)
+    return normal, np.where(cap, points + eps * facet, a + axial * d + ring * normal)
+
+
+def _cosine_directions(normals: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    """Cosine-distributed unit directions about unit ``normals`` (N, 3) from uniform numbers ``xi`` (N, K, 2) →
+    (N, K, 3); orthonormal basis of Duff et al. 2017."""
+    nx, ny, nz = normals[:, 0:1], normals[:, 1:2], normals[:, 2:3]
+    sign = np.where(nz >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + nz)
+    b = nx * ny * a
+    e1 = np.stack([1.0 + sign * nx * nx * a, sign * b, -sign * nx], axis=-1)  # (N, 1, 3)
+    e2 = np.stack([b, sign + ny * ny * a, -ny], axis=-1)
+    r = np.sqrt(xi[..., 0:1])
+    phi = 2.0 * np.pi * xi[..., 1:2]
+    return r * np.cos(phi) * e1 + r * np.sin(phi) * e2 + np.sqrt(1.0 - xi[..., 0:1]) * normals[:, None, :]
+
+
+def _ao_visible_counts(scene: RayScene, origins, normals, hit_grid, width, samples, ao_rays, seed, column_offset,
+                       progress) -> np.ndarray:
+    """Visible AO rays per sub-sample (H·S, W·S) int: ``ao_rays`` cosine rays about ``normals`` from ``origins``
+    (one per hit sub-sample, in grid order), in blocks of columns; the uniform numbers of texture column j come
+    from the stream (seed, (j + column_offset) mod W)."""
+    n_rows = hit_grid.shape[0]
+    visible = np.zeros(hit_grid.shape, np.int64)
+    index = np.full(hit_grid.shape, -1, np.int64)
+    index[hit_grid] = np.arange(origins.shape[0])
+    block = max(1, _AO_RAYS_PER_BLOCK // (n_rows * samples * ao_rays))
+    for j0 in range(0, width, block):
+        j1 = min(width, j0 + block)
+        cols = slice(j0 * samples, j1 * samples)
+        xi = np.concatenate([np.random.default_rng([seed, (j + column_offset) % width])
+                             .random((n_rows, samples, ao_rays, 2)) for j in range(j0, j1)], axis=1)
+        sel = index[:, cols][hit_grid[:, cols]]
+        if sel.size:
+            dirs = _cosine_directions(normals[sel], xi[hit_grid[:, cols]])
+            org = np.broadcast_to(origins[sel][:, None, :], dirs.shape)
+            blocked = scene.occluded(org.reshape(-1, 3), dirs.reshape(-1, 3), np.inf)
+            block_view = visible[:, cols]  # a view: writes go to ``visible``
+            block_view[hit_grid[:, cols]] = ao_rays - blocked.reshape(-1, ao_rays).sum(axis=1)
+        if progress is not None:
+            progress(j1, width)
+    return visible
+
+
+def _halve(a: np.ndarray, axis: int, reduce) -> np.ndarray:
+    """Pairwise reduction (``reduce`` = np.mean or np.sum) along ``axis``; unchanged where that dimension is 1."""
+    n = a.shape[axis]
+    if n == 1:
+        return a
+    return reduce(a.reshape(*a.shape[:axis], n // 2, 2, *a.shape[axis + 1:]), axis=axis + 1)
+
+
+def mip_levels(level0: np.ndarray, row_axis: int = 0, reduce=np.mean) -> list[np.ndarray]:
+    """Level 0 and its 2 × 2 box reductions (over axes ``row_axis``, ``row_axis`` + 1) down to 1 × 1."""
+    levels = [level0]
+    while levels[-1].shape[row_axis] > 1 or levels[-1].shape[row_axis + 1] > 1:
+        levels.append(_halve(_halve(levels[-1], row_axis, reduce), row_axis + 1, reduce))
+    return levels
+
+
+def _check_size(width: int, height: int, samples: int, ao_rays: int = 1) -> None:
+    for name, n in (("width", width), ("height", height)):
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1 or n > 1 << 15 or n & (n - 1):
+            raise ValueError(f"texture {name} must be a power of two from 1 to 32768, got {n!r}")
+    for name, n in (("samples", samples), ("ao_rays", ao_rays)):
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"{name} must be an integer ≥ 1, got {n!r}")
+
+
+def _regular_level0(spec, mesh, scene, width, height, samples, ao_rays, seed, column_offset=0, progress=None):
+    """Mip-0 sums of the regular textures: dict of per-texel covered sub-sample counts ``covered`` (H, W), summed
+    strip normals / tangents (H, W, 3) and visible AO rays ``visible`` (H, W)."""
+    h = spec.radius
+    org, dirs = texel_rays(width, height, samples, spec.geometry.ply_pitch, h, 4.0 * h, column_offset)
+    hits = scene.intersect(org, dirs)
+    hit = hits.hit
+    points = org[hit] + hits.t[hit, None] * dirs[hit]
+    prim = hits.prim[hit]
+    normal_yarn, ao_origins = _fiber_surface(mesh, prim, org[hit], dirs[hit], points, hits.normal[hit], scene.eps)
+    normal = np.zeros(org.shape)
+    tangent = np.zeros(org.shape)
+    normal[hit] = to_strip(normal_yarn)
+    tangent[hit] = to_strip(_segment_directions(mesh, prim))
+    hit_grid = hit.reshape(height * samples, width * samples)
+    visible = _ao_visible_counts(scene, ao_origins, normal_yarn, hit_grid, width, samples, ao_rays, seed,
+                                 column_offset, progress)
+    return {"covered": _texel_sum(hit.astype(np.int64), height, width, samples),
+            "normal": _texel_sum(normal, height, width, samples),
+            "tangent": _texel_sum(tangent, height, width, samples),
+            "visible": _texel_sum(visible.reshape(-1), height, width, samples)}
+
+
+def _regular_maps(sums: dict, samples: int, ao_rays: int) -> dict:
+    """Mip-0 textures (float64) from the sums of ``_regular_level0``."""
+    n = samples * samples
+    covered = sums["covered"]
+    ao = np.where(covered > 0, sums["visible"] / np.maximum(covered * ao_rays, 1), 1.0)
+    return {"normal": sums["normal"] / n, "tangent": sums["tangent"] / n, "ao": ao, "coverage": covered / n}
+
+
+def bake_regular_textures(spec: YarnSpec, width: int = 256, height: int = 64, samples: int = 4, ao_rays: int = 16,
+                          seed: int = 0, progress=None, scene=None) -> dict:
+    """Regular-fiber textures ``textures/{normal,tangent,ao,coverage}/mip{k}`` → (float32 array, error estimate,
+    attrs) (see module docstring). ``progress(done, total)`` is called per block of AO columns; ``scene``: a
+    prebuilt ``regular_scene(spec, seed)``."""
+    _check_size(width, height, samples, ao_rays)
+    mesh, rays = scene or regular_scene(spec, seed)
+    sums = _regular_level0(spec, mesh, rays, width, height, samples, ao_rays, seed, progress=progress)
+    maps = _regular_maps(sums, samples, ao_rays)
+    covered = mip_levels(sums["covered"], reduce=np.sum)
+    visible = mip_levels(sums["visible"], reduce=np.sum)
+    out = {}
+    for name in ("normal", "tangent", "coverage"):
+        for k, level in enumerate(mip_levels(maps[name])):
+            n_sub = samples * samples * (height // level.shape[0]) * (width // level.shape[1])
+            out[f"textures/{name}/mip{k}"] = (level.astype(np.float32), 1.0 / (2 * n_sub), {
+                "error_kind": _QUANTISATION_KIND.format(s=samples), "error_statistic": "max",
+                "half_width": spec.radius, "samples_per_axis": samples})
+    for k, (cov, vis) in enumerate(zip(covered, visible)):
+        rays = cov * ao_rays
+        ao = np.where(rays > 0, vis / np.maximum(rays, 1), 1.0)
+        p = (vis + 0.5) / (rays + 1.0)
+        stderr = np.sqrt(p * (1 - p) / np.maximum(rays, 1))
+        err = float(stderr[rays > 0].max()) if np.any(rays > 0) else 0.0
+        out[f"textures/ao/mip{k}"] = (ao.astype(np.float32), err, {
+            "error_kind": _AO_KIND.format(k=ao_rays, s=samples), "error_statistic": "max",
+            "half_width": spec.radius, "samples_per_axis": samples, "ao_rays": ao_rays})
+    return {name: out[name] for base in _REGULAR for name in out if name.startswith(f"textures/{base}/")}
+
+
+def regular_seam_error(spec: YarnSpec, textures: dict, seed: int = 0, scene=None) -> dict:
+    """Seam check of the regular textures: re-bake mip 0 over the window shifted by half a period (W/2 columns),
+    whose middle holds the seam u = 1 → 0 of ``textures`` on continuous fiber tubes, and compare it with the baked
+    mip 0 rolled by W/2. Returns {texture: {"mean": mean |difference|, "max": max |difference|}} for normal,
+    tangent, ao, coverage. The fibers are exactly P-periodic, but their tubes are not: a tube's polygon turns
+    along it (rotation-minimising frame), so the tube of a period is the previous one's turned by a fixed angle.
+    The seam therefore carries the tessellation error (a sub-sample within r (1 − cos(π/sides)) of a silhouette,
+    or of a crossing of two fibers, may see another fiber), and AO differs by its Monte Carlo error where a hit
+    moved to another fiber."""
+    ao0 = textures["textures/ao/mip0"]
+    height, width = ao0[0].shape
+    samples, ao_rays = ao0[2]["samples_per_axis"], ao0[2]["ao_rays"]
+    mesh, rays = scene or regular_scene(spec, seed)
+    sums = _regular_level0(spec, mesh, rays, width, height, samples, ao_rays, seed, width // 2)
+    shifted = _regular_maps(sums, samples, ao_rays)
+    out = {}
+    for name in _REGULAR:
+        diff = np.abs(np.roll(textures[f"textures/{name}/mip0"][0], -(width // 2), axis=1) - shifted[name])
+        out[name] = {"mean": float(diff.mean()), "max": float(diff.max())}
+    return out
+
+
+def _tube_z_range(mesh: TubeMesh, n_fibers: int) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) z of the tube vertices of each fiber: the exact z-extent of its drawn tube."""
+    z = mesh.vertices[:, 2].astype(np.float64)[mesh.triangles]
+    lo = np.full(n_fibers, np.inf)
+    hi = np.full(n_fibers, -np.inf)
+    np.minimum.at(lo, mesh.tri_fiber, z.min(axis=1))
+    np.maximum.at(hi, mesh.tri_fiber, z.max(axis=1))
+    return lo, hi
+
+
+def _shifted(fibers: FiberSet, idx: np.ndarray, shift: np.ndarray, period: float) -> FiberSet:
+    """Fibers ``idx`` of ``fibers`` (repeats allowed), each moved by ``shift`` along z, as a FiberSet of [0, P]."""
+    counts = np.diff(fibers.offsets)[idx]
+    offsets = np.zeros(idx.size + 1, np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    point = np.repeat(fibers.offsets[idx] - offsets[:-1], counts) + np.arange(offsets[-1])
+    pts = fibers.points[point].copy()
+    pts[:, 2] += np.repeat(shift, counts)
+    return FiberSet(pts, offsets, fibers.radius[idx].copy(), fibers.kind[idx].copy(), fibers.ply[idx].copy(), 0.0,
+                    period)
+
+
+def flyaway_variants(spec: YarnSpec, seed: int = 0, band: float = 0.0) -> tuple[list[FiberSet], dict]:
+    """The flyaway fibers of the three variants in period coordinates (z ∈ [0, P] is the texture; fibers reaching
+    past it are kept whole) and counts: ``shared`` boundary flyaways, ``copies`` of them drawn per variant,
+    ``private`` flyaways per variant. ``band``: half-width δ of the band around each period boundary (length).
+    See the module docstring for the construction."""
+    g = spec.geometry
+    period = g.ply_pitch
+    if not 0 <= band < period / 2:
+        raise ValueError(f"band = {band!r} must be in [0, period/2) = [0, {period / 2:g})")
+    cycle = g.fiber_pitch / g.migration_frequency if g.migration_frequency > 0 else g.fiber_pitch  # loop length
+    n = max(VARIANTS, math.ceil(cycle / period) + 2)
+    long = generate_fibers(spec, length=(n + 1) * period, z_start=-period, seed=seed)
+    fly = long.select(long.kind != KIND_REGULAR)
+    lo, hi = _tube_z_range(tessellate_fibers(fly, sides=TUBE_SIDES), fly.n_fibers)
+    if fly.n_fibers and np.max(hi - lo) > (n - 1) * period:
+        raise ValueError(f"a flyaway spans {np.max(hi - lo):g} along the yarn, longer than the generation window "
+                         f"allows ({(n - 1) * period:g})")
+    first_band = np.floor((lo - band) / period) + 1  # index m of the leftmost band [mP − δ, mP + δ] right of lo
+    shared = np.flatnonzero((first_band == 0) & (hi > -band))
+    s_min = np.floor(-hi[shared] / period).astype(np.int64) + 1  # copies m·P meeting [0, P]
+    s_max = np.ceil((period - lo[shared]) / period).astype(np.int64) - 1
+    n_copies = np.maximum(s_max - s_min + 1, 0)
+    copy_idx = np.repeat(shared, n_copies)
+    copy_shift = (np.repeat(s_min, n_copies) + np.arange(n_copies.sum())
+                  - np.repeat(np.cumsum(n_copies) - n_copies, n_copies)) * period
+    variants, private = [], []
+    for k in range(VARIANTS):
+        own = np.flatnonzero((lo >= k * period + band) & (hi <= (k + 1) * period - band))
+        private.append(int(own.size))
+        idx = np.concatenate([own, copy_idx])
+        variants.append(_shifted(fly, idx, np.concatenate([np.full(own.size, -k * period), copy_shift]), period))
+    return variants, {"shared": int(shared.size), "copies": int(copy_idx.size), "private": private}
+
+
+def flyaway_texture(occluders: RayScene, mesh: TubeMesh | None, period: float, half_width: float, width: int,
+                    height: int, samples: int, column_offset: int = 0) -> np.ndarray:
+    """Mip 0 (H, W, 4) of one flyaway texture of the flyaway tubes ``mesh`` (None: no flyaways) with the depth test
+    against the regular fibers ``occluders``: RGB the coverage-premultiplied strip tangent of the nearest flyaway,
+    A the fraction of sub-samples where it is nearer than every regular fiber."""
+    org, dirs = texel_rays(width, height, samples, period, half_width, 4.0 * half_width, column_offset)
+    rgba = np.zeros((org.shape[0], 4))
+    if mesh is not None:
+        hits = RayScene(mesh).intersect(org, dirs)
+        seen = hits.hit & (hits.t < occluders.intersect(org, dirs).t)
+        rgba[seen, :3] = to_strip(_segment_directions(mesh, hits.prim[seen]))
+        rgba[seen, 3] = 1.0
+    return _texel_sum(rgba, height, width, samples) / (samples * samples)
+
+
+def bake_flyaway_textures(spec: YarnSpec, width: int = 256, height: int = 64, samples: int = 4, seed: int = 0,
+                          band: int = FLYAWAY_BAND_TEXELS, progress=None, scene=None) -> tuple[dict, dict]:
+    """The three seamless flyaway textures ``textures/flyaway/mip{k}`` → (float32 (3, H, W, 4), error estimate,
+    attrs), and the counts of ``flyaway_variants``; empty for a yarn without flyaways. ``band``: half-width of the
+    shared band around the seam in mip-0 columns (at most W/4). ``progress(done, total)`` is called per variant;
+    ``scene``: a prebuilt ``regular_scene(spec, seed)``."""
+    _check_size(width, height, samples)
+    if not spec.has_flyaways:
+        return {}, {}
+    period = spec.geometry.ply_pitch
+    band = min(band, width // 4)
+    variants, counts = flyaway_variants(spec, seed, band * period / width)
+    meshes = [tessellate_fibers(f, sides=TUBE_SIDES) if f.n_fibers else None for f in variants]
+    vertices = [m.vertices.astype(np.float64) for m in meshes if m is not None]
+    half_width = max([spec.radius] + [float(np.hypot(v[:, 0], v[:, 1]).max()) for v in vertices])
+    regular = (scene or regular_scene(spec, seed))[1]
+    level0 = []
+    for k, mesh in enumerate(meshes):
+        level0.append(flyaway_texture(regular, mesh, period, half_width, width, height, samples))
+        if progress is not None:
+            progress(k + 1, VARIANTS)
+    out = {}
+    for k, level in enumerate(mip_levels(np.stack(level0), row_axis=1)):
+        n_sub = samples * samples * (height // level.shape[1]) * (width // level.shape[2])
+        out[f"textures/flyaway/mip{k}"] = (level.astype(np.float32), 1.0 / (2 * n_sub), {
+            "error_kind": _QUANTISATION_KIND.format(s=samples), "error_statistic": "max", "half_width": half_width,
+            "samples_per_axis": samples, "seam_band_texels": band})
+    return out, counts
+
+
+def flyaway_seam_error(textures: dict) -> np.ndarray:
+    """(3, 3) seam errors of the flyaway textures: entry (k, j) is the max |difference| between the seam k → j
+    and the self seams k → k and j → j over the shared band (``seam_band_texels`` mip-0 columns each side):
+    max(|T_j − T_k| over the first band columns, |T_k − T_j| over the last). 0 by construction."""
+    arr, _, attrs = textures["textures/flyaway/mip0"]
+    c = int(attrs["seam_band_texels"])
+    if c == 0:
+        return np.zeros((VARIANTS, VARIANTS))
+    bands = np.concatenate([arr[:, :, :c], arr[:, :, arr.shape[2] - c:]], axis=2).reshape(VARIANTS, -1)
+    return np.abs(bands[:, None] - bands[None, :]).max(axis=2)
+
+
+def bake_textures(spec: YarnSpec, width: int = 256, height: int = 64, samples: int = 4, ao_rays: int = 16,
+                  seed: int = 0, progress=None) -> dict:
+    """Every texture of ``spec``: name (``textures/<texture>/mip{k}``, asset_pack.TABLES) → (float32 array,
+    error estimate, attrs for ``write_pack``'s table_attrs). Flyaway textures only when the yarn has flyaways.
+    ``progress(done, total)`` over the regular AO blocks, then the flyaway variants."""
+    scene = regular_scene(spec, seed)
+    out = bake_regular_textures(spec, width, height, samples, ao_rays, seed, progress, scene)
+    out.update(bake_flyaway_textures(spec, width, height, samples, seed, progress=progress, scene=scene)[0])
+    return out
+
+
+def _stage(out: dict, counts: dict) -> StageResult:
+    return StageResult({k: v[0] for k, v in out.items()}, {k: v[1] for k, v in out.items()},
+                       {k: v[2] for k, v in out.items()}, counts)
+
+
+def bake_regular_stage(spec: YarnSpec, settings: dict, seed: int, progress=None):
+    """Stage ``textures`` of ``knitbake.bake``: settings width, height, samples, ao_rays."""
+    s = settings
+    out = bake_regular_textures(spec, s["width"], s["height"], s["samples"], s["ao_rays"], seed, progress)
+    return _stage(out, {"texels": s["width"] * s["height"], "samples_per_texel": s["samples"] ** 2,
+                        "ao_rays_per_hit": s["ao_rays"]})
+
+
+def bake_flyaway_stage(spec: YarnSpec, settings: dict, seed: int, progress=None):
+    """Stage ``flyaway`` of ``knitbake.bake``: settings width, height, samples."""
+    s = settings
+    out, counts = bake_flyaway_textures(spec, s["width"], s["height"], s["samples"], seed, progress=progress)
+    return _stage(out, {"texels": s["width"] * s["height"], "samples_per_texel": s["samples"] ** 2,
+                        "shared_flyaways": counts["shared"], "shared_copies": counts["copies"],
+                        "private_flyaways": counts["private"]})

@@ -1,0 +1,353 @@
+"""Wavefront path tracer over explicit, tessellated fibers (the reference renderer and the bake's ground truth).
+
+Design
+------
+* Waves: all live paths advance one bounce per wave. Numba kernels generate camera rays, shade hits (next-event
+  estimation, BCSDF sampling, Russian roulette) and write each path's own slots only; ``RayScene`` intersects the
+  wave's rays on 2 Python threads (Embree releases the GIL). No kernel runs while another Python thread runs one.
+* Fibers scatter as far-field curves: at a hit on fiber f the BCSDF of f's yarn type (``knitrun.shading.fiber_bcsdf``) is
+  evaluated in the frame of the hit segment's axis (x = tangent); the scattered or shadow ray leaves from the far
+  side of that segment's tube (the point at the tube radius, at the hit's axial position, on the side the new
+  direction points to), so a fiber never shadows or re-hits itself. This is the convention of a BCSDF, which
+  already integrates over the fiber's width.
+* Lights: directional lights (``direction`` toward the light, ``irradiance`` RGB on a plane facing it) and an
+  optional environment (``env_light.EnvLight``). Environment NEE and BCSDF sampling are combined with the power
+  heuristic; a directional light is a delta light (NEE only).
+* Camera rays that miss see ``background`` (if None: the environment, else black). Paths that escape after a
+  bounce see the environment (black without one).
+* ``max_depth`` counts scattering events; Russian roulette from ``rr_depth`` on, survival probability
+  min(0.95, max throughput). ``yarn_only_radius`` > 0 is the bake's "no global scattering" mode for a yarn along
+  the z axis: a path that reaches geometry outside that cylinder ends there without scattering (no light it would
+  bring back is counted; escaping to the environment is still counted).
+* Determinism: every random number is a hash of (seed, path id, depth, dimension), path id = sample·pixels +
+  pixel; results do not depend on thread count or batching.
+
+Units: lengths in scene units; radiance in the lights' units. Images are (H, W, 3) float64 means over spp.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit, prange
+
+from knitbake.trace.env_light import EnvLight, env_pdf, env_pixel, env_sample
+from knitbake.trace.ray_scene import RayScene
+from knitbake.fibers.tessellate import TubeMesh
+from knitrun.render.camera import Camera, tan_half_fov
+from knitrun.shading.fiber_bcsdf import N_PARAMS, context, evaluate, pdf, sample
+
+_MASK = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+
+@dataclass
+class TracerScene:
+    """Everything the tracer needs: geometry, per-fiber material, lights."""
+
+    mesh: TubeMesh
+    fiber_type: np.ndarray  # (F,) int32 index into params
+    params: np.ndarray  # (types, N_PARAMS) fiber BCSDF parameters
+    light_dirs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # toward the light, unit
+    light_irradiance: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    env: EnvLight | None = None
+    background: np.ndarray | None = None
+    ray_scene: RayScene | None = None
+
+    def __post_init__(self):
+        if self.ray_scene is None:
+            self.ray_scene = RayScene(self.mesh)
+        self.params = np.ascontiguousarray(self.params, dtype=np.float64).reshape(-1, N_PARAMS)
+        self.light_dirs = np.asarray(self.light_dirs, float).reshape(-1, 3)
+        norms = np.linalg.norm(self.light_dirs, axis=1, keepdims=True)
+        if np.any(norms <= 0):
+            raise ValueError("a directional light has a zero direction")
+        self.light_dirs = self.light_dirs / norms
+        self.light_irradiance = np.asarray(self.light_irradiance, float).reshape(-1, 3)
+
+
+@dataclass
+class RenderStats:
+    rays: int = 0
+    seconds: float = 0.0
+    spp: int = 0
+
+    @property
+    def rays_per_second(self):
+        return self.rays / self.seconds if self.seconds > 0 else 0.0
+
+
+# --- random numbers ----------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _mix(x):
+    """splitmix64 finaliser."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+@njit(cache=True)
+def uniform(seed, path, depth, dim):
+    """A uniform in [0, 1) from (seed, path, depth, dim), independent of evaluation order."""
+    x = _mix(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(path))
+    x = _mix(x + np.uint64(depth) * np.uint64(0xD1B54A32D192ED03) + np.uint64(dim))
+    return float(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+# --- camera ------------------------------------------------------------------------------------------------------
+
+@njit(parallel=True, cache=True)
+def _camera_rays(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, first_sample, n_samples, org, dirs):
+    n_pix = width * height
+    for n in prange(n_samples * n_pix):
+        pix = n % n_pix
+        path = (first_sample + n // n_pix) * n_pix + pix
+        px = (pix % width + uniform(seed, path, 0, 0)) / width
+        py = (pix // width + uniform(seed, path, 0, 1)) / height
+        sx = (2.0 * px - 1.0) * width / height
+        sy = 1.0 - 2.0 * py
+        for k in range(3):
+            if ortho_h > 0.0:
+                org[n, k] = pos[k] + 0.5 * ortho_h * (sx * right[k] + sy * up[k])
+                dirs[n, k] = fwd[k]
+            else:
+                org[n, k] = pos[k]
+                dirs[n, k] = fwd[k] + tan_half * (sx * right[k] + sy * up[k])
+        norm = math.sqrt(dirs[n, 0] ** 2 + dirs[n, 1] ** 2 + dirs[n, 2] ** 2)
+        for k in range(3):
+            dirs[n, k] /= norm
+
+
+# --- shading -----------------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _frame(t):
+    """Two unit vectors completing the unit tangent t to an orthonormal frame."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(t[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = a - (a[0] * t[0] + a[1] * t[1] + a[2] * t[2]) * t
+    e1 /= math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    e2 = np.array([t[1] * e1[2] - t[2] * e1[1], t[2] * e1[0] - t[0] * e1[2], t[0] * e1[1] - t[1] * e1[0]])
+    return e1, e2
+
+
+@njit(cache=True)
+def _to_local(w, t, e1, e2, out):
+    out[0] = w[0] * t[0] + w[1] * t[1] + w[2] * t[2]
+    out[1] = w[0] * e1[0] + w[1] * e1[1] + w[2] * e1[2]
+    out[2] = w[0] * e2[0] + w[1] * e2[1] + w[2] * e2[2]
+
+
+@njit(cache=True)
+def _leave_point(axis_pt, t, radius, hit, w, out):
+    """Start point for a ray in direction w leaving the tube (axis through axis_pt along t, given radius) from
+    the side w points to, at the axial position of ``hit``."""
+    s = (hit[0] - axis_pt[0]) * t[0] + (hit[1] - axis_pt[1]) * t[1] + (hit[2] - axis_pt[2]) * t[2]
+    wt = w[0] * t[0] + w[1] * t[1] + w[2] * t[2]
+    v = np.empty(3)
+    norm = 0.0
+    for k in range(3):
+        v[k] = w[k] - wt * t[k]
+        norm += v[k] * v[k]
+    if norm < 1e-18:  # along the axis: leave from the hit's own side
+        norm = 0.0
+        for k in range(3):
+            v[k] = hit[k] - axis_pt[k] - s * t[k]
+            norm += v[k] * v[k]
+    norm = math.sqrt(max(norm, 1e-300))
+    for k in range(3):
+        out[k] = axis_pt[k] + s * t[k] + radius * v[k] / norm
+
+
+@njit(parallel=True, cache=True)
+def leave_points(prims, hits, dirs, tri_fiber, tri_segment, axis_points, tube_radius, out):
+    """Batch form of the leave-point rule: out[n] is where a ray in direction dirs[n] leaves the fiber hit at
+    hits[n] (triangle prims[n])."""
+    for n in prange(prims.shape[0]):
+        s = tri_segment[prims[n]]
+        a = axis_points[s]
+        t = axis_points[s + 1] - a
+        t /= math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+        _leave_point(a, t, tube_radius[tri_fiber[prims[n]]] * 1.0001, hits[n], dirs[n], out[n])
+
+
+@njit(parallel=True, cache=True)
+def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput, radiance, prev_pdf, tri_fiber, tri_segment,
+           axis_points, tube_radius, fiber_type, params, light_dirs, light_irr, has_env, env_rad, env_row, env_col,
+           env_prob, background, camera_background, rr_depth, yarn_only_r2, new_org, new_dirs, alive,
+           shadow_org, shadow_dirs, shadow_val):
+    """One wave: escaped paths gather the environment/background; hit paths (when ``scatter``) queue shadow rays
+    for every light and sample their next direction. Each path n writes only row n of every output."""
+    n_lights = light_dirs.shape[0]
+    for n in prange(org.shape[0]):
+        alive[n] = False
+        for j in range(shadow_val.shape[1]):
+            for k in range(3):
+                shadow_val[n, j, k] = 0.0
+        d = dirs[n]
+        if hit_prim[n] < 0:  # escaped
+            if depth == 0:
+                for k in range(3):
+                    radiance[n, k] += throughput[n, k] * background[k] if camera_background else 0.0
+            if has_env and (depth > 0 or not camera_background):
+                r, c = env_pixel(env_rad, d)
+                w = 1.0
+                if prev_pdf[n] > 0.0:
+                    pe = env_pdf(env_rad, env_prob, d)
+                    w = prev_pdf[n] ** 2 / (prev_pdf[n] ** 2 + pe * pe)
+                for k in range(3):
+                    radiance[n, k] += throughput[n, k] * env_rad[r, c, k] * w
+            continue
+        if not scatter:  # depth limit reached: a hit adds nothing and ends the path
+            continue
+        pid = path_id[n]
+        prim = hit_prim[n]
+        f = tri_fiber[prim]
+        s = tri_segment[prim]
+        a = axis_points[s]
+        t = axis_points[s + 1] - a
+        t /= math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+        e1, e2 = _frame(t)
+        hit = np.empty(3)
+        wo = np.empty(3)
+        for k in range(3):
+            hit[k] = org[n, k] + hit_t[n] * d[k]
+            wo[k] = -d[k]
+        if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
+            continue  # scattering outside the yarn's cylinder is global scattering: the path ends
+        wo_l = np.empty(3)
+        _to_local(wo, t, e1, e2, wo_l)
+        p = params[fiber_type[f]]
+        ctx = context(p, wo_l)
+        rad = tube_radius[f] * 1.0001
+        wi_l = np.empty(3)
+        fval = np.empty(3)
+        # next-event estimation: directional lights
+        for j in range(n_lights):
+            _to_local(light_dirs[j], t, e1, e2, wi_l)
+            evaluate(p, ctx, wi_l, fval)
+            cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
+            _leave_point(a, t, rad, hit, light_dirs[j], shadow_org[n, j])
+            for k in range(3):
+                shadow_dirs[n, j, k] = light_dirs[j, k]
+                shadow_val[n, j, k] = throughput[n, k] * fval[k] * cos_i * light_irr[j, k]
+        # next-event estimation: environment (MIS with the BCSDF)
+        if has_env:
+            wi = np.empty(3)
+            pe = env_sample(env_rad, env_row, env_col, env_prob, uniform(seed, pid, depth + 1, 0),
+                            uniform(seed, pid, depth + 1, 1), uniform(seed, pid, depth + 1, 2),
+                            uniform(seed, pid, depth + 1, 3), wi)
+            if pe > 0.0:
+                _to_local(wi, t, e1, e2, wi_l)
+                evaluate(p, ctx, wi_l, fval)
+                pb = pdf(p, ctx, wi_l)
+                cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
+                r, c = env_pixel(env_rad, wi)
+                mis = pe * pe / (pe * pe + pb * pb)
+                _leave_point(a, t, rad, hit, wi, shadow_org[n, n_lights])
+                for k in range(3):
+                    shadow_dirs[n, n_lights, k] = wi[k]
+                    shadow_val[n, n_lights, k] = throughput[n, k] * fval[k] * cos_i * env_rad[r, c, k] * mis / pe
+        # continue the path: sample the BCSDF
+        pb = sample(p, ctx, uniform(seed, pid, depth + 1, 4), uniform(seed, pid, depth + 1, 5),
+                    uniform(seed, pid, depth + 1, 6), wi_l)
+        if not pb > 0.0:
+            continue
+        evaluate(p, ctx, wi_l, fval)
+        cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
+        best = 0.0
+        for k in range(3):
+            throughput[n, k] *= fval[k] * cos_i / pb
+            best = max(best, throughput[n, k])
+        if depth + 1 >= rr_depth:
+            q = min(0.95, best)
+            if uniform(seed, pid, depth + 1, 7) >= q:
+                continue
+            for k in range(3):
+                throughput[n, k] /= q
+        wi = np.empty(3)
+        for k in range(3):
+            wi[k] = wi_l[0] * t[k] + wi_l[1] * e1[k] + wi_l[2] * e2[k]
+        _leave_point(a, t, rad, hit, wi, new_org[n])
+        for k in range(3):
+            new_dirs[n, k] = wi[k]
+        prev_pdf[n] = pb
+        alive[n] = True
+
+
+def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_depth: int = 16, rr_depth: int = 3,
+           yarn_only_radius: float = 0.0, samples_per_pass: int | None = None, progress=None):
+    """Render ``spp`` samples per pixel; returns (image (H, W, 3), RenderStats). ``progress(done, total)`` is
+    called after every pass of ``samples_per_pass`` samples per pixel."""
+    if spp < 1 or max_depth < 1:
+        raise ValueError(f"spp = {spp} and max_depth = {max_depth} must be ≥ 1")
+    w, h = int(camera.width), int(camera.height)
+    n_pix = w * h
+    if samples_per_pass is None:
+        samples_per_pass = max(1, min(spp, (1 << 21) // n_pix))
+    fwd, right, up = camera.basis()
+    tan_half = tan_half_fov(camera)
+    mesh = scene.mesh
+    env = scene.env
+    has_env = env is not None
+    env_arrays = (env.radiance, env.row_cdf, env.col_cdf, env.pixel_prob) if has_env else \
+        (np.zeros((1, 1, 3)), np.zeros(2), np.zeros((1, 2)), np.zeros((1, 1)))
+    camera_background = scene.background is not None or not has_env
+    background = np.zeros(3) if scene.background is None else np.asarray(scene.background, float)
+    n_shadow = scene.light_dirs.shape[0] + (1 if has_env else 0)
+    accum = np.zeros((n_pix, 3))
+    stats = RenderStats()
+    t_start = time.perf_counter()
+    done = 0
+    while done < spp:
+        n_s = min(samples_per_pass, spp - done)
+        n = n_s * n_pix
+        org = np.empty((n, 3))
+        dirs = np.empty((n, 3))
+        _camera_rays(np.asarray(camera.position, float), fwd, right, up, w, h, tan_half, float(camera.ortho_height),
+                     seed, done, n_s, org, dirs)
+        path_id = (done * n_pix + np.arange(n)).astype(np.int64)
+        slot = np.arange(n)
+        throughput = np.ones((n, 3))
+        radiance = np.zeros((n, 3))
+        prev_pdf = np.zeros(n)
+        for depth in range(max_depth + 1):
+            if slot.size == 0:
+                break
+            hits = scene.ray_scene.intersect(org, dirs)
+            stats.rays += slot.size
+            m = slot.size
+            new_org, new_dirs = np.empty((m, 3)), np.empty((m, 3))
+            alive = np.zeros(m, np.bool_)
+            sh_org, sh_dirs, sh_val = np.empty((m, max(n_shadow, 1), 3)), np.empty((m, max(n_shadow, 1), 3)), \
+                np.zeros((m, max(n_shadow, 1), 3))
+            tp, rad, pp = throughput[slot], np.zeros((m, 3)), prev_pdf[slot]
+            _shade(seed, depth, depth < max_depth, path_id[slot], org, dirs, hits.t, hits.prim.astype(np.int64), tp,
+                   rad, pp,
+                   mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, scene.fiber_type,
+                   scene.params, scene.light_dirs, scene.light_irradiance, has_env, *env_arrays, background,
+                   camera_background, rr_depth, float(yarn_only_radius) ** 2, new_org, new_dirs, alive, sh_org,
+                   sh_dirs, sh_val)
+            radiance[slot] += rad
+            if n_shadow and depth < max_depth:
+                live = np.any(sh_val[:, :n_shadow] > 0, axis=2)
+                idx = np.nonzero(live)
+                if idx[0].size:
+                    blocked = scene.ray_scene.occluded(sh_org[idx], sh_dirs[idx], np.inf)
+                    stats.rays += idx[0].size
+                    contrib = np.where(blocked[:, None], 0.0, sh_val[idx])
+                    np.add.at(radiance, slot[idx[0]], contrib)
+            throughput[slot] = tp
+            prev_pdf[slot] = pp
+            slot = slot[alive]
+            org, dirs = new_org[alive], new_dirs[alive]
+        for sample_image in radiance.reshape(n_s, n_pix, 3):  # in sample order: the sum ignores the batching
+            accum += sample_image
+        done += n_s
+        if progress is not None:
+            progress(done, spp)
+    stats.seconds = time.perf_counter() - t_start
+    stats.spp = spp
+    return (accum / spp).reshape(h, w, 3), stats

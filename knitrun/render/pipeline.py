@@ -1,0 +1,348 @@
+"""The strip renderer (seed 000 §5.2): a scene file's yarn curves and asset packs → a linear HDR image.
+
+Passes, each timed (``RenderResult.timings``, seconds):
+
+1. ``load``: the scene's curves at ``render.frame`` (a stitch mesh is simulated at rest by ``knitrun.sim.simulate``),
+   evaluated by their curve type (``data_formats.curve_eval``: PL as drawn, C0 as uniform Catmull-Rom, BS, BZ) into
+   polylines of ``samples_per_segment`` samples per smooth segment, each sample with its rest arc length; each
+   yarn entry's pack (``knitrun.render.yarn_look``), reading only the tables the scene needs.
+2. ``srbf_fit`` (environment light only): J = ``render.srbf_count`` spherical Gaussians fitted to the map
+   (``knitrun.shading.srbf_fit``); the fit's errors are in ``RenderResult.facts``.
+3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample G-buffer (``strip_raster``);
+   with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second one. A flyaway
+   sample is kept where no regular strip is nearer than the yarn radius.
+4. ``shadow``: per directional light a yarn-level shadow map of ``render.shadow_map_size``² texels, filtered by PCF
+   (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
+   angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by 1.5 yarn
+   radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job).
+5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
+   (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
+   frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
+   seen from azimuth 0 shifted along its axis by twist_sign·γ/(2π) ply periods, so the texture is read at
+   u = (s − twist_sign·γ/(2π)·period)/period, γ = atan2(ω_o·(T × N), ω_o·N) with N of the curve's yarn frame
+   (``data_formats.curve_eval.yarn_frame``, the frame the reference sweeps its fibers in). The ply pattern is
+   then where the reference has it, and moves along the yarn as the camera circles it, as a real yarn's does.
+6. ``resolve``: coverage-weighted MSAA resolve over the background, the flyaway layer on top.
+
+``Features`` switch the baked terms off for ablations (seed 000 Fig. 7): without ``xi`` the correction is 1,
+without ``fiber_shadowing`` Ψ^Fiber_G = 1 (and no fiber lies between a visible fiber and the light), without
+``flyaways`` no flyaway layer; ``full_tables`` False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N}
+(the paper's) instead of the pack's unfactorized tables.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from data_formats.bcc import read_bcc
+from data_formats.bcc import sniff as is_bcc
+from data_formats.curve_eval import yarn_frame
+from data_formats.images import read_image
+from data_formats.scene import EnvironmentLight, Scene
+from data_formats.yarn_curves import read_yarn_curves
+
+from knitrun.shading.builtin_sky import sky_image
+from knitrun.render.camera import Camera
+from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
+from knitrun.shading.srbf_fit import fit_srbf
+from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
+from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
+from knitrun.render.yarn_look import load_look, no_full_table, ones_factor
+
+BUILTIN_ENVIRONMENTS = {"sky": sky_image}
+SHADOW_BIAS_RADII = 1.5
+LOBE_SHADOW_DIVISOR = 4
+MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
+MS_MERGE_DEG = 30.0  # lobes this close share one multiple-scattering evaluation
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class Features:
+    """Which baked terms the renderer uses (all on: the full model)."""
+
+    xi: bool = True
+    fiber_shadowing: bool = True
+    flyaways: bool = True
+    full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
+
+
+ABLATIONS = {
+    "plain_ds": Features(xi=False, fiber_shadowing=False, flyaways=False),
+    "xi": Features(xi=True, fiber_shadowing=False, flyaways=False),
+    "xi_shadowing": Features(xi=True, fiber_shadowing=True, flyaways=False),
+    "full": Features(),
+    "no_tables": Features(xi=False, fiber_shadowing=False),  # the full renderer without ξ and Ψ^Fiber
+    "factored": Features(full_tables=False),
+}
+
+
+@dataclass
+class RenderResult:
+    image: np.ndarray  # (H, W, 3) float32, linear RGB
+    timings: dict  # pass → seconds
+    facts: dict = field(default_factory=dict)
+
+
+@dataclass
+class _Polylines:
+    points: np.ndarray  # (P, 3)
+    offsets: np.ndarray  # (C+1,)
+    rest: np.ndarray  # (P,)
+    entry: np.ndarray  # (C,) yarn entry index
+    normal: np.ndarray  # (P, 3) the yarn frame's normal N (data_formats.curve_eval.yarn_frame)
+
+
+def _scene_curves(entry, units, frame):
+    if entry.stitch_mesh is not None:
+        from data_formats.stitch_mesh import load_stitch_mesh
+        from knitrun.sim.simulate import simulate
+
+        mesh = load_stitch_mesh(entry.stitch_mesh)
+        curves, _ = simulate(mesh, mesh.vertices[None], radius=entry.radius)
+        return curves, 0
+    curves = read_bcc(entry.curves, units=units) if is_bcc(entry.curves) else read_yarn_curves(entry.curves)
+    return curves, frame
+
+
+def _polylines(scene: Scene, samples_per_segment: int) -> _Polylines:
+    pts, rest, normals, entry_of, sizes = [], [], [], [], [0]
+    for k, entry in enumerate(scene.yarns):
+        curves, frame = _scene_curves(entry, scene.units, scene.render.frame)
+        wanted = entry.yarn_type_indices or tuple(range(len(curves.yarn_types)))
+        for c in range(len(curves.offsets) - 1):
+            control = curves.points[frame, curves.offsets[c]:curves.offsets[c + 1]]
+            if curves.yarn_type[c] not in wanted or len(control) < 2 or np.all(control == control[0]):
+                continue  # not this entry's, or nothing to draw (a point)
+            xyz, sigma, _, normal = yarn_frame(curves, c, frame,
+                                               None if curves.curve_type == "PL" else samples_per_segment)
+            pts.append(xyz)
+            rest.append(sigma)
+            normals.append(normal)
+            entry_of.append(k)
+            sizes.append(len(xyz))
+    if not pts:
+        return _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)))
+    return _Polylines(np.concatenate(pts), np.cumsum(sizes), np.concatenate(rest), np.array(entry_of, np.int64),
+                      np.concatenate(normals))
+
+
+def view_phase_arclength(points, lines, looks):
+    """Rest arc length shifted so the texture shows the yarn as seen from the view's azimuth (module docstring)."""
+    seg = points["segment"].astype(np.int64)
+    s = points["arclength"].astype(np.float64)
+    if len(seg) == 0:
+        return s
+    s_a, s_b = lines.rest[seg], lines.rest[seg + 1]
+    ds = s_b - s_a
+    f = np.clip(np.where(ds > 0, (s - s_a) / np.where(ds > 0, ds, 1.0), 0.0), 0.0, 1.0)[:, None]
+    t = points["tangent"]
+    n = (1.0 - f) * lines.normal[seg] + f * lines.normal[seg + 1]
+    n -= np.sum(n * t, axis=1, keepdims=True) * t
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(norm > 1e-9, n / np.maximum(norm, 1e-300), lines.normal[seg])
+    wo = points["view_dir"]
+    gamma = np.arctan2(np.sum(wo * np.cross(t, n), axis=1), np.sum(wo * n, axis=1))
+    sign = np.array([look.twist_sign for look in looks])[points["yarn"]]
+    period = np.array([look.period for look in looks])[points["yarn"]]
+    return s - sign * gamma / (2.0 * np.pi) * period
+
+
+def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MERGE_DEG):
+    """Distant lights for the environment's multiple scattering (``strip_shading`` docstring): lobes in order of
+    decreasing irradiance luminance join the first cluster within ``merge_deg`` of them, else start one. Returns
+    (directions (C, 3), irradiance (C, 3), [visibility (C, N) per receiver set])."""
+    energy = np.asarray(lobe_w) * (2.0 * np.pi / np.maximum(lobe_lambda, 1e-300)
+                                   * -np.expm1(-2.0 * np.asarray(lobe_lambda)))[:, None]
+    luminance = energy @ LUMINANCE
+    cos_merge = math.cos(math.radians(merge_deg))
+    members, axes = [], []
+    for j in np.argsort(-luminance, kind="stable"):
+        if luminance[j] <= 0.0:
+            continue
+        k = next((k for k, a in enumerate(axes) if a @ lobe_dir[j] >= cos_merge), None)
+        if k is None:
+            members.append([j])
+            axes.append(np.asarray(lobe_dir[j], float))
+        else:
+            members[k].append(j)
+    dirs, irr, vis = [], [], [[] for _ in lobe_vis]
+    for group in members:
+        w = luminance[group] / luminance[group].sum()
+        d = (w[:, None] * lobe_dir[group]).sum(axis=0)
+        dirs.append(d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-12 else lobe_dir[group[0]])
+        irr.append(energy[group].sum(axis=0))
+        for out, v in zip(vis, lobe_vis):
+            out.append(w @ v[group])
+    n = [v.shape[1] for v in lobe_vis]
+    return (np.array(dirs, np.float64).reshape(-1, 3), np.array(irr, np.float64).reshape(-1, 3),
+            [np.array(v, np.float64) if v else np.zeros((0, m)) for v, m in zip(vis, n)])
+
+
+def _camera(scene: Scene) -> Camera:
+    c = scene.camera
+    return Camera(np.array(c.position, float), np.array(c.look_at, float), np.array(c.up, float), c.width, c.height,
+                  fov_deg=c.fov_deg if c.fov_deg is not None else 40.0, ortho_height=c.ortho_height or 0.0)
+
+
+def _pack_path(k, entry, packs):
+    """The pack of yarn entry k: ``packs`` by the entry's index, its ``yarn`` as written or its spec's name, else
+    the scene's ``pack``."""
+    path = next((packs[key] for key in (str(k), entry.yarn, entry.spec.name) if key in packs), entry.pack)
+    if path is None:
+        name = entry.spec.name
+        raise ValueError(f"yarns[{k}] ({name}) has no asset pack: bake one (knitbake bake {entry.yarn} -o "
+                         f"{name}.h5) and name it in the scene (pack = ...) or with --pack {name}=FILE")
+    if not Path(path).is_file():
+        raise ValueError(f"yarns[{k}] ({entry.yarn}): pack {path} does not exist")
+    return path
+
+
+def _environment(scene: Scene):
+    envs = [light for light in scene.lights if isinstance(light, EnvironmentLight)]
+    if not envs:
+        return None
+    env = envs[0]
+    image = BUILTIN_ENVIRONMENTS[env.builtin]() if env.builtin else read_image(env.file)
+    return fit_srbf(np.asarray(image, np.float64) * np.asarray(env.scale, np.float64),
+                    n_lobes=scene.render.srbf_count, seed=scene.render.seed)
+
+
+def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers):
+    """Yarn-level visibility of each receiver set (position, bias) toward ``direction``."""
+    if len(lines.entry) == 0:
+        return [np.ones(len(p)) for p, _ in receivers]
+    sm = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius_of_curve, lines.entry, direction,
+                          size, lines.points.min(axis=0), lines.points.max(axis=0))
+    return [shadow_visibility(sm, p, bias, angular_radius) for p, bias in receivers]
+
+
+def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,
+           progress=None) -> RenderResult:
+    """Render ``scene``; ``packs`` maps an entry index (as a string), a yarn as written in the scene or a yarn spec's
+    name to a pack path, overriding the scene's ``pack``; ``progress(name, seconds)`` is called as each pass ends.
+    ValueError (one line) for a scene the renderer cannot draw (a missing pack, a pack for another yarn)."""
+    packs = packs or {}
+    timings, facts = {}, {}
+    clock = [time.perf_counter()]
+
+    def lap(name):
+        now = time.perf_counter()
+        start = clock[0]
+        timings[name] = timings.get(name, 0.0) + now - clock[0]
+        clock[0] = now
+        if progress is not None:
+            progress(name, now - start)
+
+    environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
+    looks = [load_look(_pack_path(k, e, packs), e, scene.units, corrections=features.xi or features.fiber_shadowing,
+                       full_tables=features.full_tables, flyaways=features.flyaways, environment=environment)
+             for k, e in enumerate(scene.yarns)]
+    for look in looks:
+        if not features.xi:
+            look.xi_full, look.xi_m, look.xi_n = no_full_table(), ones_factor(), ones_factor()
+        if not features.fiber_shadowing:
+            look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
+            look.n_occluded = 0.0
+    lines = _polylines(scene, samples_per_segment)
+    facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
+    lap("load")
+
+    fit = _environment(scene)
+    if fit is not None:
+        facts.update(srbf_lobes=int(len(fit.sharpness)), srbf_relative_l2_error=fit.relative_l2_error,
+                     srbf_irradiance_error=fit.irradiance_error)
+        lap("srbf_fit")
+
+    camera = _camera(scene)
+    msaa = scene.render.msaa
+    pattern = SAMPLE_PATTERNS[msaa]
+    radius = np.array([looks[k].radius for k in lines.entry])
+    fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
+    gbuffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
+    points = shading_points(gbuffer, camera, pattern)
+    drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
+    fly_points = None
+    if drawn_fly and len(lines.entry):
+        fly_curves = np.isin(lines.entry, drawn_fly)
+        fly_buffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest,
+                                      np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
+        tolerance = float(radius.max())
+        mask = ~gbuffer.coverage | (fly_buffer.depth <= gbuffer.depth + tolerance)
+        mask &= np.isin(fly_buffer.yarn, drawn_fly)
+        fly_points = shading_points(fly_buffer, camera, pattern, mask=mask)
+    facts.update(shading_points=int(len(points["weight"])),
+                 flyaway_points=0 if fly_points is None else int(len(fly_points["weight"])))
+    lap("raster")
+
+    sets = [points] + ([fly_points] if fly_points is not None else [])
+    bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
+    receivers = [(s["position"], bias_radius[s["yarn"]] if len(s["yarn"]) else np.zeros(0)) for s in sets]
+    directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
+    light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)
+    light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
+    size = scene.render.shadow_map_size
+    light_vis = [np.empty((len(light_dir), len(s["weight"]))) for s in sets]
+    for i, d in enumerate(light_dir):
+        for out, vis in zip(light_vis, _visibility(lines, radius, d, size, 0.0, receivers)):
+            out[i] = vis
+    lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
+    lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
+    lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
+    lobe_vis = [np.empty((len(lobe_dir), len(s["weight"]))) for s in sets]
+    for j, d in enumerate(lobe_dir):
+        angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
+        for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
+                                                  receivers)):
+            out[j] = vis
+    ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
+    facts["ms_lights"] = int(len(ms_dir))
+    lap("shadow")
+
+    h, w = camera.height, camera.width
+    rgb, alpha = np.zeros((len(points["weight"]), 3)), np.zeros(len(points["weight"]))
+    for k, look in enumerate(looks):
+        idx = np.flatnonzero(points["yarn"] == k)
+        im = look.im if look.im is not None else _NO_IM
+        shade_regular(idx, points["view_dir"], points["tangent"],
+                      view_phase_arclength(points, lines, looks), points["v"].astype(np.float64), points["footprint"],
+                      look.params, look.ds, look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm,
+                      look.psi_gn,
+                      look.tangent.data, look.tangent.offset, look.tangent.rows, look.tangent.cols,
+                      look.coverage.data, look.coverage.offset, look.coverage.rows, look.coverage.cols,
+                      look.period, look.radius, look.n_occluded, look.n_cross,
+                      light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_vis[0], ms_dir, ms_e,
+                      ms_vis[0], *im, rgb, alpha)
+    if fly_points is not None:
+        fly_rgb, fly_alpha = np.zeros((len(fly_points["weight"]), 3)), np.zeros(len(fly_points["weight"]))
+        for k in drawn_fly:
+            look = looks[k]
+            idx = np.flatnonzero(fly_points["yarn"] == k)
+            im = look.im if look.im is not None else _NO_IM
+            shade_flyaway(idx, fly_points["view_dir"], fly_points["tangent"],
+                          view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
+                          fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params,
+                          look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,
+                          look.period, look.flyaway_half_width, look.radius, look.psi_full, look.psi_gm,
+                          look.psi_gn, light_dir, light_e, light_vis[1], lobe_dir,
+                          lobe_lambda, lobe_w, lobe_vis[1], *im, fly_rgb, fly_alpha)
+    lap("shade")
+
+    image = np.empty((h * w, 3))
+    resolve(points["start"], points["weight"], rgb, alpha,
+            np.ascontiguousarray(np.broadcast_to(np.asarray(scene.background, np.float64), (h * w, 3))), image)
+    if fly_points is not None:
+        resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, image.copy(), image)
+    if not np.all(np.isfinite(image)):
+        raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
+    lap("resolve")
+    facts["residuals"] = {look.name: look.residuals for look in looks}
+    return RenderResult(image.reshape(h, w, 3).astype(np.float32), timings, facts)
+
+
+_NO_IM = (np.zeros((1, 1, 1, 1, 3)), np.zeros(4), np.ones(4), np.zeros(4, np.bool_), np.arange(4, dtype=np.int64))

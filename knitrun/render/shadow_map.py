@@ -1,0 +1,165 @@
+"""Yarn-level shadow map for a distant light: yarns as tubes, filtered by PCSS (percentage-closer soft shadows).
+
+Units and conventions:
+
+* ``direction`` is the unit vector from the scene TOWARD the light. The light camera (``knitrun.render.camera``) is
+  orthographic, square, looks along −direction at the centre of the bounding sphere (radius R_s) of the scene box
+  grown by the largest yarn radius, and sits at distance 2·R_s from that centre (outside the sphere, so every yarn
+  lies at view depth in [R_s, 3·R_s]); ortho_height = 2·R_s.
+* The map is rendered by ``rasterize_strips`` (msaa 1): strips face the light camera, so each yarn covers its tube
+  silhouette of half-width radius, at the depth of the tube's axis plane. ``depth`` is that view depth (scene units
+  along fwd from the camera plane) of the nearest strip, +inf where no yarn covers the texel centre.
+* Texel (row i, column j) covers light-view x ∈ [−h/2 + j·τ, −h/2 + (j + 1)·τ) and y ∈ (h/2 − (i + 1)·τ, h/2 − i·τ]
+  (h = ortho_height, τ = h / size the texel size); row 0 is the top (+up). Its centre, where the depth was taken, is
+  x = −h/2 + (j + ½)τ, y = h/2 − (i + ½)τ. Continuous texel coordinates of view point (x, y): u = x/τ + size/2
+  (columns), w = size/2 − y/τ (rows); texel centres at integer + ½.
+* A receiver at view depth z is occluded by a texel of depth d when d < z − bias. With bias 1.5·radius a yarn never
+  shadows its own surface (the strip passes through the axis; the far side lies at axis + radius): yarn-level
+  shadows are between yarns, self-shadowing is fiber-level (``ASSET_PACK.md`` §7).
+
+PCSS (Fernando 2005) for a light of angular radius θ (``light_angular_radius``, radians; 0 = a delta light):
+
+1. Blocker search: n × n taps (n = min(8, ⌈2r⌉ + 1), nearest texel) evenly spaced over [−r, r]² texels around the
+   receiver, r = min(max(pcf_radius, (z − d_min)·tanθ / τ), 32) with d_min the map's nearest depth; d_avg is the
+   mean depth of the occluding taps. None → visibility 1. (With r = 32 the stride is ~9 texels: a blocker thinner
+   than that between taps can be missed.)
+2. Penumbra half-width: (z − d_avg)·tanθ scene units → r' = min(max(pcf_radius, that / τ), 32) texels.
+3. PCF: the mean, over n' × n' taps (n' = min(8, ⌈2r'⌉), at the cell centres of [−r', r']²), of the bilinearly
+   weighted lit test (d ≥ z − bias, texels outside the map lit) of the 4 texels around each tap.
+
+Receivers off the map or with non-finite positions are lit (1). Every receiver is independent, so results are the
+same for any thread count.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from knitrun.render.camera import Camera, view_matrix
+from knitrun.render.strip_raster import rasterize_strips
+
+MAX_FILTER_TEXELS = 32.0  # cap on the blocker-search and PCF half-widths
+MAX_TAPS = 8  # taps per axis of each filter grid
+
+
+@dataclass
+class ShadowMap:
+    """Depth map of the yarns seen from a distant light (module docstring)."""
+
+    view: np.ndarray  # (3, 3) rows (right, up, fwd) of the light camera; fwd = −direction
+    origin: np.ndarray  # (3,) light-camera position; view coordinates of p are view @ (p − origin)
+    ortho_height: float  # side of the square view, scene units
+    size: int  # texels per side
+    depth: np.ndarray  # (size, size) float32 view depth of the nearest yarn strip, +inf where none
+
+
+def build_shadow_map(points, offsets, closed, rest_arclength, radius, yarn_id, direction, size, bounds_lo,
+                     bounds_hi, closing_length=None) -> ShadowMap:
+    """Render the yarn curves (as in ``rasterize_strips``; ``radius`` (C,) or a scalar) into a ``size`` × ``size``
+    shadow map for a light toward unit-izable ``direction`` (3,), framing the box [bounds_lo, bounds_hi] (yarn
+    beyond it may fall off the map and cast no shadow). ValueError for size < 1, a zero or non-finite direction, or
+    bad bounds."""
+    direction = np.asarray(direction, np.float64).reshape(3)
+    norm = np.linalg.norm(direction)
+    if not (np.isfinite(direction).all() and norm > 0):
+        raise ValueError(f"direction = {direction.tolist()}, expected a non-zero finite vector")
+    if int(size) != size or size < 1:
+        raise ValueError(f"size = {size}, expected an integer >= 1")
+    lo, hi = np.asarray(bounds_lo, np.float64).reshape(3), np.asarray(bounds_hi, np.float64).reshape(3)
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all() and np.all(lo <= hi)):
+        raise ValueError(f"bounds [{lo.tolist()}, {hi.tolist()}]: expected finite with lo <= hi")
+    direction = direction / norm
+    size = int(size)
+    radius_max = float(np.max(radius, initial=0.0))
+    sphere = 0.5 * float(np.linalg.norm(hi - lo)) + radius_max
+    if not sphere > 0:  # no extent at all (an empty scene in a point box): any scale frames it
+        sphere = 1.0
+    centre = 0.5 * (lo + hi)
+    up = np.eye(3)[int(np.argmin(np.abs(direction)))]  # the axis least aligned with the light: never parallel
+    camera = Camera(centre + 2 * sphere * direction, centre, up, size, size, ortho_height=2 * sphere)
+    g = rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera, msaa=1,
+                         near=0.5 * sphere, closing_length=closing_length)
+    depth = np.where(g.coverage[:, :, 0], g.depth[:, :, 0], np.float32(np.inf)).astype(np.float32)
+    return ShadowMap(view_matrix(camera), np.asarray(camera.position, np.float64), 2 * sphere, size, depth)
+
+
+def shadow_visibility(sm: ShadowMap, positions, bias, light_angular_radius: float,
+                      pcf_radius_texels: float = 1.5) -> np.ndarray:
+    """Visibility (N,) float64 in [0, 1] of the light from world ``positions`` (N, 3), by PCSS (module docstring);
+    ``bias`` (N,) or a scalar, scene units. ValueError for a non-finite or negative bias, an angular radius outside
+    [0, π/2), or a negative or non-finite PCF radius."""
+    positions = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 3)
+    bias = np.ascontiguousarray(np.broadcast_to(np.asarray(bias, np.float64), (len(positions),)))
+    bad = np.flatnonzero(~(np.isfinite(bias) & (bias >= 0)))
+    if bad.size:
+        raise ValueError(f"bias[{bad[0]}] = {bias[bad[0]]}, expected finite and >= 0")
+    if not 0 <= light_angular_radius < 0.5 * math.pi:
+        raise ValueError(f"light_angular_radius = {light_angular_radius}, expected in [0, pi/2)")
+    if not (math.isfinite(pcf_radius_texels) and pcf_radius_texels >= 0):
+        raise ValueError(f"pcf_radius_texels = {pcf_radius_texels}, expected finite and >= 0")
+    depth = np.ascontiguousarray(sm.depth, dtype=np.float32)
+    d_min = float(np.min(depth, initial=np.inf))
+    visibility = np.ones(len(positions))
+    if math.isfinite(d_min):  # an empty map shadows nothing
+        _pcss(depth, np.ascontiguousarray(sm.view, np.float64), np.asarray(sm.origin, np.float64),
+              sm.ortho_height / sm.size, d_min, positions, bias, math.tan(light_angular_radius),
+              float(pcf_radius_texels), visibility)
+    return visibility
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _pcss(depth, view, origin, texel, d_min, positions, bias, tan_angle, pcf_radius, visibility):
+    """visibility[k] for every receiver k (module docstring); each iteration writes only its own entry."""
+    size = depth.shape[0]
+    for k in prange(positions.shape[0]):
+        px, py, pz = positions[k, 0] - origin[0], positions[k, 1] - origin[1], positions[k, 2] - origin[2]
+        x = view[0, 0] * px + view[0, 1] * py + view[0, 2] * pz
+        y = view[1, 0] * px + view[1, 1] * py + view[1, 2] * pz
+        z = view[2, 0] * px + view[2, 1] * py + view[2, 2] * pz
+        u, w = x / texel + 0.5 * size, 0.5 * size - y / texel
+        reach = MAX_FILTER_TEXELS + 2.0
+        if not (math.isfinite(z) and -reach < u < size + reach and -reach < w < size + reach):
+            continue  # non-finite or off the map: lit
+        threshold = z - bias[k]
+        r = min(max(pcf_radius, (z - d_min) * tan_angle / texel), MAX_FILTER_TEXELS)
+        n = min(MAX_TAPS, int(math.ceil(2.0 * r)) + 1)
+        found, total = 0, 0.0
+        for a in range(n):
+            for b in range(n):
+                tu = u - r + (2.0 * r * a / (n - 1) if n > 1 else r)
+                tw = w - r + (2.0 * r * b / (n - 1) if n > 1 else r)
+                d = _fetch(depth, int(math.floor(tw)), int(math.floor(tu)))
+                if d < threshold:
+                    found += 1
+                    total += d
+        if found == 0:
+            continue
+        r = min(max(pcf_radius, (z - total / found) * tan_angle / texel), MAX_FILTER_TEXELS)
+        n = min(MAX_TAPS, max(1, int(math.ceil(2.0 * r))))
+        lit = 0.0
+        for a in range(n):
+            for b in range(n):
+                fu = u - r + 2.0 * r * (a + 0.5) / n - 0.5  # relative to texel centres
+                fw = w - r + 2.0 * r * (b + 0.5) / n - 0.5
+                j, i = int(math.floor(fu)), int(math.floor(fw))
+                su, sw = fu - j, fw - i
+                top = (1.0 - su) * _lit(depth, i, j, threshold) + su * _lit(depth, i, j + 1, threshold)
+                bottom = (1.0 - su) * _lit(depth, i + 1, j, threshold) + su * _lit(depth, i + 1, j + 1, threshold)
+                lit += (1.0 - sw) * top + sw * bottom
+        visibility[k] = min(max(lit / (n * n), 0.0), 1.0)
+
+
+@njit(cache=True, error_model="numpy")
+def _fetch(depth, i, j):
+    """depth[i, j], +inf outside the map."""
+    if 0 <= i < depth.shape[0] and 0 <= j < depth.shape[1]:
+        return depth[i, j]
+    return np.inf
+
+
+@njit(cache=True, error_model="numpy")
+def _lit(depth, i, j, threshold):
+    """1.0 where texel (i, j) does not occlude a receiver whose biased depth is ``threshold``, else 0.0."""
+    return 1.0 if _fetch(depth, i, j) >= threshold else 0.0

@@ -1,0 +1,465 @@
+"""Software rasterizer core of the strip renderer: yarn polylines → camera-facing strips → a multisampled G-buffer.
+
+Geometry (``ASSET_PACK.md`` §3, ``DESIGN.md`` §3):
+
+* Every control point i of a curve gets a unit tangent t_i, the normalized sum of the unit directions of its two
+  segments (one at the ends of an open curve; closed curves wrap; zero-length segments are ignored; at an exact
+  hairpin the outgoing direction), and the half-width direction b_i = normalize(ω_o × t_i) = n × t_i with
+  n = normalize(ω_o − (ω_o·t_i) t_i), ω_o the unit direction from p_i toward the camera (−fwd when orthographic).
+* Segment (a, b) becomes the quad p_a − r b_a, p_a + r b_a, p_b + r b_b, p_b − r b_b (2 triangles) for the yarn
+  radius r of its curve; neighbouring segments share their joint's two corners, so strips have no cracks.
+* Skipped: zero-length segments and segments with an end where |ω_o × t| < 1e-6 (looking along the yarn; the spec's
+  degenerate strip). Culled: segments whose bounding sphere (midpoint, half length + r) lies outside one of the
+  planes near (z = ``near``), far (z = ``far``) or the four sides of the view. Triangles are clipped against the
+  near plane (so the camera may sit inside a yarn); the far plane only culls.
+
+Sample attributes (all interpolated perspective-correctly over each triangle; view z by 1/z for a pinhole):
+
+* ``depth``: camera distance in scene units (pinhole: |sample point − camera position|; orthographic: the distance
+  in front of the camera plane); the depth test keeps the nearest (smallest view z); on equal z the triangle with the
+  lower slot (k·S + segment index for the k-th triangle of a segment, S segments) wins.
+* ``curve`` (curve index), ``yarn`` (its ``yarn_id``), ``segment`` (global index of the segment's first control
+  point, so a closed curve's closing segment has the index of its last point).
+* ``arclength``: the rest arc length s (scene units; the spec's u is s / period); on a closed curve's closing
+  segment s runs from the last point's rest arc length to that plus ``closing_length`` of the curve.
+* ``v`` ∈ [−1, 1]: −1 on the −b edge, +1 on the +b edge.
+* ``tangent``: unit world tangent (the interpolated vertex tangents, renormalized).
+
+Samples (``SAMPLE_PATTERNS``, positions inside the pixel, x right and y down, in pixels): k = 1 the centre; k = 2,
+4, 8 and 16 the standard Direct3D 11 patterns (offsets from the centre in 1/16 px: 2: (4,4) (−4,−4); 4: (−2,−6)
+(6,−2) (−6,2) (2,6); 8: (1,−3) (−1,3) (5,1) (−3,−5) (−5,5) (−7,−1) (3,7) (7,−7); 16: the D3D 16× pattern); the 8
+x positions are distinct, so a vertical strip
+w px wide covers 8·w samples per row up to one. Coverage is exact per sample: edge functions are evaluated in a
+canonical order of each edge's end points and ties follow a top-left rule, so a sample on an edge shared by two
+triangles belongs to exactly one of them.
+
+Pipeline: ``_vertex_frames`` (per point) and ``_setup`` (per segment: cull, build, clip, project; up to 4
+triangles) in parallel; ``_bin`` (serial, in triangle order) lists the triangles overlapping each square tile of
+``tile`` px; ``_raster`` (parallel over tiles, each tile owns its pixels) depth-tests and resolves. Buffers are
+identical for any thread count.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from knitrun.render.camera import Camera, tan_half_fov, view_matrix
+
+SAMPLE_PATTERNS = {
+    1: np.array([[0.5, 0.5]]),
+    2: 0.5 + np.array([[4, 4], [-4, -4]]) / 16.0,
+    4: 0.5 + np.array([[-2, -6], [6, -2], [-6, 2], [2, 6]]) / 16.0,
+    8: 0.5 + np.array([[1, -3], [-1, 3], [5, 1], [-3, -5], [-5, 5], [-7, -1], [3, 7], [7, -7]]) / 16.0,
+    16: 0.5 + np.array([[1, 1], [-1, -3], [-3, 2], [4, -1], [-5, -2], [2, 5], [5, 3], [3, -5], [-2, 6], [0, -7],
+                        [-4, -6], [-6, 4], [-8, 0], [7, -4], [6, 7], [-7, -8]]) / 16.0,
+}
+DEGENERATE_SIN = 1e-6  # |ω_o × t| below this: the strip is skipped (ASSET_PACK.md §3)
+
+# Per clipped-triangle vertex record: screen X, Y (px), q (1/z pinhole, 1 orthographic), then q·(z, s, v, tx, ty, tz).
+_NREC = 9
+
+
+@dataclass
+class StripGBuffer:
+    """Per-sample G-buffer, every array (H, W, k) (``tangent`` (H, W, k, 3)); see the module docstring.
+    Uncovered samples: ``coverage`` False, ids −1, every float 0. Pixel coverage is ``coverage.mean(axis=2)``."""
+
+    coverage: np.ndarray  # bool
+    depth: np.ndarray  # float32, scene units
+    curve: np.ndarray  # int32
+    yarn: np.ndarray  # int32
+    segment: np.ndarray  # int32
+    arclength: np.ndarray  # float32, scene units
+    v: np.ndarray  # float32
+    tangent: np.ndarray  # float32
+
+
+def empty_gbuffer(height, width, msaa):
+    """An uninitialized ``StripGBuffer`` of (height, width, msaa) samples (every sample is written by a render)."""
+    shape = (height, width, msaa)
+    return StripGBuffer(np.empty(shape, np.bool_), np.empty(shape, np.float32), np.empty(shape, np.int32),
+                        np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32),
+                        np.empty(shape, np.float32), np.empty(shape + (3,), np.float32))
+
+
+def rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera: Camera, msaa=1, near=1e-3,
+                     far=math.inf, closing_length=None, tile=32, out=None):
+    """Rasterize the strips of polylines into a ``StripGBuffer`` of camera.height × camera.width × ``msaa`` samples.
+
+    ``points`` (P, 3) and ``offsets`` (C+1,) as in ``YarnCurves`` (one frame; curve c is points[offsets[c]:
+    offsets[c+1]]); ``closed`` (C,) bool; ``rest_arclength`` (P,) scene units; ``radius`` (C,) or a scalar, the
+    yarn radius (strip half-width) in scene units; ``yarn_id`` (C,) ints; ``msaa`` ∈ {1, 2, 4, 8, 16}; ``near`` > 0 and
+    ``far`` view depths in scene units; ``closing_length`` (C,) the rest length of each closed curve's closing
+    segment (default: its current length); ``tile`` the tile size in px; ``out`` a ``StripGBuffer`` of the right
+    shape to reuse. ValueError for non-finite points (naming the curve) or bad arguments.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    offsets = np.asarray(offsets, dtype=np.int64)
+    n_curves = len(offsets) - 1
+    closed = np.broadcast_to(np.asarray(closed, dtype=np.bool_), (n_curves,))
+    rest = np.ascontiguousarray(rest_arclength, dtype=np.float64)
+    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n_curves,))
+    yarn_id = np.broadcast_to(np.asarray(yarn_id, dtype=np.int32), (n_curves,))
+    if n_curves < 0 or offsets.ndim != 1 or offsets[0] != 0 or offsets[-1] != len(points) \
+            or np.any(np.diff(offsets) < 0):
+        raise ValueError(f"offsets must run non-decreasing from 0 to the point count {len(points)}")
+    if rest.shape != (len(points),):
+        raise ValueError(f"rest_arclength has shape {rest.shape}, expected ({len(points)},)")
+    if msaa not in SAMPLE_PATTERNS:
+        raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
+    if not (near > 0 and far > near) or tile < 1:
+        raise ValueError(f"near = {near}, far = {far}, tile = {tile}: expected 0 < near < far and tile >= 1")
+    bad = np.flatnonzero(~(np.isfinite(radius) & (radius > 0)))
+    if bad.size:
+        raise ValueError(f"curve {bad[0]}: radius = {radius[bad[0]]}, expected a positive finite number")
+    finite = np.isfinite(points).all(axis=1) & np.isfinite(rest)
+    if not finite.all():
+        p = int(np.flatnonzero(~finite)[0])
+        c = int(np.searchsorted(offsets, p, side="right") - 1)
+        raise ValueError(f"curve {c}: point {p - offsets[c]} has non-finite coordinates or rest arc length "
+                         f"({points[p].tolist()}, {rest[p]})")
+
+    first, last = offsets[:-1], offsets[1:] - 1
+    nonempty = last >= first
+    curve_of = np.repeat(np.arange(n_curves, dtype=np.int64), np.diff(offsets))
+    nxt = np.arange(1, len(points) + 1, dtype=np.int64)
+    prev = np.arange(-1, len(points) - 1, dtype=np.int64)
+    nxt[last[nonempty]] = np.where(closed[nonempty], first[nonempty], -1)
+    prev[first[nonempty]] = np.where(closed[nonempty], last[nonempty], -1)
+    seg_a = np.flatnonzero(nxt >= 0)
+    seg_b = nxt[seg_a]
+    seg_curve = curve_of[seg_a]
+    s_a = rest[seg_a]
+    s_b = rest[seg_b].copy()
+    wrap = seg_b <= seg_a  # closing segments (a 1-point closed curve closes onto itself)
+    if closing_length is None:
+        s_b[wrap] = s_a[wrap] + np.linalg.norm(points[seg_b[wrap]] - points[seg_a[wrap]], axis=1)
+    else:
+        s_b[wrap] = s_a[wrap] + np.broadcast_to(np.asarray(closing_length, np.float64), (n_curves,))[seg_curve[wrap]]
+
+    w, h = int(camera.width), int(camera.height)
+    view = view_matrix(camera)
+    pos = np.asarray(camera.position, np.float64)
+    ortho_h = float(camera.ortho_height)
+    tan_half = tan_half_fov(camera)
+    tangent, bvec, ok = _vertex_frames(points, prev, nxt, pos, view[2].copy(), ortho_h > 0)
+    n_seg = len(seg_a)
+    tri = np.empty((4 * n_seg, 3, _NREC))  # slot k·S + segment: pages of slots 2, 3 (clipped quads) stay untouched
+    count = np.empty(n_seg, np.int64)
+    boxes = np.empty((4 * n_seg, 4), np.int64)
+    _setup(points, seg_a, seg_b, s_a, s_b, radius[seg_curve].copy(), tangent, bvec, ok, view, pos, float(near),
+           float(far), ortho_h, tan_half, w, h, tile, tri, count, boxes)
+    tiles_x, tiles_y = -(-w // tile), -(-h // tile)
+    tile_start, tile_tris = _bin(count, boxes, tiles_x, tiles_y)
+    if out is None or out.coverage.shape != (h, w, msaa):
+        out = empty_gbuffer(h, w, msaa)
+    _raster(tri, tile_start, tile_tris, seg_a.astype(np.int32), seg_curve.astype(np.int32),
+            np.ascontiguousarray(yarn_id), w, h, tile, tiles_x, SAMPLE_PATTERNS[msaa], ortho_h > 0, tan_half,
+            out.coverage, out.depth, out.curve, out.yarn, out.segment, out.arclength, out.v, out.tangent)
+    return out
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _vertex_frames(points, prev, nxt, cam_pos, fwd, ortho):
+    """Unit vertex tangents (P, 3), half-width directions b (P, 3) and whether the strip frame exists (P,)."""
+    n = points.shape[0]
+    tangent = np.zeros((n, 3))
+    bvec = np.zeros((n, 3))
+    ok = np.zeros(n, np.bool_)
+    for i in prange(n):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        ix = iy = iz = ox = oy = oz = 0.0
+        if prev[i] >= 0:
+            ix, iy, iz = _unit(px - points[prev[i], 0], py - points[prev[i], 1], pz - points[prev[i], 2])
+        if nxt[i] >= 0:
+            ox, oy, oz = _unit(points[nxt[i], 0] - px, points[nxt[i], 1] - py, points[nxt[i], 2] - pz)
+        tx, ty, tz = ix + ox, iy + oy, iz + oz
+        if tx * tx + ty * ty + tz * tz < 1e-18:  # an end of a zero-length run, or an exact hairpin: one side
+            tx, ty, tz = (ox, oy, oz) if ox != 0.0 or oy != 0.0 or oz != 0.0 else (ix, iy, iz)
+        tx, ty, tz = _unit(tx, ty, tz)
+        if ortho:
+            wx, wy, wz = -fwd[0], -fwd[1], -fwd[2]
+        else:
+            wx, wy, wz = _unit(cam_pos[0] - px, cam_pos[1] - py, cam_pos[2] - pz)
+        cx, cy, cz = wy * tz - wz * ty, wz * tx - wx * tz, wx * ty - wy * tx
+        sin = math.sqrt(cx * cx + cy * cy + cz * cz)  # 0 for a zero tangent or a camera on the point
+        if sin < DEGENERATE_SIN:
+            continue
+        tangent[i, 0], tangent[i, 1], tangent[i, 2] = tx, ty, tz
+        bvec[i, 0], bvec[i, 1], bvec[i, 2] = cx / sin, cy / sin, cz / sin
+        ok[i] = True
+    return tangent, bvec, ok
+
+
+@njit(cache=True, error_model="numpy")
+def _unit(x, y, z):
+    """(x, y, z) normalized; (0, 0, 0) stays (0, 0, 0)."""
+    length = math.sqrt(x * x + y * y + z * z)
+    if length == 0.0:
+        return 0.0, 0.0, 0.0
+    return x / length, y / length, z / length
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _setup(points, seg_a, seg_b, s_a, s_b, seg_radius, tangent, bvec, ok, view, cam_pos, near, far, ortho_h,
+           tan_half, width, height, tile, tri, count, boxes):
+    """Per segment: cull, build the quad in view space, clip it against z = near, project; writes up to 4
+    triangles (positively oriented on screen) into tri[k·S + seg] (S segments), their number into count[seg] and
+    the span of tiles each overlaps into boxes[k·S + seg] = (first x, last x, first y, last y) (first x = −1: not on
+    screen)."""
+    aspect = width / height
+    tan_x, tan_y = tan_half * aspect, tan_half
+    cos_x, cos_y = 1.0 / math.sqrt(1.0 + tan_x * tan_x), 1.0 / math.sqrt(1.0 + tan_y * tan_y)
+    n_seg = seg_a.shape[0]
+    n_chunks = min(n_seg, 256)
+    for chunk in prange(n_chunks):
+        quad = np.empty((4, 8))  # corners in view space: x, y, z, s, v, tx, ty, tz
+        poly = np.empty((4, 8))
+        for g in range(chunk * n_seg // n_chunks, (chunk + 1) * n_seg // n_chunks):
+            count[g] = 0
+            a, b = seg_a[g], seg_b[g]
+            if not (ok[a] and ok[b]):
+                continue
+            dx, dy, dz = points[b, 0] - points[a, 0], points[b, 1] - points[a, 1], points[b, 2] - points[a, 2]
+            half = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz)
+            if half == 0.0:
+                continue
+            r = seg_radius[g]
+            sphere = r + half
+            _to_view(view, points[a, 0] + 0.5 * dx - cam_pos[0], points[a, 1] + 0.5 * dy - cam_pos[1],
+                     points[a, 2] + 0.5 * dz - cam_pos[2], quad[0])
+            cx, cy, cz = quad[0, 0], quad[0, 1], quad[0, 2]
+            if cz + sphere < near or cz - sphere > far:
+                continue
+            if ortho_h > 0.0:
+                if abs(cx) - sphere > 0.5 * ortho_h * aspect or abs(cy) - sphere > 0.5 * ortho_h:
+                    continue
+            elif (abs(cx) - cz * tan_x) * cos_x > sphere or (abs(cy) - cz * tan_y) * cos_y > sphere:
+                continue
+            for k in range(4):
+                p = b if k >= 2 else a
+                side = 1.0 if k == 1 or k == 2 else -1.0
+                _to_view(view, points[p, 0] + side * r * bvec[p, 0] - cam_pos[0],
+                         points[p, 1] + side * r * bvec[p, 1] - cam_pos[1],
+                         points[p, 2] + side * r * bvec[p, 2] - cam_pos[2], quad[k])
+                quad[k, 3] = s_b[g] if k >= 2 else s_a[g]
+                quad[k, 4] = side
+                quad[k, 5], quad[k, 6], quad[k, 7] = tangent[p, 0], tangent[p, 1], tangent[p, 2]
+            n_out = 0
+            for half_quad in range(2):
+                n_poly = 0
+                for e in range(3):  # Sutherland-Hodgman against z >= near: triangle (0, 1, 2) or (0, 2, 3)
+                    ia = 0 if e == 0 else e + half_quad
+                    ib = 0 if e == 2 else e + 1 + half_quad
+                    da, db = quad[ia, 2] - near, quad[ib, 2] - near
+                    if da >= 0.0:
+                        poly[n_poly] = quad[ia]
+                        n_poly += 1
+                    if (da >= 0.0) != (db >= 0.0):
+                        f = da / (da - db)
+                        for m in range(8):
+                            poly[n_poly, m] = quad[ia, m] + f * (quad[ib, m] - quad[ia, m])
+                        n_poly += 1
+                for f in range(n_poly - 2):
+                    slot = n_out * n_seg + g
+                    if _emit(poly, f + 1, ortho_h, tan_half, width, height, tri[slot]):
+                        rec = tri[slot]
+                        boxes[slot, 0] = -1
+                        x0, x1 = _pixel_span(rec[0, 0], rec[1, 0], rec[2, 0], 0, width)
+                        y0, y1 = _pixel_span(rec[0, 1], rec[1, 1], rec[2, 1], 0, height)
+                        if x0 < x1 and y0 < y1:
+                            boxes[slot, 0], boxes[slot, 1] = x0 // tile, (x1 - 1) // tile
+                            boxes[slot, 2], boxes[slot, 3] = y0 // tile, (y1 - 1) // tile
+                        n_out += 1
+            count[g] = n_out
+
+
+@njit(cache=True, error_model="numpy")
+def _emit(poly, i, ortho_h, tan_half, width, height, rec):
+    """Project view-space triangle (poly[0], poly[i], poly[i + 1]) into rec (3, _NREC), oriented so its edge
+    functions are positive inside; False if its screen area is zero or not finite."""
+    for k in range(3):
+        vtx = poly[0] if k == 0 else poly[i + k - 1]
+        z = vtx[2]
+        if ortho_h > 0.0:
+            q, sx, sy = 1.0, 2.0 * vtx[0] / ortho_h, 2.0 * vtx[1] / ortho_h
+        else:
+            q = 1.0 / z
+            sx, sy = vtx[0] * q / tan_half, vtx[1] * q / tan_half
+        rec[k, 0] = 0.5 * (sx * height + width)
+        rec[k, 1] = 0.5 * (1.0 - sy) * height
+        rec[k, 2] = q
+        rec[k, 3] = z * q
+        for m in range(5):
+            rec[k, 4 + m] = vtx[3 + m] * q
+    area = _edge(rec[0, 0], rec[0, 1], rec[1, 0], rec[1, 1], rec[2, 0], rec[2, 1])
+    if not (math.isfinite(area) and area != 0.0):
+        return False
+    if area < 0.0:
+        for m in range(_NREC):
+            rec[1, m], rec[2, m] = rec[2, m], rec[1, m]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _edge_setup(ax, ay, bx, by):
+    """Edge a→b as (base x, base y, dx, dy, sign, tie): its edge function at p is
+    sign·((px − base x)·dy − (py − base y)·dx), positive on the interior side of a positively oriented triangle,
+    evaluated from the lexicographically smaller end so that reversing the edge negates it exactly; tie (the
+    top-left rule) says whether a sample exactly on the edge is inside, and is the opposite for the reversed edge."""
+    tie = by - ay > 0.0 or (by == ay and bx < ax)
+    if ax < bx or (ax == bx and ay <= by):
+        return ax, ay, bx - ax, by - ay, 1.0, tie
+    return bx, by, ax - bx, ay - by, -1.0, tie
+
+
+@njit(cache=True, error_model="numpy")
+def _row_limit(lo, hi, bx, by, slope, side, row):
+    """Narrow the screen x range [lo, hi] (px, within the triangle's pixel span) to where the edge function of
+    ``_edge_setup`` (base point (bx, by), slope dx/dy, side = sign·dy) can be ≥ 0 for some y in pixel row
+    [row, row + 1]; padded so that it never excludes a sample."""
+    if side == 0.0:
+        return lo, hi
+    xa, xb = (row - by) * slope, (row + 1.0 - by) * slope
+    pad = 1e-9 * (1.0 + abs(bx) + abs(xa) + abs(xb))
+    if side > 0.0:
+        return min(max(lo, bx + min(xa, xb) - pad), hi), hi
+    return lo, max(min(hi, bx + max(xa, xb) + pad), lo)
+
+
+@njit(cache=True, error_model="numpy")
+def _edge(ax, ay, bx, by, px, py):
+    """The edge function of ``_edge_setup`` for edge a→b at p."""
+    x, y, dx, dy, sign, _ = _edge_setup(ax, ay, bx, by)
+    return sign * ((px - x) * dy - (py - y) * dx)
+
+
+@njit(cache=True, error_model="numpy")
+def _to_view(view, dx, dy, dz, out):
+    """out[:3] = view @ (dx, dy, dz) (a world offset from the camera to view coordinates)."""
+    for r in range(3):
+        out[r] = view[r, 0] * dx + view[r, 1] * dy + view[r, 2] * dz
+
+
+@njit(cache=True, error_model="numpy")
+def _pixel_span(c0, c1, c2, lo, hi):
+    """Pixel indices [first, end) within [lo, hi) whose cells meet [min(c), max(c)] (coordinates in px, clamped
+    before rounding so huge off-screen values stay finite)."""
+    first = int(math.floor(min(max(min(c0, c1, c2), lo), hi)))
+    end = int(math.floor(min(max(max(c0, c1, c2), lo - 1.0), hi - 1.0))) + 1
+    return first, end
+
+
+@njit(cache=True, error_model="numpy")
+def _bin(count, boxes, tiles_x, tiles_y):
+    """Triangles (in slot order) overlapping each tile: tile t owns tile_tris[tile_start[t]:tile_start[t + 1]]."""
+    n_seg = count.shape[0]
+    valid = np.zeros(boxes.shape[0], np.bool_)
+    for slot in range(boxes.shape[0]):
+        valid[slot] = slot // n_seg < count[slot % n_seg] and boxes[slot, 0] >= 0
+    per_tile = np.zeros(tiles_x * tiles_y + 1, np.int64)
+    for slot in range(boxes.shape[0]):
+        if valid[slot]:
+            for ty in range(boxes[slot, 2], boxes[slot, 3] + 1):
+                for tx in range(boxes[slot, 0], boxes[slot, 1] + 1):
+                    per_tile[ty * tiles_x + tx + 1] += 1
+    tile_start = np.cumsum(per_tile)
+    fill = tile_start[:-1].copy()
+    tile_tris = np.empty(tile_start[-1], np.int64)
+    for slot in range(boxes.shape[0]):
+        if valid[slot]:
+            for ty in range(boxes[slot, 2], boxes[slot, 3] + 1):
+                for tx in range(boxes[slot, 0], boxes[slot, 1] + 1):
+                    t = ty * tiles_x + tx
+                    tile_tris[fill[t]] = slot
+                    fill[t] += 1
+    return tile_start, tile_tris
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _raster(tri, tile_start, tile_tris, seg_first, seg_curve, yarn_id, width, height, tile, tiles_x,
+            pattern, ortho, tan_half, coverage, depth, curve, yarn, segment, arclength, v, tangent):
+    """Depth-test every tile's triangles at the ``pattern`` samples and resolve the G-buffer of its pixels."""
+    k_samples = pattern.shape[0]
+    n_tiles = tile_start.shape[0] - 1
+    for t in prange(n_tiles):
+        x_lo, y_lo = (t % tiles_x) * tile, (t // tiles_x) * tile
+        x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
+        best_z = np.full((y_hi - y_lo, x_hi - x_lo, k_samples), np.inf)
+        best_tri = np.full((y_hi - y_lo, x_hi - x_lo, k_samples), -1, np.int64)
+        best_l = np.zeros((y_hi - y_lo, x_hi - x_lo, k_samples, 3))
+        for idx in range(tile_start[t], tile_start[t + 1]):
+            slot = tile_tris[idx]
+            rec = tri[slot]
+            x0, y0, x1, y1, x2, y2 = rec[0, 0], rec[0, 1], rec[1, 0], rec[1, 1], rec[2, 0], rec[2, 1]
+            bx0, by0, dx0, dy0, sg0, tie0 = _edge_setup(x1, y1, x2, y2)  # edges 1→2, 2→0, 0→1
+            bx1, by1, dx1, dy1, sg1, tie1 = _edge_setup(x2, y2, x0, y0)
+            bx2, by2, dx2, dy2, sg2, tie2 = _edge_setup(x0, y0, x1, y1)
+            inv_area = 1.0 / (sg2 * ((x2 - bx2) * dy2 - (y2 - by2) * dx2))
+            slope0 = dx0 / dy0 if dy0 != 0.0 else 0.0
+            slope1 = dx1 / dy1 if dy1 != 0.0 else 0.0
+            slope2 = dx2 / dy2 if dy2 != 0.0 else 0.0
+            px_lo, px_hi = _pixel_span(x0, x1, x2, x_lo, x_hi)
+            py_lo, py_hi = _pixel_span(y0, y1, y2, y_lo, y_hi)
+            for py in range(py_lo, py_hi):
+                lo, hi = float(px_lo), float(px_hi)
+                lo, hi = _row_limit(lo, hi, bx0, by0, slope0, sg0 * dy0, py)
+                lo, hi = _row_limit(lo, hi, bx1, by1, slope1, sg1 * dy1, py)
+                lo, hi = _row_limit(lo, hi, bx2, by2, slope2, sg2 * dy2, py)
+                for px in range(int(math.floor(lo)), min(int(math.floor(hi)) + 1, px_hi)):
+                    for s in range(k_samples):
+                        sx, sy = px + pattern[s, 0], py + pattern[s, 1]
+                        e0 = sg0 * ((sx - bx0) * dy0 - (sy - by0) * dx0)
+                        if e0 < 0.0 or (e0 == 0.0 and not tie0):
+                            continue
+                        e1 = sg1 * ((sx - bx1) * dy1 - (sy - by1) * dx1)
+                        if e1 < 0.0 or (e1 == 0.0 and not tie1):
+                            continue
+                        e2 = sg2 * ((sx - bx2) * dy2 - (sy - by2) * dx2)
+                        if e2 < 0.0 or (e2 == 0.0 and not tie2):
+                            continue
+                        l0, l1, l2 = e0 * inv_area, e1 * inv_area, e2 * inv_area
+                        z = (l0 * rec[0, 3] + l1 * rec[1, 3] + l2 * rec[2, 3]) / \
+                            (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
+                        j, i = px - x_lo, py - y_lo
+                        if z < best_z[i, j, s]:
+                            best_z[i, j, s] = z
+                            best_tri[i, j, s] = slot
+                            best_l[i, j, s, 0], best_l[i, j, s, 1], best_l[i, j, s, 2] = l0, l1, l2
+        for i in range(y_hi - y_lo):
+            for j in range(x_hi - x_lo):
+                for s in range(k_samples):
+                    py, px = y_lo + i, x_lo + j
+                    slot = best_tri[i, j, s]
+                    coverage[py, px, s] = slot >= 0
+                    if slot < 0:
+                        depth[py, px, s] = 0.0
+                        curve[py, px, s] = yarn[py, px, s] = segment[py, px, s] = -1
+                        arclength[py, px, s] = v[py, px, s] = 0.0
+                        tangent[py, px, s, 0] = tangent[py, px, s, 1] = tangent[py, px, s, 2] = 0.0
+                        continue
+                    rec = tri[slot]
+                    l0, l1, l2 = best_l[i, j, s, 0], best_l[i, j, s, 1], best_l[i, j, s, 2]
+                    inv_q = 1.0 / (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
+                    z = best_z[i, j, s]
+                    if ortho:
+                        depth[py, px, s] = z
+                    else:
+                        sx = (2.0 * (px + pattern[s, 0]) - width) / height * tan_half
+                        sy = (1.0 - 2.0 * (py + pattern[s, 1]) / height) * tan_half
+                        depth[py, px, s] = z * math.sqrt(1.0 + sx * sx + sy * sy)
+                    g = slot % seg_first.shape[0]
+                    curve[py, px, s] = seg_curve[g]
+                    yarn[py, px, s] = yarn_id[seg_curve[g]]
+                    segment[py, px, s] = seg_first[g]
+                    arclength[py, px, s] = (l0 * rec[0, 4] + l1 * rec[1, 4] + l2 * rec[2, 4]) * inv_q
+                    v[py, px, s] = min(max((l0 * rec[0, 5] + l1 * rec[1, 5] + l2 * rec[2, 5]) * inv_q, -1.0), 1.0)
+                    tx = l0 * rec[0, 6] + l1 * rec[1, 6] + l2 * rec[2, 6]
+                    ty = l0 * rec[0, 7] + l1 * rec[1, 7] + l2 * rec[2, 7]
+                    tz = l0 * rec[0, 8] + l1 * rec[1, 8] + l2 * rec[2, 8]
+                    norm = math.sqrt(tx * tx + ty * ty + tz * tz)
+                    if norm > 0.0:
+                        tx, ty, tz = tx / norm, ty / norm, tz / norm
+                    tangent[py, px, s, 0], tangent[py, px, s, 1], tangent[py, px, s, 2] = tx, ty, tz

@@ -1,0 +1,437 @@
+"""Shading of the strip renderer's multisampled G-buffer (seed 000 §4.3–4.5, eqs. 8–11 and 17).
+
+Shading points
+--------------
+MSAA shades once per primitive per pixel (as a GPU does): the covered samples of a pixel are grouped by the curve
+that covers them, and each group is one shading point with the attributes of its first sample and the weight
+(samples in the group)/k. ``shading_points`` builds them from a ``StripGBuffer``, in pixel order (pixel p owns the
+points start[p]:start[p+1], so the resolve runs in parallel over pixels without races); an optional per-sample mask
+drops samples (the flyaway layer's depth test against the regular layer).
+
+Regular fibers (``shade_regular``), per point, angles by ``ASSET_PACK.md`` §3
+----------------------------------------------------------------------------
+t the yarn tangent (G-buffer), ω_o toward the camera, n = normalize(ω_o − (ω_o·t)t), b = n × t, u = s/period,
+v ∈ [−1, 1]. Textures (trilinear, mip level from the pixel footprint): coverage c(u, v) is the point's alpha;
+the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where it vanishes). Per directional light
+(toward ω_i, irradiance E, yarn-level visibility V from the shadow map):
+
+    yarn angles   θ_i, θ_o against t;  θ_d = (θ_o − θ_i)/2;  φ = φ_o − φ_i = −atan2(ω_i·b, ω_i·n)
+    ξ           = ξ(v, θ_d, φ) (the pack's full table), or ξ_M(v, θ_d) ξ_N(v, φ) (its factors)
+    Ψ^Fiber_G   = mean_RGB Ψ(v, θ_i, φ), or Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ); clamped to [0, 1]
+    D           = V · Ψ^Fiber_G                                           fraction lit directly
+    n           = n_occluded + (1 − V) n_cross                            fibers toward the light when not lit
+    L_o        += E · ξ · DS(θ_i^f, θ_o^f, φ^f; n, D)                    ``dual_scattering.ds_kernel``, fiber frame
+
+with θ^f, φ^f against t_f. An empty (0, 1, 1, 3) full table selects the factors. An ablation passes (1, 1, 3) factor tables of ones for ξ or Ψ (and n_occluded = 0 without
+Ψ^Fiber: no fiber of the yarn is assumed between a visible fiber and the light). This is the bin average of what the bake divides by (ξ = ΣΨ_*/ΣΨ_DS over the hits of a
+(v, θ_d, φ) bin, each hit lit directly iff no fiber lies toward the light), with Ψ^Yarn_G = V from the yarn-level
+shadow map in place of the other yarns' fibers: seed 000 eq. 11. Per SRBF lobe j (centre ω_j, sharpness λ_j,
+weight W_j, visibility T̃_j from the lobe's shadow map), eq. 17:
+
+    L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
+
+(I_M = the pack's I_M^{TT,D} table + the R lobe integrated per lookup, ``im_lookup.im_kernel``)
+
+plus, beyond the paper, the environment's multiple scattering: eq. 17 has single scattering only (I_M integrates
+f), which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. Lobe j
+carries irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}); the lobes are merged into clusters (the
+renderer's ``ms_lights``: lobes within a fixed angle of a brighter cluster's direction join it; E summed, the
+direction and the visibility T̃ averaged with luminance weights), and each cluster c acts as a distant light for the
+smooth DS terms, with D = T̃_c Ψ^Fiber_G and n as for a directional light:
+
+    L_o += E_c · ξ · (D d_b f_back^direct + F_scatter) cos θ_c^f        (``ds_kernel`` terms; f itself is in I_M)
+
+Flyaways (``shade_flyaway``): the variant of period ⌊s/period⌋ of curve c is ``variant_of(c, period)`` (a fixed
+integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the wider flyaway strip; the hair
+tangent from its RGB; single scattering, L_o = Σ E V S f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j S_j I_M (thin hairs: no
+multiple-scattering terms), S = Ψ^Fiber_G(v_strip, ω_i) (mean RGB) where the hair lies over the yarn body
+(|v_strip| ≤ 1, v_strip = v·h_fly/r) — a hair on the surface is shadowed like the surface fibers — and 1 beyond.
+
+Resolve (``resolve``): C = Σ w α L + (1 − Σ w α)·background for the regular layer, then the flyaway layer over it:
+C ← Σ w A L_fly + (1 − Σ w A)·C. All radiances linear RGB in the units of E and W.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from knitrun.shading.dual_scattering import D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel
+from knitrun.shading.fiber_bcsdf import context, evaluate
+from knitrun.shading.im_lookup import im_kernel
+from knitrun.shading.table_lookup import THETA_RANGE, axis_cell
+from knitrun.render.texture_sampling import mip_level, sample_mip
+
+DEGENERATE = 1e-6  # |ω_o × t| below this: the strip is edge-on (ASSET_PACK.md §3); the point is not drawn
+
+
+# --- shading points -------------------------------------------------------------------------------------------------
+
+@njit(parallel=True, cache=True)
+def _group_counts(curve, use, counts):
+    height, width, k = curve.shape
+    for i in prange(height):
+        for j in range(width):
+            n = 0
+            for a in range(k):
+                if not use[i, j, a]:
+                    continue
+                new = True
+                for b in range(a):
+                    if use[i, j, b] and curve[i, j, b] == curve[i, j, a]:
+                        new = False
+                        break
+                if new:
+                    n += 1
+            counts[i * width + j] = n
+
+
+@njit(parallel=True, cache=True)
+def _group_fill(curve, use, depth, start, pattern, cam_pos, basis, tan_half, ortho_h, sample_of, weight, position,
+                view_dir, footprint):
+    height, width, k = curve.shape
+    right, up, fwd = basis[0], basis[1], basis[2]
+    for i in prange(height):
+        for j in range(width):
+            q = start[i * width + j]
+            for a in range(k):
+                if not use[i, j, a]:
+                    continue
+                new = True
+                for b in range(a):
+                    if use[i, j, b] and curve[i, j, b] == curve[i, j, a]:
+                        new = False
+                        break
+                if not new:
+                    continue
+                same = 0
+                for b in range(k):
+                    if use[i, j, b] and curve[i, j, b] == curve[i, j, a]:
+                        same += 1
+                sample_of[q, 0], sample_of[q, 1], sample_of[q, 2] = i, j, a
+                weight[q] = same / k
+                sx = (2.0 * (j + pattern[a, 0]) - width) / height
+                sy = 1.0 - 2.0 * (i + pattern[a, 1]) / height
+                d = depth[i, j, a]
+                if ortho_h > 0.0:
+                    for c in range(3):
+                        position[q, c] = cam_pos[c] + 0.5 * ortho_h * (sx * right[c] + sy * up[c]) + d * fwd[c]
+                        view_dir[q, c] = -fwd[c]
+                    footprint[q] = ortho_h / height
+                else:
+                    ray = np.empty(3)
+                    for c in range(3):
+                        ray[c] = fwd[c] + tan_half * (sx * right[c] + sy * up[c])
+                    norm = math.sqrt(ray[0] ** 2 + ray[1] ** 2 + ray[2] ** 2)
+                    for c in range(3):
+                        position[q, c] = cam_pos[c] + d * ray[c] / norm
+                        view_dir[q, c] = -ray[c] / norm
+                    footprint[q] = 2.0 * d * tan_half / height
+                q += 1
+
+
+def shading_points(gbuffer, camera, pattern, mask=None):
+    """Group a ``StripGBuffer``'s covered samples into shading points (module docstring). Returns a dict of arrays:
+    ``start`` (H·W + 1,), ``weight`` (N,), ``position`` (N, 3) world,
+    ``view_dir`` (N, 3) unit toward the camera, ``footprint`` (N,) pixel size at the point (scene units), and the
+    G-buffer attributes ``curve``, ``yarn``, ``segment``, ``arclength``, ``v``, ``tangent`` of each point's
+    sample."""
+    use = gbuffer.coverage if mask is None else (gbuffer.coverage & mask)
+    height, width, _ = use.shape
+    counts = np.empty(height * width, np.int64)
+    _group_counts(gbuffer.curve, use, counts)
+    start = np.zeros(height * width + 1, np.int64)
+    np.cumsum(counts, out=start[1:])
+    n = int(start[-1])
+    pixel_sample = np.empty((n, 3), np.int64)
+    weight, footprint = np.empty(n), np.empty(n)
+    position, view_dir = np.empty((n, 3)), np.empty((n, 3))
+    fwd, right, up = camera.basis()
+    _group_fill(gbuffer.curve, use, gbuffer.depth, start, np.asarray(pattern, np.float64),
+                np.asarray(camera.position, np.float64), np.stack([right, up, fwd]),
+                math.tan(math.radians(camera.fov_deg) / 2), float(camera.ortho_height), pixel_sample, weight,
+                position, view_dir, footprint)
+    i, j, a = pixel_sample.T
+    points = {"start": start, "weight": weight, "position": position,
+              "view_dir": view_dir, "footprint": footprint}
+    for name in ("curve", "yarn", "segment", "arclength", "v"):
+        points[name] = getattr(gbuffer, name)[i, j, a]
+    points["tangent"] = gbuffer.tangent[i, j, a].astype(np.float64)
+    return points
+
+
+# --- small vector helpers ----------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _asin(x):
+    return math.asin(min(max(x, -1.0), 1.0))
+
+
+@njit(cache=True)
+def _strip_frame(t, wo, n, b):
+    """n, b of the strip at unit tangent t seen from ω_o; False when edge-on."""
+    c = _dot(wo, t)
+    for k in range(3):
+        n[k] = wo[k] - c * t[k]
+    norm = math.sqrt(_dot(n, n))
+    if norm < DEGENERATE:
+        return False
+    for k in range(3):
+        n[k] /= norm
+    b[0] = n[1] * t[2] - n[2] * t[1]
+    b[1] = n[2] * t[0] - n[0] * t[2]
+    b[2] = n[0] * t[1] - n[1] * t[0]
+    return True
+
+
+@njit(cache=True)
+def _azimuth_difference(t, wo, wi):
+    """φ = φ_o − φ_i about the unit tangent t (as the bake's fiber-frame azimuth)."""
+    co, ci = _dot(wo, t), _dot(wi, t)
+    o0, o1, o2 = wo[0] - co * t[0], wo[1] - co * t[1], wo[2] - co * t[2]
+    i0, i1, i2 = wi[0] - ci * t[0], wi[1] - ci * t[1], wi[2] - ci * t[2]
+    cx, cy, cz = i1 * o2 - i2 * o1, i2 * o0 - i0 * o2, i0 * o1 - i1 * o0
+    return math.atan2(cx * t[0] + cy * t[1] + cz * t[2], i0 * o0 + i1 * o1 + i2 * o2)
+
+
+@njit(cache=True)
+def _table_v(tab, v, x, lo, hi, repeat, out):
+    """out[:3] = bilinear lookup of a (N_v, N_x, 3) table at (v, x); v over [−1, 1] clamps."""
+    a0, a1, fa = axis_cell(v, -1.0, 1.0, tab.shape[0], False)
+    b0, b1, fb = axis_cell(x, lo, hi, tab.shape[1], repeat)
+    for ch in range(3):
+        out[ch] = ((1.0 - fa) * ((1.0 - fb) * tab[a0, b0, ch] + fb * tab[a0, b1, ch])
+                   + fa * ((1.0 - fb) * tab[a1, b0, ch] + fb * tab[a1, b1, ch]))
+
+
+@njit(cache=True)
+def _table_v3(tab, v, theta, phi, out):
+    """out[:3] = trilinear lookup of a (N_v, N_theta, N_phi, 3) table at (v, θ, φ) (§4.3: v, θ clamp, φ repeats)."""
+    a0, a1, fa = axis_cell(v, -1.0, 1.0, tab.shape[0], False)
+    b0, b1, fb = axis_cell(theta, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
+    c0, c1, fc = axis_cell(phi, -math.pi, math.pi, tab.shape[2], True)
+    for ch in range(3):
+        lo = ((1.0 - fb) * ((1.0 - fc) * tab[a0, b0, c0, ch] + fc * tab[a0, b0, c1, ch])
+              + fb * ((1.0 - fc) * tab[a0, b1, c0, ch] + fc * tab[a0, b1, c1, ch]))
+        hi = ((1.0 - fb) * ((1.0 - fc) * tab[a1, b0, c0, ch] + fc * tab[a1, b0, c1, ch])
+              + fb * ((1.0 - fc) * tab[a1, b1, c0, ch] + fc * tab[a1, b1, c1, ch]))
+        out[ch] = (1.0 - fa) * lo + fa * hi
+
+
+@njit(cache=True)
+def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
+    """A correction or shadowing value: the full table when it has cells (``full.shape[0] > 0``), else the product
+    of the factor lookups (ASSET_PACK.md §6–7)."""
+    if full.shape[0] > 0:
+        _table_v3(full, v, theta, phi, out)
+        return
+    _table_v(m_tab, v, theta, THETA_RANGE[0], THETA_RANGE[1], False, out)
+    _table_v(n_tab, v, phi, -math.pi, math.pi, True, scratch)
+    for ch in range(3):
+        out[ch] *= scratch[ch]
+
+
+@njit(cache=True)
+def _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, theta_d, phi, xi, psi, scratch):
+    _factored_or_full(xi_full, xi_m, xi_n, v, theta_d, phi, xi, scratch)
+    _factored_or_full(psi_full, psi_gm, psi_gn, v, theta_i, phi, psi, scratch)
+
+
+@njit(cache=True)
+def _texture_tangent(tex, t, n, b, tf):
+    """World fiber tangent from a coverage-premultiplied strip-frame vector; t where it vanishes."""
+    for k in range(3):
+        tf[k] = tex[0] * t[k] + tex[1] * b[k] + tex[2] * n[k]
+    norm = math.sqrt(_dot(tf, tf))
+    if norm < 1e-6:
+        tf[:] = t
+        return False
+    for k in range(3):
+        tf[k] /= norm
+    return True
+
+
+@njit(cache=True)
+def _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha):
+    """Clear point q's output and set up its strip frame (n, b); returns (drawn, u, v), drawn False when edge-on."""
+    rgb[q, :] = 0.0
+    alpha[q] = 0.0
+    if not _strip_frame(t, wo, n, b):
+        return False, 0.0, 0.0
+    return True, arclength[q] / period, min(max(v_coord[q], -1.0), 1.0)
+
+
+# --- regular fibers --------------------------------------------------------------------------------------------------
+
+@njit(parallel=True, cache=True)
+def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
+                  params, ds, xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn,
+                  tan_data, tan_off, tan_rows, tan_cols, cov_data, cov_off, cov_rows, cov_cols,
+                  period, half_width, n_occluded, n_cross,
+                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis, ms_dir, ms_e, ms_vis,
+                  im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):
+    """Shade the points ``idx`` (indices into the point arrays) of one yarn; writes rgb[idx], alpha[idx].
+    ``ms_dir`` (C, 3), ``ms_e`` (C, 3), ``ms_vis`` (C, N): the environment's multiple-scattering lights (module
+    docstring)."""
+    texel_u = period / tan_cols[0, 0]
+    texel_v = 2.0 * half_width / tan_rows[0, 0]
+    for m in prange(idx.shape[0]):
+        q = idx[m]
+        t, wo = tangent[q], view_dir[q]
+        n, b, tf = np.empty(3), np.empty(3), np.empty(3)
+        drawn, u, v = _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha)
+        if not drawn:
+            continue
+        level = mip_level(footprint[q], texel_u, texel_v)
+        cov, tex = np.empty(1), np.empty(3)
+        sample_mip(cov_data, cov_off, cov_rows, cov_cols, 0, level, u, v, cov)
+        sample_mip(tan_data, tan_off, tan_rows, tan_cols, 0, level, u, v, tex)
+        alpha[q] = min(max(cov[0], 0.0), 1.0)
+        _texture_tangent(tex, t, n, b, tf)
+        theta_o = _asin(_dot(wo, t))
+        theta_o_f = _asin(_dot(wo, tf))
+        xi, psi, scratch, comp = np.ones(3), np.ones(3), np.empty(3), np.empty((7, 3))
+        for light in range(light_dir.shape[0]):
+            wi = light_dir[light]
+            theta_i = _asin(_dot(wi, t))
+            phi = -math.atan2(_dot(wi, b), _dot(wi, n))
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
+                         xi, psi, scratch)
+            fiber_lit = min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
+            vis = light_vis[light, q]
+            n_front = n_occluded + (1.0 - vis) * n_cross
+            ds_kernel(params, ds, _asin(_dot(wi, tf)), theta_o_f, _azimuth_difference(tf, wo, wi), n_front, D_F, D_B,
+                      vis * fiber_lit, comp)
+            for ch in range(3):
+                rgb[q, ch] += light_e[light, ch] * xi[ch] * comp[K_TOTAL, ch]
+        im = np.empty(3)
+        # the BCSDF context of the fiber-frame view, for I_M's R lobe
+        c_f = context(params, np.array([math.sin(theta_o_f), math.cos(theta_o_f), 0.0])) if lobe_dir.shape[0] \
+            else np.empty(0)
+        for j in range(lobe_dir.shape[0]):
+            wj = lobe_dir[j]
+            theta_i = _asin(_dot(wj, t))
+            phi = -math.atan2(_dot(wj, b), _dot(wj, n))
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
+                         xi, psi, scratch)
+            theta_j_f = _asin(_dot(wj, tf))
+            phi_f = _azimuth_difference(tf, wo, wj)
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c_f, theta_o_f, theta_j_f, -phi_f,
+                      lobe_lambda[j], im)
+            vis = lobe_vis[j, q]
+            for ch in range(3):
+                rgb[q, ch] += lobe_w[j, ch] * vis * xi[ch] * psi[ch] * im[ch]
+        for c in range(ms_dir.shape[0]):  # multiple scattering: clusters of lobes as distant lights
+            wc = ms_dir[c]
+            theta_i = _asin(_dot(wc, t))
+            phi = -math.atan2(_dot(wc, b), _dot(wc, n))
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
+                         xi, psi, scratch)
+            vis = ms_vis[c, q]
+            lit = vis * min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
+            theta_c_f = _asin(_dot(wc, tf))
+            ds_kernel(params, ds, theta_c_f, theta_o_f, _azimuth_difference(tf, wo, wc),
+                      n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit, comp)
+            cos_c = math.cos(theta_c_f)
+            for ch in range(3):
+                multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
+                rgb[q, ch] += ms_e[c, ch] * xi[ch] * multiple
+
+
+# --- flyaways --------------------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def variant_of(curve, period_index):
+    """Flyaway texture variant (0, 1, 2) of one period of one curve: a fixed 64-bit integer hash (splitmix64's
+    finaliser) of the pair, stable over frames and thread counts."""
+    x = np.uint64(curve) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(period_index & 0xFFFFFFFFFFFF)
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    x = x ^ (x >> np.uint64(31))
+    return int(x % np.uint64(3))
+
+
+@njit(parallel=True, cache=True)
+def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, params,
+                  fly_data, fly_off, fly_rows, fly_cols, period, half_width, radius, psi_full, psi_gm, psi_gn,
+                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis,
+                  im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):
+    """Shade the flyaway-layer points ``idx`` of one yarn; writes rgb[idx], alpha[idx]."""
+    texel_u = period / fly_cols[0, 0]
+    texel_v = 2.0 * half_width / fly_rows[0, 0]
+    for m in prange(idx.shape[0]):
+        q = idx[m]
+        t, wo = tangent[q], view_dir[q]
+        n, b, tf = np.empty(3), np.empty(3), np.empty(3)
+        drawn, u, v = _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha)
+        if not drawn:
+            continue
+        texel = np.empty(4)
+        sample_mip(fly_data, fly_off, fly_rows, fly_cols, variant_of(curve[q], int(math.floor(u))),
+                   mip_level(footprint[q], texel_u, texel_v), u, v, texel)
+        if not _texture_tangent(texel, t, n, b, tf):
+            continue
+        alpha[q] = min(max(texel[3], 0.0), 1.0)
+        # local fiber frame: x along tf, y toward the camera in the normal plane, z = x × y
+        ny = np.empty(3)
+        if not _strip_frame(tf, wo, ny, b):
+            continue
+        c = context(params, np.array([_dot(wo, tf), _dot(wo, ny), 0.0]))
+        f, wl, psi, scratch = np.empty(3), np.empty(3), np.ones(3), np.empty(3)
+        # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
+        # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
+        v_strip = v * half_width / radius
+        on_body = abs(v_strip) <= 1.0
+        theta_o = _asin(_dot(wo, t))
+        for light in range(light_dir.shape[0]):
+            wi = light_dir[light]
+            wl[0], wl[1], wl[2] = _dot(wi, tf), _dot(wi, ny), -_dot(wi, b)
+            evaluate(params, c, wl, f)
+            cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
+            lit = light_vis[light, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wi, psi,
+                                                     scratch)
+            for ch in range(3):
+                rgb[q, ch] += light_e[light, ch] * lit * f[ch] * cos_i
+        theta_o_f = _asin(_dot(wo, tf))
+        for j in range(lobe_dir.shape[0]):
+            wj = lobe_dir[j]
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c, theta_o_f, _asin(_dot(wj, tf)),
+                      -_azimuth_difference(tf, wo, wj), lobe_lambda[j], f)
+            lit = lobe_vis[j, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wj, psi, scratch)
+            for ch in range(3):
+                rgb[q, ch] += lobe_w[j, ch] * lit * f[ch]
+
+
+@njit(cache=True)
+def _body_shadow(on_body, psi_full, psi_gm, psi_gn, v, t, n, b, wi, psi, scratch):
+    """Ψ^Fiber_G (mean RGB, clamped to [0, 1]) at strip coordinate v toward ω_i, or 1 off the yarn body."""
+    if not on_body:
+        return 1.0
+    phi = -math.atan2(_dot(wi, b), _dot(wi, n))
+    _factored_or_full(psi_full, psi_gm, psi_gn, v, _asin(_dot(wi, t)), phi, psi, scratch)
+    return min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
+
+
+# --- resolve ---------------------------------------------------------------------------------------------------------
+
+@njit(parallel=True, cache=True)
+def resolve(start, weight, rgb, alpha, under, out):
+    """out[p] = Σ_points w α L + (1 − Σ w α)·under[p] over the points of pixel p (flattened H·W, RGB)."""
+    for p in prange(out.shape[0]):
+        cov = 0.0
+        acc = np.zeros(3)
+        for q in range(start[p], start[p + 1]):
+            a = weight[q] * alpha[q]
+            cov += a
+            for ch in range(3):
+                acc[ch] += a * rgb[q, ch]
+        cov = min(cov, 1.0)
+        for ch in range(3):
+            out[p, ch] = acc[ch] + (1.0 - cov) * under[p, ch]

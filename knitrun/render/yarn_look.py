@@ -1,0 +1,140 @@
+"""What the strip renderer needs of one yarn entry, read from its asset pack (``data_formats/ASSET_PACK.md``).
+
+``load_look(pack_path, entry, units, needs)`` opens only the datasets the scene uses (``needs``: corrections,
+flyaways, environment) and converts everything to the scene:
+
+* Lengths: the pack's `/yarn` lengths are in its own ``units``; they are converted to the scene's and scaled by
+  ``entry.radius / pack radius`` (a scene may draw a yarn thicker or thinner than it was baked, ``SCENE.md``): the
+  texture period and the flyaway strip half-width scale with it, so the fibers keep their proportions.
+* Colour: the entry's ``color`` multiplies the BCSDF lobe colours A_R, A_TT, A_D (as the reference path tracer does).
+  f is linear in those colours, so I_M and the dual-scattering averages ā_f, ā_b scale with the colour while the
+  shifts and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
+  correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked.
+* Fiber counts for the dual-scattering estimate at run time: ``dual_scattering.fiber_counts`` (n_cross, n_occluded)
+  from the yarn spec stored in the pack's provenance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from data_formats.asset_pack import read_pack
+from data_formats.scene import CM_PER_UNIT
+from data_formats.yarn_spec import loads_spec
+
+from knitrun.shading.dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables
+from knitrun.shading.fiber_bcsdf import P_A_D, P_A_R, P_A_TT, params_from_pack
+from knitrun.shading.im_lookup import kernel_axes
+from knitrun.render.texture_sampling import MipStack, mip_stack
+
+CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
+FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
+
+
+@dataclass
+class YarnLook:
+    """Runtime data of one yarn entry; lengths in scene units, tables float64 (textures float32)."""
+
+    name: str
+    params: np.ndarray  # (N_PARAMS,) fiber BCSDF with the entry's colour
+    ds: np.ndarray  # (5, N_theta, 3) dual-scattering tables (pack_tables order)
+    xi_full: np.ndarray  # (N_v, N_theta, N_phi, 3), or (0, 1, 1, 3) to use the factors
+    xi_m: np.ndarray  # (N_v, N_theta, 3) or a (1, 1, 3) table of ones when corrections are not used
+    xi_n: np.ndarray
+    psi_full: np.ndarray
+    psi_gm: np.ndarray
+    psi_gn: np.ndarray
+    tangent: MipStack
+    coverage: MipStack
+    flyaway: MipStack | None
+    radius: float  # drawn yarn radius = regular strip half-width
+    period: float  # texture period along the rest arc length
+    flyaway_half_width: float
+    n_cross: float
+    n_occluded: float
+    twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
+    im: tuple | None  # (I_M^{TT,D} table (…, 3) float64, lo, hi, repeat, codes) for ``im_lookup.im_kernel``
+    residuals: dict  # xi / psi factorization residuals, for reports
+
+
+def ones_factor():
+    """A (1, 1, 3) factor table of ones: the term switched off."""
+    return np.ones((1, 1, 3))
+
+
+def no_full_table():
+    """An empty full table: lookups use the factors."""
+    return np.zeros((0, 1, 1, 3))
+
+
+def _tinted_ds(tables, colour):
+    if np.all(colour == 1.0):
+        return pack_tables(tables)
+    t = {n: np.asarray(tables[f"dual_scattering/{n}"], np.float64) for n in DS_NAMES}
+    a_f, a_b = t["a_f"] * colour, t["a_b"] * colour
+    big_a_b, delta_b, sigma_b = backscatter_terms(a_f, a_b, t["alpha_f"], t["alpha_b"], t["beta_f"], t["beta_b"])
+    return pack_tables({"dual_scattering/a_f": a_f, "dual_scattering/beta_f": t["beta_f"],
+                        "dual_scattering/A_b": big_a_b, "dual_scattering/Delta_b": delta_b,
+                        "dual_scattering/sigma_b": sigma_b})
+
+
+def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
+              environment=False) -> YarnLook:
+    """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
+    ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
+    serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
+    ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors."""
+    header = read_pack(pack_path, tables=[])
+    spec = loads_spec(header.provenance["yarn_spec_toml"])
+    if spec.name != entry.spec.name:
+        raise ValueError(f"{pack_path}: pack baked for yarn {spec.name!r}, the scene draws {entry.spec.name!r}")
+    flyaways = flyaways and spec.has_flyaways  # a yarn without flyaways has no flyaway textures to draw
+    names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
+    if corrections:
+        names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
+    if flyaways:
+        names.append("textures/flyaway")
+    if environment:
+        names.append("environment/I_M_TT_D")
+    stored = header.info
+    missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
+    if corrections and full_tables:
+        names += [n for n in FULL_TABLES if n in stored]
+    if missing:
+        raise ValueError(f"{pack_path}: pack lacks {', '.join(missing)} (bake the yarn again without --only or --scene)")
+    pack = read_pack(pack_path, tables=[k for k in stored if any(k == n or k.startswith(n + "/mip") for n in names)])
+    colour = np.asarray(entry.color, np.float64)
+    params = params_from_pack(pack.fiber_bcsdf)
+    for base in (P_A_R, P_A_TT, P_A_D):
+        params[base:base + 3] *= colour
+    to_scene = CM_PER_UNIT[pack.yarn["units"]] / CM_PER_UNIT[units]
+    pack_radius = float(pack.yarn["radius"]) * to_scene
+    scale = entry.radius / pack_radius
+    geometry = spec.geometry
+    n_cross, n_occluded = fiber_counts(geometry, spec.radius)
+    tables = {n: np.asarray(pack.tables[n], np.float64) for n in names if n in CORRECTION_TABLES + FULL_TABLES}
+    fly = pack.mip_chain("textures/flyaway") if flyaways else []
+    im = None
+    if environment:
+        lo, hi, repeat, codes = kernel_axes(pack.info["environment/I_M_TT_D"].axes)
+        im = (np.ascontiguousarray(pack.tables["environment/I_M_TT_D"] * colour, np.float64), lo, hi, repeat, codes)
+    residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
+                 if corrections}
+    return YarnLook(
+        name=spec.name, params=params, ds=_tinted_ds(pack.tables, colour),
+        xi_full=tables.get("correction/xi", no_full_table()), xi_m=tables.get("correction/xi_M", ones_factor()),
+        xi_n=tables.get("correction/xi_N", ones_factor()), psi_full=tables.get("shadowing/psi", no_full_table()),
+        psi_gm=tables.get("shadowing/psi_GM", ones_factor()), psi_gn=tables.get("shadowing/psi_GN", ones_factor()),
+        tangent=mip_stack([pack.mip_chain("textures/tangent")]),
+        coverage=mip_stack([pack.mip_chain("textures/coverage")]),
+        flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
+        radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
+        flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
+        n_cross=n_cross, n_occluded=n_occluded, twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
+        im=im, residuals=residuals)
+
+
+def _half_width(pack, base):
+    return float(pack.info[f"{base}/mip0"].attrs["half_width"])

@@ -1,0 +1,243 @@
+"""Environment light: the spherical Gaussian (SRBF) and the runtime lookup of the I_M table (seed 000 §4.5).
+
+Definitions (angles as in ``knitrun.shading.fiber_bcsdf`` and ``data_formats/ASSET_PACK.md`` §3, radians)
+--------------------------------------------------------------------------------------------------
+* SRBF: G(ω; ω_j, λ) = exp(λ(ω·ω_j − 1)) (seed 000 eq. 14), unnormalised: G(ω_j) = 1 and
+  ∫ G dω = (2π/λ)(1 − e^{−2λ}).
+* I_M(ω_o; ω_j, λ_j) = ∫ G(ω_i; ω_j, λ_j) f(ω_i, ω_o) cos θ_i dω_i (eq. 16), linear RGB, dimensionless;
+  f the fiber BCSDF of ``knitrun.shading.fiber_bcsdf``. I_M = I_M^R + I_M^{TT,D}, one term per group of lobes.
+
+Two parts (``im_kernel`` adds them)
+-----------------------------------
+* I_M^{TT,D}, the TT and D lobes: interpolated in the pack's table ``environment/I_M_TT_D`` (axes below). These
+  lobes are wide (β_TT ≥ 10°, γ_TT ≥ 20° in every preset; D is isotropic), so a 4-D table resolves them.
+* I_M^R, the R lobe: integrated at lookup time (``r_lobe_integral``). N_R = 1/2π is constant, so the azimuthal
+  integral is closed-form and I_M^R is a 1-D integral over θ_i (``knitbake.stages.im_table`` derives it):
+
+      I_M^R = A_R/Z_R ∫ exp(−(θ_i − μ_R)²/(2σ_R²)) cos²θ_i exp(λ(cos(θ_i − θ_j) − 1)) I0e(λ cos θ_i cos θ_j) dθ_i
+
+  over [−π/2, π/2], with μ_R, σ_R, Z_R of the view (``fiber_bcsdf.context``) and I0e(x) = e^{−x} I_0(x). The
+  integrand is close to a Gaussian of precision P = 1/σ_R² + λ centred at m = (μ_R/σ_R² + λθ_j)/P, so the rule is
+  ``R_NODES``-point Gauss–Legendre on the window m ± ``R_WINDOW``/√P clipped to [−π/2, π/2]. Why not a table:
+  the presets' R lobe is 1° (σ_R = 2°) wide, and under a sharp SRBF (the sun: λ ≈ 6600, 0.7°) I^R is a 2°-wide
+  ridge along θ_j = μ_R(θ_o) in a 3-D domain; resolving it to 2 % takes ~0.015 rad samples on two angle axes, and a
+  lobe-centred axis fails where the ridge meets the poles. The 12-node rule is within 0.2 % of direct quadrature
+  for β_R from 0.001° to 25°, λ from 0.5 to 10⁴ and θ_o, θ_j up to ±π/2 (``tests/test_im_table.py``).
+
+Parameterisation of the I_M^{TT,D} table (the axes ``knitbake.stages.im_table`` writes)
+-------------------------------------------------------------------------------
+f depends on θ_i, θ_o and φ_o − φ_i only, and G on ω_i·ω_j, so a common rotation about the fiber axis leaves the
+integral unchanged: I_M is a function of exactly four numbers, θ_o, θ_j, φ_j − φ_o and λ. The table axes are
+
+=========================  ==================================  =====  =====
+name                       variable                            units  wrap
+=========================  ==================================  =====  =====
+``theta_o``                θ_o = asin(ω_o·t)                   rad    clamp
+``theta_j``                θ_j = asin(ω_j·t)                   rad    clamp
+``abs_phi_j_minus_phi_o``  |φ_j − φ_o| wrapped into [0, π]     rad    clamp
+``log10_lambda``           log10 λ_j                           1      clamp
+=========================  ==================================  =====  =====
+
+* θ itself, not cos θ: the paper's (cos θ_j, cos θ_o, cos(θ_j − θ_o), 1/λ_j) cannot tell (θ_j, θ_o) from
+  (−θ_j, −θ_o), which f distinguishes whenever a lobe is shifted (α ≠ 0: the M lobes are centred at
+  θ_i = 2α − θ_o), and it drops the azimuth, on which the TT lobe depends. The M lobes are Gaussians in θ, so a
+  uniform θ grid resolves them equally well at every latitude (a sin θ grid is coarsest at the poles).
+* |φ_j − φ_o|: f is exactly even in φ (N_R and D are constant, N_TT depends on |φ − π|), so reflecting ω_i about
+  the plane through the fiber axis and ω_o gives I_M(−Δφ) = I_M(Δφ); the half range halves the table.
+* log10 λ: I_M falls like 2π/λ for large λ and the SRBF sweeps from wider than the sphere to narrower than the
+  lobes over decades of λ; a logarithmic axis spends samples evenly over that sweep (the paper's 1/λ puts almost
+  every sample at λ < 10).
+
+Every axis range is chosen so that the first and last cell centres (ASSET_PACK.md §4.2) lie exactly on the ends
+of the domain (θ = ±π/2, Δφ = 0 and π, the smallest and largest λ): a lookup inside the domain always
+interpolates and never clamps.
+
+Accuracy (random points with λ log-uniform in [0.5, 10⁴], plus λ = 0.5, λ = 10⁴, the R ridge and θ_o, θ_j within
+1e-3 rad of ±π/2)
+---------------------------------------------------------------------------------------------------------------
+Multilinear interpolation reproduces a feature to ~2% when its standard deviation spans ≳ 2.5 sample spacings.
+The features of the TT and D table are: the TT lobe, √(4β_TT² + 1/λ) wide in θ_j and moving with θ_o (centre 2α − θ_o); N_TT in |Δφ|
+(logistic scale γ_TT√3/π, widened by the SG); in log λ, the fall-off exp(−λ(1 − cos γ)) of an SRBF at angle γ from
+the lobes, which needs ~0.07 decades for λ ≲ 20; and near θ_j = ±π/2 the cos θ_j factor, which levels off at
+~1/√λ, so the cell at the pole has large *relative* errors at large λ where I_M is a few % of its peak.
+
+I_M as evaluated here (table + R rule) against direct quadrature, by ``knitbake.stages.im_table.lookup_accuracy`` (2000
+points; "rel" = max relative error where I_M > 1% of its maximum, "decade" = max error over each λ decade's largest
+I_M), for the bake's quality shapes (``knitbake.bake.QUALITY``; every bake stores these two figures with its table):
+
+==========  =======================  ===============  ===============  ===============
+quality     shape                    cotton1          silk1            polyester1
+==========  =======================  ===============  ===============  ===============
+draft       (12, 24, 12, 32)         9.9% / 0.8%      23% / 9.9%       19% / 6.8%
+standard    (24, 48, 24, 96)         1.2% / 0.24%     5.3% / 4.1%      3.6% / 1.7%
+final       (32, 64, 32, 128)        0.7% / 0.13%     3.0% / 2.0%      2.9% / 1.2%
+==========  =======================  ===============  ===============  ===============
+
+cotton1's TT lobe is wide (β_TT 27°); silk1, the rayons and polyester1 have β_TT = 10° (σ_TT = 20°) and γ_TT ≈ 20°,
+which the standard grid samples at ~2.6 and ~1.7 spacings per standard deviation: their worst relative errors lie in
+the lobes' tails at 1–3% of the maximum. A rough fiber (β_R 25°, β_TT 35°, γ_TT 80°) at (16, 40, 12, 64) is within
+1.2% / 0.6% (``tests/test_im_table.py``). Before the R lobe left the table (schema 1.x), cotton1 erred by up to 75% of
+the decade maximum at λ > 2000.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from knitrun.shading import fiber_bcsdf as fb
+from knitrun.shading.table_lookup import axis_cell
+
+R_NODES = 12  # Gauss–Legendre nodes of the R-lobe integral (``r_lobe_integral``)
+R_WINDOW = 6.0  # its window: the product Gaussian's centre ± R_WINDOW standard deviations (e^{−18} of the peak)
+_R_GX, _R_GW = np.polynomial.legendre.leggauss(R_NODES)
+
+
+def sg(omega, omega_j, lam):
+    """Spherical Gaussian G(ω; ω_j, λ) = exp(λ(ω·ω_j − 1)) for unit vectors (last axis 3); broadcasting."""
+    return np.exp(np.asarray(lam, float) * (np.sum(np.asarray(omega, float) * np.asarray(omega_j, float), axis=-1)
+                                            - 1.0))
+
+
+# name → (definition written into the pack, units); the order is the axis code of ``im_kernel``
+AXIS_VARIABLES = {
+    "theta_o": ("θ_o = asin(ω_o·t), longitudinal angle of the view against the fiber tangent", "rad"),
+    "theta_j": ("θ_j = asin(ω_j·t), longitudinal angle of the SRBF centre against the fiber tangent", "rad"),
+    "abs_phi_j_minus_phi_o": ("|φ_j − φ_o| wrapped into [0, π]: azimuth of the SRBF centre minus azimuth of the view "
+                              "(I_M is even in it because f is even in φ)", "rad"),
+    "log10_lambda": ("log10 λ_j, λ_j the SRBF sharpness", "1"),
+}
+AXIS_CODES = {name: code for code, name in enumerate(AXIS_VARIABLES)}  # theta_o, theta_j, |Δφ|, log10 λ
+
+
+def _field(axis, key):
+    """An axis description as a dict (``bake_im_table``'s axes_attrs) or an ``AxisInfo`` (``read_pack``)."""
+    return axis[key] if isinstance(axis, dict) else getattr(axis, key)
+
+
+def kernel_axes(axes):
+    """(lo, hi, repeat, codes) arrays for ``im_kernel`` from the four sampled axes of an I_M table (dicts or
+    ``AxisInfo``; the channel axis is ignored); ValueError naming the axes for a parameterisation this renderer
+    does not implement."""
+    sampled = [a for a in axes if _field(a, "name") != "channel"]
+    names = [_field(a, "name") for a in sampled]
+    if len(sampled) != 4 or any(n not in AXIS_CODES for n in names):
+        raise ValueError(f"I_M axes {names}: this renderer implements 4 axes from {sorted(AXIS_CODES)}")
+    ranges = np.array([_field(a, "range") for a in sampled], np.float64)
+    return (ranges[:, 0].copy(), ranges[:, 1].copy(), np.array([_field(a, "wrap") == "repeat" for a in sampled]),
+            np.array([AXIS_CODES[n] for n in names], np.int64))
+
+
+def im_lookup(table, axes, params, theta_o, theta_j, dphi, lam):
+    """I_M (RGB) as the renderer evaluates it (``im_kernel``): the I_M^{TT,D} table by multilinear interpolation
+    (ASSET_PACK.md §4.2–4.3) plus the R lobe by ``r_lobe_integral``; inputs broadcast, result (…, 3).
+
+    table: (N_a, N_b, N_c, N_d, 3), the TT and D lobes; axes: its four sampled axes, as dicts with name, range, wrap
+    (the axes_attrs of ``knitbake.stages.im_table.bake_im_table``) or as ``AxisInfo`` of a read pack
+    (``pack.info['environment/I_M_TT_D'].axes``; the channel axis is ignored). params: the fiber BCSDF vector the
+    table was baked for (its R lobe is integrated here). θ_o, θ_j in [−π/2, π/2], dphi = φ_j − φ_o (any real),
+    lam > 0 (values outside the table's λ range take its end samples). A parameterisation with an axis not in
+    ``AXIS_VARIABLES`` is refused."""
+    lo, hi, repeat, codes = kernel_axes(axes)
+    args = np.broadcast_arrays(*[np.asarray(x, np.float64) for x in (theta_o, theta_j, dphi, lam)])
+    if np.any(~(args[3] > 0)):
+        raise ValueError("I_M lookup: λ must be > 0")
+    flat = [np.ascontiguousarray(x.ravel()) for x in args]
+    out = _im_batch(np.ascontiguousarray(table, np.float64), lo, hi, repeat, codes, np.asarray(params, np.float64),
+                    *flat)
+    return out.reshape(args[0].shape + (3,))
+
+
+@njit(parallel=True, cache=True)
+def _im_batch(table, lo, hi, repeat, codes, params, theta_o, theta_j, dphi, lam):
+    out = np.empty((theta_o.shape[0], 3))
+    for k in prange(theta_o.shape[0]):
+        c = fb.context(params, np.array([math.sin(theta_o[k]), math.cos(theta_o[k]), 0.0]))
+        im_kernel(table, lo, hi, repeat, codes, params, c, theta_o[k], theta_j[k], dphi[k], lam[k], out[k])
+    return out
+
+
+@njit(cache=True)
+def i0e(x):
+    """Exponentially scaled modified Bessel function e^{−x} I_0(x) for x ≥ 0, to ~1e-15 relative: the power series
+    Σ (x²/4)^k/(k!)² (positive terms) for x ≤ 20, the asymptotic series (2πx)^{−1/2} Σ ((2k−1)!!)²/(k! (8x)^k)
+    beyond (its smallest term is ~e^{−2x})."""
+    if x <= 20.0:
+        q = 0.25 * x * x
+        term, total, k = 1.0, 1.0, 0
+        while term > 1e-17 * total:
+            k += 1
+            term *= q / (k * k)
+            total += term
+        return total * math.exp(-x)
+    term, total, k = 1.0, 1.0, 0
+    while term > 1e-17 * total and k < 2.0 * x:  # terms shrink while k < 2x
+        k += 1
+        term *= (2 * k - 1) ** 2 / (k * 8.0 * x)
+        total += term
+    return total / math.sqrt(2.0 * math.pi * x)
+
+
+@njit(cache=True)
+def r_lobe_integral(c, theta_j, lam):
+    """∫ M_R N_R G cos θ_i dω_i without the albedo A_R (the module docstring's I_M^R / A_R) for the view of context
+    ``c`` (``fiber_bcsdf.context``), θ_j ∈ [−π/2, π/2], λ > 0: ``R_NODES``-point Gauss–Legendre on the window of the
+    product of the R lobe and the SRBF (module docstring). Finite and ≥ 0 for every input in range."""
+    mu, sigma, z = c[fb.C_MU], c[fb.C_SIGMA], c[fb.C_Z]
+    precision = 1.0 / (sigma * sigma) + lam
+    centre = (mu / (sigma * sigma) + lam * theta_j) / precision
+    reach = R_WINDOW / math.sqrt(precision)
+    lo = max(-fb.HALF_PI, centre - reach)
+    hi = min(fb.HALF_PI, centre + reach)
+    if hi <= lo:
+        return 0.0
+    half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
+    cos_j = max(math.cos(theta_j), 0.0)
+    total = 0.0
+    for q in range(_R_GX.shape[0]):
+        t = mid + half * _R_GX[q]
+        ct = math.cos(t)
+        total += _R_GW[q] * (math.exp(-0.5 * ((t - mu) / sigma) ** 2 + lam * (math.cos(t - theta_j) - 1.0))
+                             * ct * ct * i0e(lam * max(ct, 0.0) * cos_j))
+    return half * total / z
+
+
+@njit(cache=True)
+def im_kernel(table, lo, hi, repeat, codes, params, c, theta_o, theta_j, dphi, lam, out):
+    """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0): the I_M^{TT,D} table by multilinear interpolation over its four
+    sampled axes (the §4.3 rule per axis, ``table_lookup.axis_cell``) plus A_R times ``r_lobe_integral``. ``c`` is
+    ``fiber_bcsdf.context`` of ``params`` for a view at θ_o (the caller's, so a shading point pays for it once)."""
+    i0 = np.empty(4, np.int64)
+    i1 = np.empty(4, np.int64)
+    fr = np.empty(4)
+    for axis in range(4):
+        code = codes[axis]
+        if code == 0:
+            x = theta_o
+        elif code == 1:
+            x = theta_j
+        elif code == 2:
+            x = abs((dphi + math.pi) % (2.0 * math.pi) - math.pi)
+        else:
+            x = math.log10(lam)
+        i0[axis], i1[axis], fr[axis] = axis_cell(x, lo[axis], hi[axis], table.shape[axis], repeat[axis])
+    out[:] = 0.0
+    idx = np.empty(4, np.int64)
+    for bits in range(16):
+        w = 1.0
+        for axis in range(4):
+            if (bits >> axis) & 1:
+                w *= fr[axis]
+                idx[axis] = i1[axis]
+            else:
+                w *= 1.0 - fr[axis]
+                idx[axis] = i0[axis]
+        if w > 0.0:
+            for ch in range(3):
+                out[ch] += w * table[idx[0], idx[1], idx[2], idx[3], ch]
+    if params[fb.P_A_R] > 0.0 or params[fb.P_A_R + 1] > 0.0 or params[fb.P_A_R + 2] > 0.0:
+        r = r_lobe_integral(c, min(max(theta_j, -fb.HALF_PI), fb.HALF_PI), lam)
+        for ch in range(3):
+            out[ch] += params[fb.P_A_R + ch] * r
