@@ -16,8 +16,8 @@ from pathlib import Path
 
 from data_formats.asset_pack import read_pack, validate
 from data_formats.yarn_spec import resolve_yarn
-from knitbake.stages import correction as correction_bake
 from knitbake.bake import bake
+from knitbake.stages import correction as correction_bake
 
 
 def main():

@@ -24,7 +24,7 @@ from scipy.optimize import least_squares
 from knitrun.sim.deformations import deform, deformation_frames
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.sim.simulate import (control_segment_lengths, course_knot_spacing, face_problem, prepare, solve_frame,
-                              yarn_points)
+                                  yarn_points)
 
 COMPILE_SNIPPET = """
 import time

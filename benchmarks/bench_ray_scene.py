@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from knitbake.trace.ray_scene import RayScene
 from knitbake.fibers.tessellate import tessellate_fibers
+from knitbake.trace.ray_scene import RayScene
 
 
 def preset_fibers(name, seed):

@@ -18,14 +18,13 @@ import time
 from pathlib import Path
 
 import numba
-import numpy as np
 
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import write_yarn_curves
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
-from knitrun.sim.crane_stockinette import stockinette_curves
 from knitrun.render.pipeline import render
+from knitrun.sim.crane_stockinette import stockinette_curves
 
 SCENE = """format = "knit-scene"
 version = "1.0"

@@ -16,9 +16,9 @@ import time
 import numba
 import numpy as np
 
-from knitrun.sim.crane_stockinette import stockinette_curves
 from knitrun.render.camera import Camera
 from knitrun.render.strip_raster import rasterize_strips
+from knitrun.sim.crane_stockinette import stockinette_curves
 
 WIDTH, HEIGHT = 1280, 960
 

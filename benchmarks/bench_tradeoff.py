@@ -32,10 +32,10 @@ from PIL import Image, ImageDraw
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import write_yarn_curves
-from knitrun.sim.deformations import deformation_frames, parse_deformation
 from knitbake.compare.image_metrics import compare_images
-from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.render.pipeline import render
+from knitrun.sim.deformations import deformation_frames, parse_deformation
+from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.sim.simulate import simulate
 
 ROOT = Path(__file__).resolve().parent.parent

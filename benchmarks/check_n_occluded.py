@@ -13,11 +13,12 @@ import sys
 import numpy as np
 
 from data_formats.yarn_spec import load_preset
-from knitbake.stages.correction import (_primary_hits, _signed_azimuth, fiber_frames, fibers_toward, strip_camera,
-                                      yarn_direction, yarn_tracer)
+from knitbake.stages.correction import (fiber_frames, fibers_toward, primary_hits, strip_camera, yarn_direction,
+                                        yarn_tracer)
 from knitbake.stages.ds_precompute import precompute_dual_scattering
 from knitrun.shading.dual_scattering import evaluate_ds, fiber_counts
 from knitrun.shading.fiber_bcsdf import params_from_optics
+from knitrun.shading.fiber_frame import fiber_angles
 
 FRACTIONS = (0.15, 0.25, 1 / 3, 0.4, 0.5, 0.6)
 
@@ -31,16 +32,13 @@ def check(name):
     err, total = np.zeros(len(FRACTIONS)), 0.0
     for theta_o in (0.0, 0.5):
         cam = strip_camera(spec, theta_o, 16)
-        _, points, prims, _ = _primary_hits(geom, cam, 0, 0)
+        _, points, prims, _ = primary_hits(geom, cam, 0, 0)
         t = fiber_frames(geom, prims)
-        wo = np.broadcast_to(-cam.basis()[0], t.shape)
-        th_o = np.arcsin(np.clip((wo * t).sum(-1), -1, 1))
+        wo = np.tile(-cam.basis()[0], (len(t), 1))
         for theta_i in (-0.6, 0.0, 0.6):
             for phi in np.linspace(-math.pi, math.pi, 8, endpoint=False) + math.pi / 8:
                 light = yarn_direction(theta_i, -phi)
-                wi = np.broadcast_to(light, t.shape)
-                th_i = np.arcsin(np.clip((wi * t).sum(-1), -1, 1))
-                az = _signed_azimuth(t, wo, wi)
+                th_i, th_o, az = fiber_angles(t, wo, np.tile(light, (len(t), 1)))
                 n = fibers_toward(geom, prims, points, light)
                 exact = evaluate_ds(ds, th_i, th_o, az, n, params=params)[:, 1].mean()
                 lit = float((n == 0).mean())

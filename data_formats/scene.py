@@ -28,8 +28,9 @@ import tomli_w
 
 from . import bcc, yarn_curves
 from .atomic import atomic_path
+from .conventions import CM_PER_UNIT, LENGTH_UNITS
 from .errors import FormatError
-from .yarn_spec import UNITS, YarnSpec, load_preset, load_spec, preset_names
+from .yarn_spec import YarnSpec, load_preset, load_spec, preset_names
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -38,7 +39,6 @@ else:  # pragma: no cover
 
 FORMAT_NAME = "knit-scene"
 FORMAT_VERSION = "1.0"
-CM_PER_UNIT = {"mm": 0.1, "cm": 1.0, "m": 100.0}
 LIGHT_TYPES = ("directional", "environment")
 BUILTIN_ENVIRONMENTS = ("sky",)
 MSAA_LEVELS = (1, 2, 4, 8, 16)
@@ -290,6 +290,12 @@ def curve_file_facts(path, where):
     raise FormatError(f"{where} = {str(path)!r} is not a knit-yarn-curves HDF5 or BCC file")
 
 
+def read_curves(path, units: str):
+    """The yarn curves of a scene entry's ``curves`` file, by content: our HDF5 file, or BCC (which stores no unit:
+    it is read in the scene's ``units``)."""
+    return bcc.read_bcc(path, units=units) if bcc.sniff(path) else yarn_curves.read_yarn_curves(path)
+
+
 def _yarn(raw, where, base, units, lenient, facts):
     """One [[yarns]] entry; ``facts`` caches ``curve_file_facts`` by path."""
     raw = _table(raw, where)
@@ -364,8 +370,8 @@ def scene_from_dict(data: dict, source: str, base: Path) -> Scene:
     _known_keys(data, {"format", "version", "name", "description", "units", "background", "yarns", "camera",
                        "lights", "render"}, source, lenient)
     units = data.get("units")
-    if units not in UNITS:
-        raise FormatError(f"{source}: units = {units!r} is not one of {', '.join(UNITS)}")
+    if units not in LENGTH_UNITS:
+        raise FormatError(f"{source}: units = {units!r} is not one of {', '.join(LENGTH_UNITS)}")
     for key in ("yarns", "camera", "lights"):
         if key not in data:
             raise FormatError(f"{source}: {key} is missing (required; see SCENE.md)")

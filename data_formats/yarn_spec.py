@@ -34,6 +34,7 @@ import numpy as np
 import tomli_w
 
 from .atomic import atomic_path
+from .conventions import LENGTH_UNITS
 from .errors import FormatError
 
 if sys.version_info >= (3, 11):
@@ -43,7 +44,6 @@ else:  # pragma: no cover
 
 FORMAT_NAME = "knit-yarn-spec"
 FORMAT_VERSION = "1.0"
-UNITS = ("mm", "cm", "m")
 PRESET_DIR = Path(__file__).parent / "presets"
 
 
@@ -152,6 +152,16 @@ class YarnSpec:
         return float(np.max(np.hypot(g.ply_distance + b * np.cos(t), a * np.sin(t)))) + g.fiber_radius
 
 
+def fiber_bcsdf_attrs(optics: Optics) -> dict:
+    """The fiber BCSDF of a spec's optics as an asset pack's ``/fiber_bcsdf`` attributes: lobe colours as given,
+    angles converted from the spec's degrees to radians (the one place this conversion is made)."""
+    o = optics
+    return {"r_color": list(o.r_color), "tt_color": list(o.tt_color), "d_color": list(o.d_color),
+            "beta_r": math.radians(o.beta_r_deg), "beta_tt": math.radians(o.beta_tt_deg),
+            "gamma_tt": math.radians(o.gamma_tt_deg), "alpha_r": math.radians(o.alpha_r_deg),
+            "alpha_tt": math.radians(o.alpha_tt_deg)}
+
+
 def _where(source, section, key):
     return f"{source}: [{section}] {key}"
 
@@ -235,8 +245,8 @@ def spec_from_dict(data: dict, source: str = "<yarn spec>") -> YarnSpec:
     if not isinstance(name, str) or not name.strip():
         raise FormatError(f"{source}: name = {name!r} must be a non-empty string")
     units = data.get("units", "cm")
-    if units not in UNITS:
-        raise FormatError(f"{source}: units = {units!r} is not one of {', '.join(UNITS)}")
+    if units not in LENGTH_UNITS:
+        raise FormatError(f"{source}: units = {units!r} is not one of {', '.join(LENGTH_UNITS)}")
     known_top = {"format", "version", "name", "units", "description", "provenance", *SECTIONS}
     for key in data:
         if key not in known_top and not newer_minor:

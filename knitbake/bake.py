@@ -21,6 +21,7 @@ the thread count (every stage is deterministic for a seed).
 from __future__ import annotations
 
 import hashlib
+import importlib.metadata
 import json
 import math
 import os
@@ -30,14 +31,14 @@ from pathlib import Path
 import numpy as np
 
 from data_formats.asset_pack import write_pack
-from data_formats.yarn_spec import YarnSpec, dumps_spec
+from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
 from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
 from knitbake.stages.ds_precompute import bake_dual_scattering_stage
-from knitbake.stages.im_table import ERROR_KIND, LOOKUP_CHECK_POINTS, bake_im_table, lookup_accuracy
+from knitbake.stages.im_table import bake_environment_stage
 from knitbake.stages.stage_result import StageResult
 from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage
+from knitrun.render.camera import scene_camera, tan_half_fov
 
-CODE_VERSION = "0.1.0"
 STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment")
 
 QUALITY = {
@@ -108,19 +109,6 @@ def _load_stage(path: Path) -> StageResult | None:
     return StageResult(tables, errors, meta["attrs"], meta["counts"])
 
 
-def bake_environment_stage(spec, settings, seed, progress=None) -> StageResult:
-    """Stage ``environment``: the I_M^{TT,D} table by deterministic quadrature (the seed is unused); settings: shape."""
-    from knitrun.shading.fiber_bcsdf import params_from_optics
-
-    del seed
-    params = params_from_optics(spec.optics)
-    table, err, axes = bake_im_table(params, shape=tuple(settings["shape"]), progress=progress)
-    accuracy = lookup_accuracy(table, axes, params)
-    return StageResult({"environment/I_M_TT_D": table}, {"environment/I_M_TT_D": float(err.max())},
-                       {"environment/I_M_TT_D": {"axes": axes, "error_kind": ERROR_KIND, **accuracy}},
-                       {"shape": list(settings["shape"]), "lookup_check_points": LOOKUP_CHECK_POINTS})
-
-
 STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
           "shadowing": bake_shadowing_stage, "textures": bake_regular_stage, "flyaway": bake_flyaway_stage,
           "environment": bake_environment_stage}
@@ -145,7 +133,7 @@ def scene_needs(scene, spec: YarnSpec) -> dict:
     largest on-screen yarn width (power of two, 8–512), width from the period/diameter aspect."""
     from data_formats.scene import EnvironmentLight
 
-    cam = scene.camera
+    cam = scene_camera(scene)
     widths = []
     for entry in scene.yarns:
         if entry.spec.name != spec.name:
@@ -154,7 +142,7 @@ def scene_needs(scene, spec: YarnSpec) -> dict:
             pixel = cam.ortho_height / cam.height
         else:  # nearest plausible distance: the camera's distance to its look-at point
             dist = float(np.linalg.norm(np.subtract(cam.look_at, cam.position)))
-            pixel = 2 * dist * math.tan(math.radians(cam.fov_deg) / 2) / cam.height
+            pixel = 2 * dist * tan_half_fov(cam) / cam.height
         widths.append(2 * entry.radius / pixel)
     height = int(min(512, max(8, 2 ** math.ceil(math.log2(max(widths or [8.0]))))))
     width = int(min(4096, 2 ** math.ceil(math.log2(height * spec.geometry.ply_pitch / (2 * spec.radius)))))
@@ -200,14 +188,9 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
                           "error_estimate": worst}
     yarn = {"name": spec.name, "units": spec.units, "radius": spec.radius, "period": spec.geometry.ply_pitch,
             "plies": spec.geometry.plies}
-    o = spec.optics
-    bcsdf = {"r_color": list(o.r_color), "tt_color": list(o.tt_color), "d_color": list(o.d_color),
-             "beta_r": math.radians(o.beta_r_deg), "beta_tt": math.radians(o.beta_tt_deg),
-             "gamma_tt": math.radians(o.gamma_tt_deg), "alpha_r": math.radians(o.alpha_r_deg),
-             "alpha_tt": math.radians(o.alpha_tt_deg)}
     provenance = {"yarn_spec_toml": dumps_spec(spec),
                   "bake_settings": {"quality": quality, "stages": stages, "settings": settings, "needs": needs},
-                  "seed": int(seed), "code_version": CODE_VERSION,
+                  "seed": int(seed), "code_version": importlib.metadata.version("knit"),
                   "timings": {s: round(v["seconds"], 4) for s, v in summary.items()}, "sample_counts": counts}
-    write_pack(output, yarn, provenance, bcsdf, tables, errors, attrs)
+    write_pack(output, yarn, provenance, fiber_bcsdf_attrs(spec.optics), tables, errors, attrs)
     return summary

@@ -6,12 +6,13 @@ import math
 import numpy as np
 import pytest
 
+from data_formats.conventions import cell_centres
 from data_formats.yarn_spec import load_preset
+from knitbake.fibers.fiber_set import FiberSet
+from knitbake.fibers.tessellate import tessellate_fibers
 from knitbake.stages import correction as cb
 from knitbake.stages.ds_precompute import precompute_dual_scattering
-from knitbake.fibers.fiber_set import FiberSet
 from knitbake.trace.path_tracer import Camera, TracerScene, render
-from knitbake.fibers.tessellate import tessellate_fibers
 from knitrun.shading import fiber_bcsdf as fb
 
 DEG = math.pi / 180
@@ -82,7 +83,7 @@ def test_shadowing_sees_the_lit_side_and_not_the_back():
     spec = load_preset("cotton1")
     tables, errors = cb.bake_shadowing(spec, n_v=4, n_theta=2, n_phi=4, rows=8, spp=1, batches=2, seed=0)
     psi = tables["shadowing/psi_GM"][:, :, None, 0] * tables["shadowing/psi_GN"][:, None, :, 0]
-    phis = cb.cell_centres(-math.pi, math.pi, 4)
+    phis = cell_centres(-math.pi, math.pi, 4)
     front = np.abs(phis) < math.pi / 2  # light from the camera's side
     assert psi[:, :, front].mean() > 2 * psi[:, :, ~front].mean()
     assert np.all((psi >= 0) & (psi <= 1.5)) and all(np.all(np.isfinite(e)) for e in errors.values())

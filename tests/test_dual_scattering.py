@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 
 from data_formats import asset_pack as ap
+from data_formats.conventions import cell_centres
 from knitbake.stages.ds_precompute import ERROR_KIND, precompute_dual_scattering
 from knitrun.shading import dual_scattering as ds
 from knitrun.shading import fiber_bcsdf as fb
+from knitrun.shading.fiber_frame import wrap_angle
 from knitrun.shading.table_lookup import lookup_axis, lookup_theta
 
 DEG = math.pi / 180
@@ -49,7 +51,7 @@ def brute_force(p, theta, n_theta=1200, n_phi=24):
 def test_precompute_matches_brute_force_quadrature(rough):
     p = params(COLOURS, *rough)
     tables = precompute_dual_scattering(p, n_theta=N_THETA)
-    centres = ap.cell_centres(-0.5 * math.pi, 0.5 * math.pi, N_THETA)
+    centres = cell_centres(-0.5 * math.pi, 0.5 * math.pi, N_THETA)
     for k in (0, 6, 9, 14, 17):  # −85°, −25°, 5°, 55°, 85°
         ref = brute_force(p, centres[k])
         for name, value in ref.items():
@@ -155,7 +157,7 @@ def test_global_azimuthal_functions_are_the_convolutions():
     u = -0.5 * math.pi + (np.arange(4000) + 0.5) * math.pi / 4000
     gamma = 20 * DEG
     s = gamma * math.sqrt(3) / math.pi
-    n_tt = np.vectorize(lambda x: fb._logistic_trimmed(fb._wrap(x - math.pi), s))
+    n_tt = np.vectorize(lambda x: fb.logistic_trimmed(wrap_angle(x - math.pi), s))
     n_b = np.vectorize(ds.n_back)
     for phi in (0.0, 0.4, 1.5, 2.9, -2.2, math.pi):
         assert ds.n_tt_global(phi, gamma) == pytest.approx(n_tt(phi - u).mean(), rel=1e-5, abs=1e-12)
@@ -196,7 +198,7 @@ def test_lookup_theta_is_exact_at_centres_linear_between_and_clamps():
     rng = np.random.default_rng(0)
     for n in (1, 2, 7):
         table = rng.uniform(size=(n, 3))
-        centres = ap.cell_centres(-0.5 * math.pi, 0.5 * math.pi, n)
+        centres = cell_centres(-0.5 * math.pi, 0.5 * math.pi, n)
         np.testing.assert_allclose(lookup_theta(table, centres), table, rtol=1e-12)
         np.testing.assert_allclose(lookup_theta(table, [-0.5 * math.pi, -2.0]), table[[0, 0]], rtol=1e-12)
         np.testing.assert_allclose(lookup_theta(table, [0.5 * math.pi, 2.0]), table[[-1, -1]], rtol=1e-12)

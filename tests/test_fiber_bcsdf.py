@@ -137,7 +137,7 @@ def test_lobes_peak_where_the_model_says():
     p = fb.params_from_values([1, 1, 1], [1, 1, 1], [0, 0, 0], 3 * DEG, 3 * DEG, 10 * DEG)
     phi = np.linspace(-np.pi, np.pi, 200001)
     s = p[fb.P_GAMMA_TT] * math.sqrt(3) / math.pi
-    dens = np.array([fb._logistic_trimmed(x, s) for x in phi[::10]])
+    dens = np.array([fb.logistic_trimmed(x, s) for x in phi[::10]])
     assert np.trapezoid(dens, phi[::10]) == pytest.approx(1.0, abs=1e-6)
     assert math.sqrt(np.trapezoid(dens * phi[::10] ** 2, phi[::10])) == pytest.approx(p[fb.P_GAMMA_TT], rel=1e-3)
 
@@ -189,15 +189,15 @@ def test_params_are_checked():
 def test_lobe_normaliser_matches_dense_quadrature_in_both_branches():
     """Z(μ, σ) = ∫ exp(−(θ−μ)²/2σ²) cos²θ dθ over the ±9σ window inside [−π/2, π/2]: closed form when the window
     fits, 32-node Gauss–Legendre when it is cut; both against 400 nodes."""
-    from knitrun.shading.fiber_bcsdf import _cos2_normaliser
-
+    assert fb.LOBE_WINDOW == 9.0
     x, w = np.polynomial.legendre.leggauss(400)
     worst, branches = 0.0, set()
     for sigma in np.geomspace(1e-4, 3.0, 40):
         for mu in np.linspace(-math.pi / 2 - 4 * sigma, math.pi / 2 + 4 * sigma, 31):
             lo, hi = max(-math.pi / 2, mu - 9 * sigma), min(math.pi / 2, mu + 9 * sigma)
+            assert (lo, hi) == fb.lobe_window(mu, sigma)
             branches.add(lo == mu - 9 * sigma and hi == mu + 9 * sigma)
             t = 0.5 * (hi + lo) + 0.5 * (hi - lo) * x
             dense = 0.5 * (hi - lo) * np.sum(w * np.exp(-0.5 * ((t - mu) / sigma) ** 2) * np.cos(t) ** 2)
-            worst = max(worst, abs(_cos2_normaliser(mu, sigma) / dense - 1.0))
+            worst = max(worst, abs(fb.cos2_normaliser(mu, sigma) / dense - 1.0))
     assert branches == {True, False} and worst < 1e-8

@@ -8,11 +8,11 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from data_formats.curve_eval import curve_frames, initial_normal
+from data_formats.curve_eval import dense_curve, evaluate, rest_length
 from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves
 from data_formats.yarn_spec import load_preset
-from data_formats.curve_eval import dense_curve, evaluate, rest_length
 from knitbake.fibers.fiber_set import KIND_REGULAR
-from data_formats.curve_eval import curve_frames, initial_normal
 from knitbake.fibers.fiber_sweep import curve_seed, sweep_fibers
 from knitbake.fibers.procedural_yarn import generate_fibers
 from knitrun.sim.crane_stockinette import stockinette_curves, write_example_patch

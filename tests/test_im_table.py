@@ -8,11 +8,12 @@ import pytest
 from scipy import integrate, special
 
 from data_formats import asset_pack as ap
+from data_formats.conventions import cell_centres
 from data_formats.yarn_spec import load_preset
-from knitbake.stages import im_table as im
 from knitbake.bake import QUALITY
+from knitbake.stages import im_table as im
 from knitrun.shading import fiber_bcsdf as fb
-from knitrun.shading.im_lookup import i0e, im_lookup, r_lobe_integral, sg
+from knitrun.shading.im_lookup import i0e, im_lookup, sg
 from tests.test_asset_pack import BCSDF, YARN, provenance
 
 DEG = math.pi / 180
@@ -228,7 +229,7 @@ def test_cotton1_standard_quality_meets_the_lookup_target():
 
 def test_samples_are_the_direct_values_within_their_error(rough_table):
     table, err, axes = rough_table
-    samples = [ap.cell_centres(*a["range"], n) for a, n in zip(axes, TEST_SHAPE)]
+    samples = [cell_centres(*a["range"], n) for a, n in zip(axes, TEST_SHAPE)]
     rng = np.random.default_rng(8)
     idx = tuple(rng.integers(0, n, 300) for n in TEST_SHAPE)
     without_r = ROUGH.copy()

@@ -14,7 +14,7 @@ from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.sim.knot_solver import R_KNOTS, W_SIZE, damped_solve, knot_points
 from knitrun.sim.simulate import face_problem, knot_centres, prepare, solve_frame
 from knitrun.sim.stitch_templates import (F_A, F_C, F_S, I_KNOT, K2TOG, KNIT, MAX_POINTS, N_POINTS, PURL, SSK,
-                                      TEMPLATE_FLOAT, TEMPLATE_INT, YARN_OVER, piece_ranges)
+                                          TEMPLATE_FLOAT, TEMPLATE_INT, YARN_OVER, piece_ranges)
 
 MIXED_CHART = """
 ppk\\k

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from data_formats.yarn_spec import load_preset
-from knitbake.trace.env_light import env_from_image, env_pdf, env_sample, uniform_env
 from knitbake.fibers.fiber_set import FiberSet
-from knitbake.trace.path_tracer import Camera, TracerScene, render
 from knitbake.fibers.procedural_yarn import generate_fibers
 from knitbake.fibers.tessellate import tessellate_fibers
+from knitbake.trace.env_light import env_from_image, env_pdf, env_sample, uniform_env
+from knitbake.trace.path_tracer import Camera, TracerScene, render
 from knitrun.shading import equirect
 from knitrun.shading import fiber_bcsdf as fb
 

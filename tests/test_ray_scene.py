@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from knitbake.fibers.fiber_set import FiberSet
-from knitbake.trace.ray_scene import RayScene
 from knitbake.fibers.tessellate import radial_band, tessellate_fibers
+from knitbake.trace.ray_scene import RayScene
 
 SIDES = 6
 R = 1e-3

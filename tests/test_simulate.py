@@ -18,7 +18,7 @@ from data_formats.yarn_curves import control_polygon_arclength, read_yarn_curves
 from knitrun.sim.deformations import deform, deformation_frames, frame_amounts, parse_deformation, read_obj_frames
 from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
 from knitrun.sim.simulate import (control_segment_lengths, course_knot_spacing, prepare, simulate, solve_frame,
-                              yarn_points)
+                                  yarn_points)
 from knitrun.sim.stitch_templates import ROLE_IN, ROLE_OUT, piece_ranges
 from knitrun.sim.yarn_assembly import face_point_offsets
 

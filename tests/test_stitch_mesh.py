@@ -9,8 +9,8 @@ import pytest
 
 from data_formats.errors import FormatError
 from data_formats.stitch_mesh import (STITCH_TYPES, StitchMesh, describe, describe_obj, make_stitch_mesh,
-                                      read_obj_stitch_mesh, read_stitch_mesh, sniff, sniff_obj, validate,
-                                      validate_obj, validate_stitch_mesh, write_obj_stitch_mesh, write_stitch_mesh)
+                                      read_obj_stitch_mesh, read_stitch_mesh, sniff, sniff_obj, validate, validate_obj,
+                                      validate_stitch_mesh, write_obj_stitch_mesh, write_stitch_mesh)
 
 KNIT, PURL, YO, K2TOG, SSK = range(5)
 

@@ -8,10 +8,10 @@ import pytest
 
 from data_formats import asset_pack as ap
 from data_formats.yarn_spec import load_preset
-from knitbake.stages import textures as tb
 from knitbake.fibers.fiber_set import FiberSet
-from knitbake.trace.ray_scene import RayScene
 from knitbake.fibers.tessellate import tessellate_fibers
+from knitbake.stages import textures as tb
+from knitbake.trace.ray_scene import RayScene
 
 W, H, S, K, SEED = 64, 16, 2, 4, 3
 

@@ -40,9 +40,9 @@ import math
 
 import numpy as np
 
+from data_formats.curve_eval import curve_frames, dense_curve, start_normal, tangents
 from data_formats.yarn_curves import YarnCurves
 from data_formats.yarn_spec import YarnSpec
-from data_formats.curve_eval import curve_frames, dense_curve, start_normal, tangents
 from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.procedural_yarn import generate_fibers
 

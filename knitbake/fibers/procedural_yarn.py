@@ -144,7 +144,7 @@ def generate_fibers(spec: YarnSpec, length: float | None = None, z_start: float 
     The same seed gives the same yarn in every window: a window [z_start, z_start + length] shows the regular
     fibers of the infinite periodic yarn; flyaways are drawn for the window itself.
     """
-    g, fl = spec.geometry, spec.flyaways
+    g = spec.geometry
     period = g.ply_pitch
     length = period if length is None else float(length)
     if not (math.isfinite(length) and length > 0 and math.isfinite(z_start)):

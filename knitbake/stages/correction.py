@@ -33,19 +33,17 @@ import math
 
 import numpy as np
 
+from data_formats.conventions import PHI_RANGE, THETA_RANGE, cell_centres
 from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.fibers.fiber_set import KIND_REGULAR
-from knitbake.trace.path_tracer import TracerScene, _camera_rays, leave_points, render
 from knitbake.fibers.procedural_yarn import generate_fibers
-from knitbake.stages.stage_result import StageResult
 from knitbake.fibers.tessellate import tessellate_fibers
+from knitbake.stages.stage_result import StageResult
+from knitbake.trace.path_tracer import TracerScene, camera_rays, leave_points, render
 from knitrun.render.camera import Camera, tan_half_fov
 from knitrun.shading.dual_scattering import evaluate_ds, fiber_counts
 from knitrun.shading.fiber_bcsdf import params_from_optics
-
-
-def cell_centres(lo, hi, n):
-    return lo + (np.arange(n) + 0.5) * (hi - lo) / n
+from knitrun.shading.fiber_frame import fiber_angles
 
 
 def yarn_direction(theta, phi):
@@ -87,7 +85,8 @@ def strip_camera(spec: YarnSpec, theta_o: float, rows: int) -> Camera:
 
 
 def row_v(rows: int) -> np.ndarray:
-    return -(1 - 2 * (np.arange(rows) + 0.5) / rows)
+    """v of each image row of ``strip_camera``: the cell centres of [−1, 1], row 0 at v = −1 (image up is −b)."""
+    return cell_centres(-1.0, 1.0, rows)
 
 
 def factor_rank1(x: np.ndarray, weight: np.ndarray | None = None, iterations: int = 30):
@@ -157,8 +156,8 @@ def _factored_tables(samples, prefix, names, weights=None):
 
 def bake_shadowing(spec: YarnSpec, n_v=8, n_theta=8, n_phi=8, rows=32, spp=4, batches=4, seed=0, progress=None):
     """Ψ^Fiber_{G,M}, Ψ^Fiber_{G,N} and residuals (see module docstring); returns (tables, errors)."""
-    thetas = cell_centres(-math.pi / 2, math.pi / 2, n_theta)
-    phis = cell_centres(-math.pi, math.pi, n_phi)
+    thetas = cell_centres(*THETA_RANGE, n_theta)
+    phis = cell_centres(*PHI_RANGE, n_phi)
     samples = np.ones((batches, n_v, n_theta, n_phi, 3))
     rows = max(rows, n_v)
     total, done = batches * n_theta * n_phi, 0
@@ -178,14 +177,14 @@ def bake_shadowing(spec: YarnSpec, n_v=8, n_theta=8, n_phi=8, rows=32, spp=4, ba
     return _factored_tables(samples, "shadowing", ("psi_GM", "psi_GN", "psi_residual"))
 
 
-def _primary_hits(tracer, cam, seed, sample):
+def primary_hits(tracer, cam, seed, sample):
     """Camera sample ``sample`` of every pixel — exactly the primary rays ``path_tracer.render`` traces for this
     seed, so the path-traced and DS images share their hits (common random numbers: the ratio ξ loses the
     coverage noise). Returns (hit mask (H, W), hit points (n, 3), prims (n,), flat pixel indices (n,))."""
     fwd, right, up = cam.basis()
     h, w = cam.height, cam.width
     org, dirs = np.empty((h * w, 3)), np.empty((h * w, 3))
-    _camera_rays(np.asarray(cam.position, float), fwd, right, up, w, h, tan_half_fov(cam),
+    camera_rays(np.asarray(cam.position, float), fwd, right, up, w, h, tan_half_fov(cam),
                  float(cam.ortho_height), seed, sample, 1, org, dirs)
     hits = tracer.ray_scene.intersect(org, dirs)
     idx = np.flatnonzero(hits.hit)
@@ -199,7 +198,7 @@ def _visibility_image(tracer, cam, light, spp, seed):
     vis = np.zeros((cam.height, cam.width))
     hits_n = np.zeros((cam.height, cam.width))
     for sample in range(spp):
-        mask, points, prims, idx = _primary_hits(tracer, cam, seed, sample)
+        mask, points, prims, idx = primary_hits(tracer, cam, seed, sample)
         dirs = np.tile(light, (prims.size, 1))
         start = np.empty_like(points)
         leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
@@ -240,13 +239,6 @@ def fiber_frames(tracer, prims):
     return t / np.linalg.norm(t, axis=1, keepdims=True)
 
 
-def _signed_azimuth(t, w_o, w_i):
-    """φ = φ_o − φ_i about unit tangents t (rows), for unit directions w_o, w_i (rows or one vector)."""
-    o = w_o - (w_o * t).sum(-1, keepdims=True) * t
-    i = w_i - (w_i * t).sum(-1, keepdims=True) * t
-    return np.arctan2((np.cross(i, o) * t).sum(-1), (i * o).sum(-1))
-
-
 def _ds_image(tracer, cam, light, spp, seed, ds_tables, params, n_occluded=None):
     """Per pixel: mean DS radiance per unit irradiance (``knitrun.shading.dual_scattering.evaluate_ds``) of the pixel's
     fiber hits (misses add 0), fiber angles in each hit fiber's frame. ``n_occluded`` None: Zinke's estimate, each
@@ -257,17 +249,14 @@ def _ds_image(tracer, cam, light, spp, seed, ds_tables, params, n_occluded=None)
     fwd = cam.basis()[0]
     img = np.zeros((cam.height * cam.width, 3))
     for sample in range(spp):
-        _, points, prims, idx = _primary_hits(tracer, cam, seed, sample)
+        _, points, prims, idx = primary_hits(tracer, cam, seed, sample)
         t = fiber_frames(tracer, prims)
-        w_o = np.broadcast_to(-fwd, t.shape)
-        w_i = np.broadcast_to(light, t.shape)
-        theta_o = np.arcsin(np.clip((w_o * t).sum(-1), -1, 1))
-        theta_i = np.arcsin(np.clip((w_i * t).sum(-1), -1, 1))
+        theta_i, theta_o, phi = fiber_angles(t, np.tile(-fwd, (len(t), 1)), np.tile(light, (len(t), 1)))
         if n_occluded is None:
             n_front = fibers_toward(tracer, prims, points, light)
         else:
             n_front = np.where(fibers_toward(tracer, prims, points, light, max_fibers=1) == 0, 0.0, n_occluded)
-        img[idx] += evaluate_ds(ds_tables, theta_i, theta_o, _signed_azimuth(t, w_o, w_i), n_front, params=params,
+        img[idx] += evaluate_ds(ds_tables, theta_i, theta_o, phi, n_front, params=params,
                                 direct_fraction=(n_front == 0).astype(float))
     return (img / spp).reshape(cam.height, cam.width, 3)
 
@@ -276,8 +265,8 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
                     max_depth=16, seed=0, progress=None):
     """ξ_M, ξ_N and residuals (see module docstring); ``ds_tables``: the baked ``dual_scattering/*`` arrays.
     Returns (tables, errors)."""
-    thetas = cell_centres(-math.pi / 2, math.pi / 2, n_theta)
-    phis = cell_centres(-math.pi, math.pi, n_phi)
+    thetas = cell_centres(*THETA_RANGE, n_theta)
+    phis = cell_centres(*PHI_RANGE, n_phi)
     params = params_from_optics(spec.optics)
     n_occluded = fiber_counts(spec.geometry, spec.radius)[1]
     samples = np.ones((batches, n_v, n_theta, n_phi, 3))

@@ -27,7 +27,8 @@ f = Σ_p A_p M_p(θ'|θ) N_p(φ) separates, so every integral is a sum over lobe
 * azimuthal fractions, closed form: R and D put 1/2 in each half; TT puts tanh(π/4s)/tanh(π/2s) in the front half
   (s = √3 γ_TT/π, the logistic scale) and the rest in the back;
 * longitudinal moments of R and TT: Gauss–Legendre with ``quality`` nodes over the lobe's ±9σ window clipped to
-  [−π/2, π/2] (the window of the BCSDF's own normaliser), as ratios to ∫ M_p cos²θ' dθ' (= 1);
+  [−π/2, π/2] (``fiber_bcsdf.lobe_window``, the window of the BCSDF's own normaliser), as ratios to
+  ∫ M_p cos²θ' dθ' (= 1);
 * the D lobe's θ' density is cos²θ'/(π/2): θ_h mean θ/2 and variance (π²/12 − 1/2)/4, exact.
 
 Per channel the lobe weights are w_p = A_p × (fraction in H): ā_H = Σ w_p, ᾱ_H = Σ w_p m_p / ā_H and
@@ -47,13 +48,11 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from data_formats.asset_pack import cell_centres
-from knitrun.shading.dual_scattering import D_B, TABLE_NAMES, backscatter_terms, tt_front_fraction
-from knitrun.shading.fiber_bcsdf import (HALF_PI, N_PARAMS, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R,
-                                 P_BETA_TT, P_GAMMA_TT, _lobe_centre)
+from data_formats.conventions import THETA_RANGE, cell_centres
 from knitbake.stages.stage_result import StageResult
-from knitrun.shading.fiber_bcsdf import params_from_optics
-from knitrun.shading.table_lookup import THETA_RANGE
+from knitrun.shading.dual_scattering import D_B, TABLE_NAMES, backscatter_terms, tt_front_fraction
+from knitrun.shading.fiber_bcsdf import (N_PARAMS, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R, P_BETA_TT,
+                                         P_GAMMA_TT, gauss, lobe_centre, lobe_window, params_from_optics)
 
 D_THETA_H_VAR = (math.pi ** 2 / 12.0 - 0.5) / 4.0  # variance of θ_h = (θ + θ')/2 for θ' ~ cos²θ'/(π/2)
 ERROR_KIND = ("quadrature: |T(q) − T(q/2)| between Gauss–Legendre rules with q and q/2 nodes per lobe window "
@@ -63,21 +62,21 @@ ERROR_KIND = ("quadrature: |T(q) − T(q/2)| between Gauss–Legendre rules with
 @njit(parallel=True, cache=True)
 def _lobe_moments(alpha, beta, theta, x, w):
     """θ_h mean and variance of one Gaussian lobe (shift α, width β) under M(θ'|θ) cos²θ' dθ', per θ (the lobe's
-    centre 2α − θ and its ±9σ window exactly as in ``fiber_bcsdf``); x, w: Gauss–Legendre nodes/weights on [−1, 1]."""
+    centre and window exactly as in ``fiber_bcsdf``: ``lobe_centre``, ``lobe_window``); x, w: Gauss–Legendre nodes
+    and weights on [−1, 1]."""
     mean = np.empty(theta.shape[0])
     var = np.empty(theta.shape[0])
     sigma = 2.0 * beta
     for k in prange(theta.shape[0]):
-        mu = _lobe_centre(alpha, sigma, math.sin(theta[k]))
-        lo = max(-HALF_PI, mu - 9.0 * sigma)
-        hi = min(HALF_PI, mu + 9.0 * sigma)
+        mu = lobe_centre(alpha, sigma, math.sin(theta[k]))
+        lo, hi = lobe_window(mu, sigma)
         half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
         s0 = 0.0
         s1 = 0.0
         for j in range(x.shape[0]):
             t = mid + half * x[j]
             c = math.cos(t)
-            wt = w[j] * math.exp(-0.5 * ((t - mu) / sigma) ** 2) * c * c
+            wt = w[j] * gauss(t, mu, sigma) * c * c
             s0 += wt
             s1 += wt * 0.5 * (theta[k] + t)
         m = s1 / s0
@@ -85,7 +84,7 @@ def _lobe_moments(alpha, beta, theta, x, w):
         for j in range(x.shape[0]):
             t = mid + half * x[j]
             c = math.cos(t)
-            s2 += w[j] * math.exp(-0.5 * ((t - mu) / sigma) ** 2) * c * c * (0.5 * (theta[k] + t) - m) ** 2
+            s2 += w[j] * gauss(t, mu, sigma) * c * c * (0.5 * (theta[k] + t) - m) ** 2
         mean[k] = m
         var[k] = s2 / s0
     return mean, var

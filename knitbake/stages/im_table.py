@@ -45,9 +45,13 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from data_formats.asset_pack import cell_centres
+from data_formats.asset_pack import AXES, IM_AXES
+from data_formats.conventions import HALF_PI, cell_centres
+from knitbake.stages.stage_result import StageResult
 from knitrun.shading import fiber_bcsdf as fb
-from knitrun.shading.im_lookup import AXIS_VARIABLES, i0e
+from knitrun.shading.fiber_bcsdf import params_from_optics
+from knitrun.shading.fiber_frame import wrap_angle
+from knitrun.shading.im_lookup import i0e
 
 DEFAULT_SHAPE = (24, 48, 24, 96)  # (θ_o, θ_j, |φ_j − φ_o|, log10 λ): the standard quality; see bake_im_table
 LAMBDA_RANGE = (0.5, 1.0e4)
@@ -62,7 +66,6 @@ ERROR_KIND = ("quadrature, max over entries of Σ_lobes A_p |J_p(n) − J_p(n/2)
               "and far below the interpolation error); the lookup's interpolation error, measured against direct "
               f"quadrature at {LOOKUP_CHECK_POINTS} points, is in lookup_rel_error (where I_M > 1% of its maximum) and "
               "lookup_error_per_decade (relative to each λ decade's maximum)")
-HALF_PI = 0.5 * math.pi
 
 
 @njit(cache=True)
@@ -98,7 +101,7 @@ def _azimuth_tt(kappa, centre, s, gx, gw, tail):
             a = lo + (2 * panel + 1) * half
             for q in range(gx.shape[0]):
                 d = a + half * gx[q]
-                total += half * gw[q] * fb._logistic_trimmed(d - mid, s) * math.exp(kappa * (math.cos(d) - 1.0))
+                total += half * gw[q] * fb.logistic_trimmed(d - mid, s) * math.exp(kappa * (math.cos(d) - 1.0))
     return total
 
 
@@ -164,11 +167,11 @@ def _theta_integral(lobe, c, theta_j, cos_j, lam, tt_centre, s, tt_tab, u_max, g
             kappa = lam * max(ct, 0.0) * cos_j
             w = ct * ct * math.exp(lam * (math.cos(t - theta_j) - 1.0))
             if lobe == 0:
-                w *= fb._gauss(t, mu, sigma) / z * i0e(kappa)
+                w *= fb.gauss(t, mu, sigma) / z * i0e(kappa)
             elif lobe == 1:
                 phi = _azimuth_lookup(tt_tab, u_max, kappa) if tt_tab.shape[0] else _azimuth_tt(kappa, tt_centre, s,
                                                                                                   gx, gw, tail)
-                w *= fb._gauss(t, mu, sigma) / z * phi
+                w *= fb.gauss(t, mu, sigma) / z * phi
             else:
                 w *= 2.0 / math.pi * i0e(kappa)
             total += half * gw[q] * w
@@ -183,19 +186,13 @@ def _lobe_integrals(p, c, theta_j, dphi, lam, tt_tab, u_max, gx, gw, tail, first
     (J_p = 0)."""
     theta_j = min(max(theta_j, -HALF_PI), HALF_PI)
     cos_j = max(math.cos(theta_j), 0.0)
-    tt_centre = fb._wrap(math.pi - dphi)  # N_TT peaks where φ_o − φ_i = π, i.e. Δ = π − Δφ
-    s = p[fb.P_GAMMA_TT] * math.sqrt(3.0) / math.pi
+    tt_centre = wrap_angle(math.pi - dphi)  # N_TT peaks where φ_o − φ_i = π, i.e. Δ = π − Δφ
+    s = fb.tt_logistic_scale(p[fb.P_GAMMA_TT])
     for lobe in range(3):
         base = (fb.P_A_R, fb.P_A_TT, fb.P_A_D)[lobe]
         out[lobe] = 0.0
         if lobe >= first and max(p[base], p[base + 1], p[base + 2]) > 0.0:
             out[lobe] = _theta_integral(lobe, c, theta_j, cos_j, lam, tt_centre, s, tt_tab, u_max, gx, gw, tail)
-
-
-@njit(cache=True)
-def _view_context(p, theta_o):
-    wo = np.array([math.sin(theta_o), math.cos(theta_o), 0.0])
-    return fb.context(p, wo)
 
 
 @njit(parallel=True, cache=True)
@@ -205,7 +202,7 @@ def _azimuth_tables(dphi, s, u_max, n, gx, gw, tail):
     tabs = np.empty((dphi.shape[0], n))
     eps = np.zeros(dphi.shape[0])
     for k in prange(dphi.shape[0]):
-        centre = fb._wrap(math.pi - dphi[k])
+        centre = wrap_angle(math.pi - dphi[k])
         tabs[k] = _azimuth_table(centre, s, u_max, n, gx, gw, tail)
         for m in range(n - 1):
             kappa = math.expm1((m + 0.5) * u_max / (n - 1))
@@ -218,7 +215,7 @@ def _azimuth_tables(dphi, s, u_max, n, gx, gw, tail):
 def _bake_slab(p, theta_o, theta_j, dphi, lam, tt_tabs, tt_eps, u_max, gx, gw, gx_half, gw_half, tail, table, err):
     """One θ_o: table[j, k, l] = I_M^{TT,D}(θ_o, θ_j[j], dphi[k], lam[l]) with n nodes; err = Σ_p A_p |J_p(n) −
     J_p(n/2)| over TT and D plus the azimuth-table error A_TT ε_k (∫ M_TT cos²θ_i S dθ_i ≤ 1 bounds its weight)."""
-    c = _view_context(p, theta_o)
+    c = fb.view_context(p, theta_o)
     nj, nk, nl = theta_j.shape[0], dphi.shape[0], lam.shape[0]
     for e in prange(nj * nk * nl):
         j, rest = e // (nk * nl), e % (nk * nl)
@@ -239,7 +236,7 @@ def _bake_slab(p, theta_o, theta_j, dphi, lam, tt_tabs, tt_eps, u_max, gx, gw, g
 def _direct_batch(p, theta_o, theta_j, dphi, lam, gx, gw, tail, out):
     no_table = np.empty(0)
     for n in prange(theta_o.shape[0]):
-        c = _view_context(p, min(max(theta_o[n], -HALF_PI), HALF_PI))
+        c = fb.view_context(p, min(max(theta_o[n], -HALF_PI), HALF_PI))
         j = np.empty(3)
         _lobe_integrals(p, c, theta_j[n], dphi[n], lam[n], no_table, 1.0, gx, gw, tail, 0, j)
         for ch in range(3):
@@ -277,13 +274,13 @@ def im_axes(shape, lam_range=LAMBDA_RANGE) -> list:
         raise ValueError(f"I_M shape {tuple(shape)}: expected 4 axes of ≥ 2 samples")
     if not 0 < lam_range[0] < lam_range[1]:
         raise ValueError(f"λ range {lam_range}: expected 0 < λ_min < λ_max")
-    domains = [(-HALF_PI, HALF_PI), (-HALF_PI, HALF_PI), (0.0, math.pi),
-               (math.log10(lam_range[0]), math.log10(lam_range[1]))]
     axes = []
-    for name, (a, b), n in zip(("theta_o", "theta_j", "abs_phi_j_minus_phi_o", "log10_lambda"), domains, shape):
-        definition, units = AXIS_VARIABLES[name]
+    for name, n in zip(IM_AXES, shape):  # the schema's axes (data_formats.asset_pack.AXES): domain, wrap, units
+        axis = AXES[name]
+        a, b = (math.log10(lam_range[0]), math.log10(lam_range[1])) if name == "log10_lambda" else axis.range
         lo, hi = end_centred_range(a, b, n)
-        axes.append({"name": name, "range": [lo, hi], "wrap": "clamp", "units": units, "definition": definition})
+        axes.append({"name": name, "range": [lo, hi], "wrap": axis.wrap, "units": axis.units,
+                     "definition": axis.definition})
     return axes
 
 
@@ -307,7 +304,7 @@ def bake_im_table(params, shape=DEFAULT_SHAPE, nodes: int = NODES, lam_range=LAM
     gx, gw = np.polynomial.legendre.leggauss(nodes)
     gx_half, gw_half = np.polynomial.legendre.leggauss(nodes // 2)
     u_max = math.log1p(lam[-1])
-    s = p[fb.P_GAMMA_TT] * math.sqrt(3.0) / math.pi
+    s = fb.tt_logistic_scale(p[fb.P_GAMMA_TT])
     tt_tabs, tt_eps = _azimuth_tables(dphi, s, u_max, AZIMUTH_SAMPLES, gx, gw, TAIL)
     table = np.empty(tuple(shape) + (3,))
     err = np.empty_like(table)
@@ -352,3 +349,15 @@ def lookup_accuracy(table, axes, params, n: int = LOOKUP_CHECK_POINTS, seed: int
                      for m in (decade == d for d in np.unique(decade)))
     return {"lookup_rel_error": float(rel[counted].max()) if counted.any() else 0.0,
             "lookup_error_per_decade": per_decade}
+
+
+def bake_environment_stage(spec, settings, seed, progress=None) -> StageResult:
+    """Stage ``environment`` of ``knitbake.bake``: the I_M^{TT,D} table by deterministic quadrature (the seed is
+    unused), with its lookup accuracy measured by ``lookup_accuracy``; settings: shape."""
+    del seed
+    params = params_from_optics(spec.optics)
+    table, err, axes = bake_im_table(params, shape=tuple(settings["shape"]), progress=progress)
+    accuracy = lookup_accuracy(table, axes, params)
+    return StageResult({"environment/I_M_TT_D": table}, {"environment/I_M_TT_D": float(err.max())},
+                       {"environment/I_M_TT_D": {"axes": axes, "error_kind": ERROR_KIND, **accuracy}},
+                       {"shape": list(settings["shape"]), "lookup_check_points": LOOKUP_CHECK_POINTS})

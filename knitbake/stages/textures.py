@@ -71,11 +71,11 @@ import math
 import numpy as np
 
 from data_formats.yarn_spec import YarnSpec
-from knitbake.stages.stage_result import StageResult
 from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
 from knitbake.fibers.procedural_yarn import generate_fibers
-from knitbake.trace.ray_scene import RayScene
 from knitbake.fibers.tessellate import TubeMesh, ring_radius_factor, tessellate_fibers
+from knitbake.stages.stage_result import StageResult
+from knitbake.trace.ray_scene import RayScene
 
 TUBE_SIDES = 8
 FLYAWAY_BAND_TEXELS = 2  # default half-width of the shared band around each period boundary, in mip-0 columns

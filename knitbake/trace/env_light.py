@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from data_formats.conventions import LUMINANCE
 from knitrun.shading import equirect
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass

@@ -34,9 +34,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit, prange
 
+from knitbake.fibers.tessellate import TubeMesh
 from knitbake.trace.env_light import EnvLight, env_pdf, env_pixel, env_sample
 from knitbake.trace.ray_scene import RayScene
-from knitbake.fibers.tessellate import TubeMesh
 from knitrun.render.camera import Camera, tan_half_fov
 from knitrun.shading.fiber_bcsdf import N_PARAMS, context, evaluate, pdf, sample
 
@@ -100,7 +100,7 @@ def uniform(seed, path, depth, dim):
 # --- camera ------------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
-def _camera_rays(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, first_sample, n_samples, org, dirs):
+def camera_rays(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, first_sample, n_samples, org, dirs):
     n_pix = width * height
     for n in prange(n_samples * n_pix):
         pix = n % n_pix
@@ -306,7 +306,7 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
         n = n_s * n_pix
         org = np.empty((n, 3))
         dirs = np.empty((n, 3))
-        _camera_rays(np.asarray(camera.position, float), fwd, right, up, w, h, tan_half, float(camera.ortho_height),
+        camera_rays(np.asarray(camera.position, float), fwd, right, up, w, h, tan_half, float(camera.ortho_height),
                      seed, done, n_s, org, dirs)
         path_id = (done * n_pix + np.arange(n)).astype(np.int64)
         slot = np.arange(n)

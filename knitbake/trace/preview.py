@@ -14,8 +14,8 @@ from PIL import Image, ImageDraw
 
 from data_formats.atomic import atomic_path
 from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
-from knitbake.trace.ray_scene import RayScene
 from knitbake.fibers.tessellate import tessellate_fibers
+from knitbake.trace.ray_scene import RayScene
 
 PLY_COLOURS = np.array([[110, 140, 200], [120, 190, 150], [200, 150, 120], [170, 130, 200], [200, 200, 120]])
 FLYAWAY_COLOUR = (240, 140, 40)

@@ -70,3 +70,11 @@ def project(camera: Camera, points):
             scale = 1.0 / (z * tan_half_fov(camera))
         sx, sy = x * scale, y * scale
     return (sx * h + w) / 2, (1 - sy) * h / 2, z
+
+
+def scene_camera(scene) -> Camera:
+    """The ``Camera`` of a scene file's ``[camera]`` (``data_formats.scene``: exactly one of ``fov_deg`` and
+    ``ortho_height`` is set); the strip renderer and the reference path tracer both see the scene through it."""
+    c = scene.camera
+    return Camera(np.array(c.position, float), np.array(c.look_at, float), np.array(c.up, float), c.width, c.height,
+                  fov_deg=c.fov_deg if c.fov_deg is not None else 40.0, ortho_height=c.ortho_height or 0.0)

@@ -1,4 +1,5 @@
-"""The built-in analytic sky: an environment that needs no download (``builtin = "sky"`` in a scene).
+"""The built-in analytic sky: an environment that needs no download (``builtin = "sky"`` in a scene); and the
+radiance image of a scene's environment light (``environment_image``), built-in or from a file.
 
 A clear-sky gradient (zenith blue to a bright horizon), a darker ground below the horizon and a sun disk of
 angular radius ``SUN_RADIUS_DEG`` around ``SUN_DIRECTION`` (+y up, see ``knitrun.shading.equirect``). Linear RGB radiance,
@@ -8,6 +9,7 @@ adds about as much again. It is a fixed image, not a physical sky model: its job
 
 import numpy as np
 
+from data_formats.images import read_image
 from knitrun.shading.equirect import texel_directions
 
 SUN_DIRECTION = np.array([0.35, 0.8, 0.49]) / np.linalg.norm([0.35, 0.8, 0.49])
@@ -30,3 +32,11 @@ def sky_image(height: int = 128, width: int = 256) -> np.ndarray:
     texel_solid_angle = np.sin(np.arccos(np.clip(up[..., 0], -1, 1))) * (np.pi / height) * (2 * np.pi / width)
     sun_radiance = np.pi / texel_solid_angle[disk].sum()  # irradiance π on a surface facing the sun
     return (img + disk[..., None] * SUN * sun_radiance).astype(np.float32)
+
+
+def environment_image(light) -> np.ndarray:
+    """(H, W, 3) equirectangular radiance of a scene's ``EnvironmentLight`` before its ``scale``: the built-in it
+    names (``data_formats.scene.BUILTIN_ENVIRONMENTS``) or its image file (EXR or Radiance HDR)."""
+    if light.builtin:
+        return {"sky": sky_image}[light.builtin]()
+    return read_image(light.file)

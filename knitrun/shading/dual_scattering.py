@@ -26,7 +26,7 @@ approximations (his pseudo-code F(T_f, σ̄_f², directFraction) times cos θ_i)
 
 M(α, w) is the BCSDF's longitudinal lobe: a Gaussian in θ_h of mean α and standard deviation w, i.e.
 exp(−(θ_i − μ)²/(2σ²))/Z(μ, σ) with μ = 2α − θ_o, σ = 2w and Z = ∫ exp(·) cos²θ_i dθ_i over [−π/2, π/2]
-(``fiber_bcsdf._cos2_normaliser``, the same centre clamp), so ∫ M cos²θ_i dθ_i = 1. Azimuthal functions:
+(``fiber_bcsdf.cos2_normaliser``, the same centre clamp), so ∫ M cos²θ_i dθ_i = 1. Azimuthal functions:
 N_R = 1/(2π), N_TT the BCSDF's trimmed logistic around φ = π, N_b = 1/π on the back half |φ| < π/2.
 Forward-scattered light arrives spread uniformly over ±π/2 of azimuth around the light (Zinke's S_f, density 1/π),
 so every global azimuthal function is that convolution, N^G(φ) = (1/π) ∫_{−π/2}^{π/2} N(φ − u) du:
@@ -51,9 +51,12 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from data_formats.conventions import HALF_PI, THETA_RANGE
 from knitrun.shading.fiber_bcsdf import (INV_PI2, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R, P_BETA_TT,
-                          P_GAMMA_TT, _cos2_normaliser, _gauss, _lobe_centre, _wrap, context, evaluate)
-from knitrun.shading.table_lookup import THETA_RANGE, axis_cell
+                                         P_GAMMA_TT, context, cos2_normaliser, evaluate, gauss, lobe_centre,
+                                         tt_logistic_scale)
+from knitrun.shading.fiber_frame import wrap_angle
+from knitrun.shading.table_lookup import axis_cell
 
 D_F = 0.7  # forward-scattering density factor (Zinke §4.1)
 D_B = 0.7  # back-scattering density factor (Zinke §4.2)
@@ -69,7 +72,6 @@ R_A_F, R_BETA_F, R_A_BACK, R_DELTA_B, R_SIGMA_B = range(5)
 COMPONENTS = ("T_f", "sigma_f2", "f_back_direct", "f_back_scatter", "F_direct", "F_scatter", "L_over_E")
 K_T_F, K_SIGMA_F2, K_F_BACK_DIRECT, K_F_BACK_SCATTER, K_F_DIRECT, K_F_SCATTER, K_TOTAL = range(7)
 
-HALF_PI = 0.5 * math.pi
 INV_PI = 1.0 / math.pi
 
 
@@ -101,12 +103,6 @@ def backscatter_terms(a_f, a_b, alpha_f, alpha_b, beta_f, beta_b, d_b=D_B):
 # --- azimuthal functions -----------------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _tt_scale(gamma_tt):
-    """Logistic scale s of N_TT (standard deviation γ_TT = sπ/√3)."""
-    return gamma_tt * math.sqrt(3.0) / math.pi
-
-
-@njit(cache=True)
 def _tt_cdf(x, s):
     """CDF of the trimmed logistic N_TT on x = φ − π ∈ [−π, π]: (tanh(x/2s) + tanh(π/2s)) / (2 tanh(π/2s))."""
     t = math.tanh(0.5 * math.pi / s)
@@ -116,15 +112,15 @@ def _tt_cdf(x, s):
 @njit(cache=True)
 def tt_front_fraction(gamma_tt):
     """∫ N_TT dφ over the front half |φ| > π/2 = tanh(π/4s) / tanh(π/2s)."""
-    s = _tt_scale(gamma_tt)
+    s = tt_logistic_scale(gamma_tt)
     return math.tanh(0.25 * math.pi / s) / math.tanh(0.5 * math.pi / s)
 
 
 @njit(cache=True)
 def n_tt_global(phi, gamma_tt):
     """N_TT^G(φ) = (1/π) ∫_{−π/2}^{π/2} N_TT(φ − u) du: the N_TT mass on the arc of length π centred at φ."""
-    s = _tt_scale(gamma_tt)
-    c = _wrap(phi - math.pi)
+    s = tt_logistic_scale(gamma_tt)
+    c = wrap_angle(phi - math.pi)
     lo, hi = c - HALF_PI, c + HALF_PI
     if hi > math.pi:
         mass = 1.0 - _tt_cdf(lo, s) + _tt_cdf(hi - 2.0 * math.pi, s)
@@ -138,13 +134,13 @@ def n_tt_global(phi, gamma_tt):
 @njit(cache=True)
 def n_back(phi):
     """N_b: uniform over the back half |φ| < π/2."""
-    return INV_PI if abs(_wrap(phi)) < HALF_PI else 0.0
+    return INV_PI if abs(wrap_angle(phi)) < HALF_PI else 0.0
 
 
 @njit(cache=True)
 def n_back_global(phi):
     """N_b^G(φ) = (1/π) ∫_{−π/2}^{π/2} N_b(φ − u) du = (π − |φ|)/π²."""
-    return (math.pi - abs(_wrap(phi))) * INV_PI2
+    return (math.pi - abs(wrap_angle(phi))) * INV_PI2
 
 
 # --- the runtime kernel ------------------------------------------------------------------------------------------
@@ -153,9 +149,9 @@ def n_back_global(phi):
 def _lobe(theta_i, sin_o, alpha, width):
     """M(α, w): the BCSDF's longitudinal lobe with θ_h mean α and standard deviation w (1/rad, w.r.t. cos²θ_i dθ_i)."""
     sigma = 2.0 * max(width, WIDTH_FLOOR)
-    mu = _lobe_centre(alpha, sigma, sin_o)
-    g = _gauss(theta_i, mu, sigma)
-    return g / _cos2_normaliser(mu, sigma) if g > 0.0 else 0.0
+    mu = lobe_centre(alpha, sigma, sin_o)
+    g = gauss(theta_i, mu, sigma)
+    return g / cos2_normaliser(mu, sigma) if g > 0.0 else 0.0
 
 
 @njit(cache=True)
@@ -255,8 +251,7 @@ def _inputs(tables, theta_i, theta_o, phi, n_front, d_f, d_b, direct_fraction):
         raise ValueError("n_front must be ≥ 0 and direct_fraction in [0, 1]")
     if not (math.isfinite(d_f) and math.isfinite(d_b) and d_f >= 0 and d_b >= 0):
         raise ValueError(f"density factors must be finite and ≥ 0, got d_f={d_f}, d_b={d_b}")
-    half = 0.5 * math.pi
-    return tab, np.clip(ti, -half, half), np.clip(to, -half, half), ph, n, direct
+    return tab, np.clip(ti, *THETA_RANGE), np.clip(to, *THETA_RANGE), ph, n, direct
 
 
 def evaluate_ds(tables, theta_i, theta_o, phi, n_front, d_f=D_F, d_b=D_B, *, params, direct_fraction=None):

@@ -36,6 +36,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from data_formats.conventions import HALF_PI
+from data_formats.yarn_spec import fiber_bcsdf_attrs
+from knitrun.shading.fiber_frame import clamped_asin, wrap_angle
+
 # Parameter vector layout (radians).
 P_A_R, P_A_TT, P_A_D = 0, 3, 6
 P_BETA_R, P_BETA_TT, P_GAMMA_TT, P_ALPHA_R, P_ALPHA_TT = 9, 10, 11, 12, 13
@@ -46,18 +50,17 @@ C_MU, C_SIGMA, C_Z, C_MASS = 3, 5, 7, 9  # two entries each: [R, TT]
 C_PROB = 11  # three entries: R, TT, D
 N_CONTEXT = 14
 
-HALF_PI = 0.5 * math.pi
 INV_PI2 = 1.0 / (math.pi * math.pi)
 SQRT2 = math.sqrt(2.0)
+LOBE_WINDOW = 9.0  # a longitudinal lobe is integrated over μ ± LOBE_WINDOW σ (beyond it: < e^{−40} of its peak)
 COS_FLOOR = 1e-12  # cos θ_i floor in the solid-angle pdf (θ_i = ±π/2 exactly)
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(32)  # Z to < 1e-9 relative for every σ ≥ 1e-4, μ
 
 
 def params_from_optics(optics) -> np.ndarray:
-    """Parameter vector from a yarn spec's ``Optics`` (angles in degrees there)."""
-    return params_from_values(optics.r_color, optics.tt_color, optics.d_color, math.radians(optics.beta_r_deg),
-                              math.radians(optics.beta_tt_deg), math.radians(optics.gamma_tt_deg),
-                              math.radians(optics.alpha_r_deg), math.radians(optics.alpha_tt_deg))
+    """Parameter vector from a yarn spec's ``Optics`` (angles in degrees there, converted by
+    ``data_formats.yarn_spec.fiber_bcsdf_attrs``)."""
+    return params_from_pack(fiber_bcsdf_attrs(optics))
 
 
 def params_from_pack(fiber_bcsdf: dict) -> np.ndarray:
@@ -65,6 +68,16 @@ def params_from_pack(fiber_bcsdf: dict) -> np.ndarray:
     b = fiber_bcsdf
     return params_from_values(b["r_color"], b["tt_color"], b["d_color"], b["beta_r"], b["beta_tt"], b["gamma_tt"],
                               b["alpha_r"], b["alpha_tt"])
+
+
+def tinted(params, colour) -> np.ndarray:
+    """A copy of ``params`` with every lobe albedo A_R, A_TT, A_D multiplied by the RGB ``colour`` (a scene entry's
+    yarn colour: f is linear in the albedos)."""
+    p = np.array(params, dtype=np.float64)
+    colour = np.asarray(colour, np.float64)
+    for base in (P_A_R, P_A_TT, P_A_D):
+        p[base:base + 3] *= colour
+    return p
 
 
 def params_from_values(a_r, a_tt, a_d, beta_r, beta_tt, gamma_tt, alpha_r=0.0, alpha_tt=0.0) -> np.ndarray:
@@ -150,22 +163,26 @@ def _normal_sample(a, b, u):
 
 
 @njit(cache=True)
-def _lobe_centre(alpha, sigma, sin_o):
-    mu = 2.0 * alpha - math.asin(min(max(sin_o, -1.0), 1.0))
+def lobe_centre(alpha, sigma, sin_o):
+    """Centre μ = 2α − θ_o of a longitudinal lobe (θ_o = asin(sin_o)), clamped to at most 4σ beyond ±π/2."""
+    mu = 2.0 * alpha - clamped_asin(sin_o)
     return min(max(mu, -HALF_PI - 4.0 * sigma), HALF_PI + 4.0 * sigma)
 
 
 @njit(cache=True)
-def _cos2_normaliser(mu, sigma):
-    """Z = ∫_{−π/2}^{π/2} exp(−(θ − μ)²/(2σ²)) cos²θ dθ over the lobe's ±9σ window: in closed form,
+def lobe_window(mu, sigma):
+    """(lo, hi): the lobe's window μ ± ``LOBE_WINDOW``·σ clipped to [−π/2, π/2]."""
+    return max(-HALF_PI, mu - LOBE_WINDOW * sigma), min(HALF_PI, mu + LOBE_WINDOW * sigma)
+
+
+@njit(cache=True)
+def cos2_normaliser(mu, sigma):
+    """Z = ∫_{−π/2}^{π/2} exp(−(θ − μ)²/(2σ²)) cos²θ dθ over the lobe's window (``lobe_window``): in closed form,
     ½√(2π)σ (1 + e^{−2σ²} cos 2μ) (cos²θ = (1 + cos 2θ)/2 against the Gaussian's characteristic function), when the
     window lies inside [−π/2, π/2]; else by Gauss–Legendre over the window's part inside it."""
-    lo = mu - 9.0 * sigma
-    hi = mu + 9.0 * sigma
-    if lo >= -HALF_PI and hi <= HALF_PI:
+    if mu - LOBE_WINDOW * sigma >= -HALF_PI and mu + LOBE_WINDOW * sigma <= HALF_PI:
         return 0.5 * math.sqrt(2.0 * math.pi) * sigma * (1.0 + math.exp(-2.0 * sigma * sigma) * math.cos(2.0 * mu))
-    lo = max(-HALF_PI, lo)
-    hi = min(HALF_PI, hi)
+    lo, hi = lobe_window(mu, sigma)
     half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
     z = 0.0
     for k in range(_GL_X.shape[0]):
@@ -176,7 +193,13 @@ def _cos2_normaliser(mu, sigma):
 
 
 @njit(cache=True)
-def _logistic_trimmed(x, s):
+def tt_logistic_scale(gamma_tt):
+    """Scale s of the TT lobe's logistic N_TT, whose standard deviation is γ_TT = sπ/√3: s = γ_TT √3/π."""
+    return gamma_tt * math.sqrt(3.0) / math.pi
+
+
+@njit(cache=True)
+def logistic_trimmed(x, s):
     """Logistic density of scale s on [−π, π], renormalised."""
     ax = abs(x)
     e = math.exp(-ax / s)
@@ -192,12 +215,6 @@ def _logistic_sample(u, s):
     return min(max(-s * math.log(1.0 / v - 1.0), -math.pi), math.pi)
 
 
-@njit(cache=True)
-def _wrap(x):
-    """Angle to [−π, π)."""
-    return (x + math.pi) % (2.0 * math.pi) - math.pi
-
-
 # --- the BCSDF ---------------------------------------------------------------------------------------------------
 
 @njit(cache=True)
@@ -210,10 +227,10 @@ def context(p, wo):
     c[C_PHI_O] = math.atan2(wo[2], wo[1])
     for k in range(2):
         sigma = 2.0 * (p[P_BETA_R] if k == 0 else p[P_BETA_TT])
-        mu = _lobe_centre(p[P_ALPHA_R] if k == 0 else p[P_ALPHA_TT], sigma, s)
+        mu = lobe_centre(p[P_ALPHA_R] if k == 0 else p[P_ALPHA_TT], sigma, s)
         c[C_MU + k] = mu
         c[C_SIGMA + k] = sigma
-        c[C_Z + k] = _cos2_normaliser(mu, sigma)
+        c[C_Z + k] = cos2_normaliser(mu, sigma)
         c[C_MASS + k] = sigma * math.sqrt(2.0 * math.pi) * _normal_mass((-HALF_PI - mu) / sigma,
                                                                         (HALF_PI - mu) / sigma)
     w_r = (p[P_A_R] + p[P_A_R + 1] + p[P_A_R + 2]) / 3.0
@@ -227,19 +244,27 @@ def context(p, wo):
 
 
 @njit(cache=True)
-def _gauss(theta, mu, sigma):
+def view_context(p, theta_o):
+    """``context`` of a view at longitudinal angle θ_o and azimuth 0: enough for every quantity that depends on the
+    view through θ_o alone (I_M, the dual-scattering averages)."""
+    return context(p, np.array([math.sin(theta_o), math.cos(theta_o), 0.0]))
+
+
+@njit(cache=True)
+def gauss(theta, mu, sigma):
+    """exp(−(θ − μ)²/(2σ²)): the unnormalised longitudinal lobe."""
     return math.exp(-0.5 * ((theta - mu) / sigma) ** 2)
 
 
 @njit(cache=True)
 def evaluate(p, c, wi, out):
     """out[:] = f(ω_i, ω_o) in RGB (1/sr), ω_o given through its context ``c``; wi unit, local frame."""
-    theta_i = math.asin(min(max(wi[0], -1.0), 1.0))
-    phi = _wrap(c[C_PHI_O] - math.atan2(wi[2], wi[1]))
-    m_r = _gauss(theta_i, c[C_MU], c[C_SIGMA]) / c[C_Z]
-    m_tt = _gauss(theta_i, c[C_MU + 1], c[C_SIGMA + 1]) / c[C_Z + 1]
+    theta_i = clamped_asin(wi[0])
+    phi = wrap_angle(c[C_PHI_O] - math.atan2(wi[2], wi[1]))
+    m_r = gauss(theta_i, c[C_MU], c[C_SIGMA]) / c[C_Z]
+    m_tt = gauss(theta_i, c[C_MU + 1], c[C_SIGMA + 1]) / c[C_Z + 1]
     n_r = 0.5 / math.pi
-    n_tt = _logistic_trimmed(_wrap(phi - math.pi), p[P_GAMMA_TT] * math.sqrt(3.0) / math.pi)
+    n_tt = logistic_trimmed(wrap_angle(phi - math.pi), tt_logistic_scale(p[P_GAMMA_TT]))
     for ch in range(3):
         out[ch] = p[P_A_R + ch] * m_r * n_r + p[P_A_TT + ch] * m_tt * n_tt + p[P_A_D + ch] * INV_PI2
 
@@ -247,12 +272,12 @@ def evaluate(p, c, wi, out):
 @njit(cache=True)
 def pdf(p, c, wi):
     """Solid-angle density of ``sample`` for ω_o's context ``c`` (1/sr)."""
-    theta_i = math.asin(min(max(wi[0], -1.0), 1.0))
+    theta_i = clamped_asin(wi[0])
     cos_i = max(math.cos(theta_i), COS_FLOOR)
-    phi = _wrap(c[C_PHI_O] - math.atan2(wi[2], wi[1]))
-    q_r = _gauss(theta_i, c[C_MU], c[C_SIGMA]) / c[C_MASS]
-    q_tt = _gauss(theta_i, c[C_MU + 1], c[C_SIGMA + 1]) / c[C_MASS + 1]
-    n_tt = _logistic_trimmed(_wrap(phi - math.pi), p[P_GAMMA_TT] * math.sqrt(3.0) / math.pi)
+    phi = wrap_angle(c[C_PHI_O] - math.atan2(wi[2], wi[1]))
+    q_r = gauss(theta_i, c[C_MU], c[C_SIGMA]) / c[C_MASS]
+    q_tt = gauss(theta_i, c[C_MU + 1], c[C_SIGMA + 1]) / c[C_MASS + 1]
+    n_tt = logistic_trimmed(wrap_angle(phi - math.pi), tt_logistic_scale(p[P_GAMMA_TT]))
     return (c[C_PROB] * q_r * 0.5 / math.pi + c[C_PROB + 1] * q_tt * n_tt) / cos_i + c[C_PROB + 2] / (4.0 * math.pi)
 
 
@@ -270,7 +295,7 @@ def sample(p, c, u0, u1, u2, wi):
         if k == 0:
             phi = 2.0 * math.pi * u2 - math.pi
         else:
-            phi = math.pi + _logistic_sample(u2, p[P_GAMMA_TT] * math.sqrt(3.0) / math.pi)
+            phi = math.pi + _logistic_sample(u2, tt_logistic_scale(p[P_GAMMA_TT]))
         phi_i = c[C_PHI_O] - phi
     cos_t = math.sqrt(max(0.0, 1.0 - s * s))
     wi[0] = s

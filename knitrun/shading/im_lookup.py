@@ -87,6 +87,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from data_formats.asset_pack import IM_AXES
+from data_formats.conventions import HALF_PI
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.table_lookup import axis_cell
 
@@ -101,15 +103,14 @@ def sg(omega, omega_j, lam):
                                             - 1.0))
 
 
-# name → (definition written into the pack, units); the order is the axis code of ``im_kernel``
-AXIS_VARIABLES = {
-    "theta_o": ("θ_o = asin(ω_o·t), longitudinal angle of the view against the fiber tangent", "rad"),
-    "theta_j": ("θ_j = asin(ω_j·t), longitudinal angle of the SRBF centre against the fiber tangent", "rad"),
-    "abs_phi_j_minus_phi_o": ("|φ_j − φ_o| wrapped into [0, π]: azimuth of the SRBF centre minus azimuth of the view "
-                              "(I_M is even in it because f is even in φ)", "rad"),
-    "log10_lambda": ("log10 λ_j, λ_j the SRBF sharpness", "1"),
-}
-AXIS_CODES = {name: code for code, name in enumerate(AXIS_VARIABLES)}  # theta_o, theta_j, |Δφ|, log10 λ
+def sg_integral(lam):
+    """∫ G(ω; ω_j, λ) dω = (2π/λ)(1 − e^{−2λ}) over the sphere, for λ > 0 (arrays broadcast)."""
+    lam = np.asarray(lam, float)
+    return 2.0 * np.pi / np.maximum(lam, 1e-300) * -np.expm1(-2.0 * lam)
+
+
+# axis name (the asset pack schema's ``IM_AXES``, defined there) → the axis code of ``im_kernel``
+AXIS_CODES = {name: code for code, name in enumerate(IM_AXES)}  # theta_o, theta_j, |Δφ|, log10 λ
 
 
 def _field(axis, key):
@@ -139,7 +140,7 @@ def im_lookup(table, axes, params, theta_o, theta_j, dphi, lam):
     (``pack.info['environment/I_M_TT_D'].axes``; the channel axis is ignored). params: the fiber BCSDF vector the
     table was baked for (its R lobe is integrated here). θ_o, θ_j in [−π/2, π/2], dphi = φ_j − φ_o (any real),
     lam > 0 (values outside the table's λ range take its end samples). A parameterisation with an axis not in
-    ``AXIS_VARIABLES`` is refused."""
+    ``data_formats.asset_pack.IM_AXES`` is refused."""
     lo, hi, repeat, codes = kernel_axes(axes)
     args = np.broadcast_arrays(*[np.asarray(x, np.float64) for x in (theta_o, theta_j, dphi, lam)])
     if np.any(~(args[3] > 0)):
@@ -154,7 +155,7 @@ def im_lookup(table, axes, params, theta_o, theta_j, dphi, lam):
 def _im_batch(table, lo, hi, repeat, codes, params, theta_o, theta_j, dphi, lam):
     out = np.empty((theta_o.shape[0], 3))
     for k in prange(theta_o.shape[0]):
-        c = fb.context(params, np.array([math.sin(theta_o[k]), math.cos(theta_o[k]), 0.0]))
+        c = fb.view_context(params, theta_o[k])
         im_kernel(table, lo, hi, repeat, codes, params, c, theta_o[k], theta_j[k], dphi[k], lam[k], out[k])
     return out
 
@@ -189,8 +190,8 @@ def r_lobe_integral(c, theta_j, lam):
     precision = 1.0 / (sigma * sigma) + lam
     centre = (mu / (sigma * sigma) + lam * theta_j) / precision
     reach = R_WINDOW / math.sqrt(precision)
-    lo = max(-fb.HALF_PI, centre - reach)
-    hi = min(fb.HALF_PI, centre + reach)
+    lo = max(-HALF_PI, centre - reach)
+    hi = min(HALF_PI, centre + reach)
     if hi <= lo:
         return 0.0
     half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
@@ -238,6 +239,6 @@ def im_kernel(table, lo, hi, repeat, codes, params, c, theta_o, theta_j, dphi, l
             for ch in range(3):
                 out[ch] += w * table[idx[0], idx[1], idx[2], idx[3], ch]
     if params[fb.P_A_R] > 0.0 or params[fb.P_A_R + 1] > 0.0 or params[fb.P_A_R + 2] > 0.0:
-        r = r_lobe_integral(c, min(max(theta_j, -fb.HALF_PI), fb.HALF_PI), lam)
+        r = r_lobe_integral(c, min(max(theta_j, -HALF_PI), HALF_PI), lam)
         for ch in range(3):
             out[ch] += params[fb.P_A_R + ch] * r

@@ -31,11 +31,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
+from data_formats.conventions import LUMINANCE
+from knitrun.shading.equirect import texel_directions
 from knitrun.shading.im_lookup import sg
 
 LAMBDA_MIN = 0.5
 LAMBDA_MAX = 1e4
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 _LAMBDA_CANDIDATES = np.geomspace(LAMBDA_MIN, LAMBDA_MAX, 13)
 _PLANE_NORMALS = np.vstack([np.eye(3), -np.eye(3)])
 
@@ -67,8 +68,6 @@ def evaluate_srbf(fit: SRBFFit, directions) -> np.ndarray:
 
 def srbf_image(fit: SRBFFit, height: int, width: int) -> np.ndarray:
     """(H, W, 3) float32 equirectangular image of the fitted lobes at the texel centres."""
-    from knitrun.shading.equirect import texel_directions
-
     return evaluate_srbf(fit, texel_directions(height, width).reshape(-1, 3)).reshape(height, width, 3).astype(
         np.float32)
 
@@ -121,8 +120,6 @@ def _checked(image) -> np.ndarray:
 
 def _texels(h, w):
     """(H·W, 3) texel-centre directions and (H·W,) exact texel solid angles (sr, summing to 4π)."""
-    from knitrun.shading.equirect import texel_directions
-
     edges = np.cos(np.arange(h + 1) * np.pi / h)
     omega = np.repeat((edges[:-1] - edges[1:]) * (2 * np.pi / w), w)
     return texel_directions(h, w).reshape(-1, 3), omega

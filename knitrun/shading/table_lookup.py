@@ -24,7 +24,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-THETA_RANGE = (-0.5 * math.pi, 0.5 * math.pi)
+from data_formats.conventions import THETA_RANGE
+
 WRAPS = ("clamp", "repeat")
 
 

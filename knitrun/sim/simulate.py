@@ -32,10 +32,10 @@ import numpy as np
 
 from data_formats.errors import FormatError
 from data_formats.yarn_curves import control_polygon_arclength, make_yarn_curves
-
 from knitrun.sim.knot_solver import (EPS_LENGTH, MAX_RESIDUALS, R_TARGETS, REST_SIZE, W_SIZE, face_setup, knot_points,
-                          prepare_faces, residuals, solve_faces)
-from knitrun.sim.stitch_templates import F_A, F_C, I_KNOT, I_PIECES, MAX_POINTS, N_KNOTS, N_UNKNOWNS, TEMPLATE_FLOAT, TEMPLATE_INT
+                                     prepare_faces, residuals, solve_faces)
+from knitrun.sim.stitch_templates import (F_A, F_C, I_KNOT, I_PIECES, MAX_POINTS, N_KNOTS, N_UNKNOWNS, TEMPLATE_FLOAT,
+                                          TEMPLATE_INT)
 from knitrun.sim.yarn_assembly import face_point_offsets, render_points, upsample_plan, yarn_layout
 
 RADIUS_PER_STITCH = 1.0 / 8.0  # default yarn radius / stitch width: a stitch 4 yarn diameters wide

@@ -32,9 +32,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from data_formats.stitch_mesh import LOOPS_CONSUMED
-
 from data_formats.numba_setup import FASTMATH
+from data_formats.stitch_mesh import LOOPS_CONSUMED
 from knitrun.sim.stitch_templates import N_POINTS, ROLE_IN, ROLE_LOOP, ROLE_OUT, piece_ranges
 
 
