@@ -12,7 +12,8 @@ speed ratio to the reference. One `knitrun compare` report folder per scene unde
 import argparse
 from pathlib import Path
 
-from knitbake.compare.report import ABLATION_LABELS, compare_scene
+from knitbake.compare.report import compare_scene
+from knitrun.render.ablations import ABLATION_LABELS
 
 SCENES = ("straight_yarn_directional", "straight_yarn_sky", "knit_patch_directional", "knit_patch_sky")
 

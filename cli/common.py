@@ -20,6 +20,24 @@ from data_formats.jsonable import jsonable
 FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),
               ("scene", scene), ("yarn-spec", yarn_spec))
 USER_ERRORS = (FormatError, ValueError, OSError)
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 110}  # both programs' click settings
+
+
+class SuffixPath(click.Path):
+    """A file path whose name must end in one of ``suffixes`` (case-insensitive), e.g. ``SuffixPath(".h5", ".hdf5")``
+    for an asset pack. A wrong suffix is a one-line user error (exit 1) naming the path and the option."""
+
+    def __init__(self, *suffixes: str):
+        super().__init__(dir_okay=False)
+        self.suffixes = tuple(s.lower() for s in suffixes)
+
+    def convert(self, value, param, ctx):
+        value = super().convert(value, param, ctx)
+        if not str(value).lower().endswith(self.suffixes):
+            label = param.opts[-1] if isinstance(param, click.Option) else param.name
+            choices = ", ".join(self.suffixes[:-1]) + (" or " if len(self.suffixes) > 1 else "") + self.suffixes[-1]
+            raise FormatError(f"{value}: {label} must end in {choices}")
+        return value
 
 
 class FriendlyGroup(click.Group):

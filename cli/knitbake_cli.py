@@ -5,20 +5,15 @@ Thin: parse, call ``data_formats``/``knitbake``, report. Errors are one line on 
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
 
 import click
 
-from cli.common import FriendlyGroup, echo_json, echo_tree, file_kind
+from cli.common import CONTEXT, FriendlyGroup, SuffixPath, echo_json, echo_tree, file_kind
 from data_formats import FormatError
-from data_formats.atomic import atomic_path
-from data_formats.yarn_spec import (FIELDS, SECTIONS, describe_spec, dumps_spec, load_preset, preset_names,
-                                    resolve_yarn)
-
-CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 110}
+from data_formats.yarn_spec import FIELDS, SECTIONS, describe_spec, dumps_spec, load_preset, preset_names, resolve_yarn
 
 
 @click.group(name="knitbake", cls=FriendlyGroup, context_settings=CONTEXT)
@@ -148,7 +143,7 @@ def validate(path):
 
 @main.command()
 @click.argument("yarn_name", metavar="YARN")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+@click.option("-o", "--output", type=SuffixPath(".h5", ".hdf5", ".bcc"), required=True,
               help="Fiber curves: .h5 (our yarn-curve HDF5) or .bcc (polylines).")
 @click.option("--periods", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
               help="Length of yarn to generate, in ply-twist periods.")
@@ -170,8 +165,6 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
     from knitbake.fibers.procedural_yarn import generate_fibers
 
     suffix = Path(output).suffix.lower()
-    if suffix not in (".h5", ".hdf5", ".bcc"):
-        raise FormatError(f"{output}: output must end in .h5, .hdf5 or .bcc")
     spec = resolve_yarn(yarn_name)
     t0 = time.perf_counter()
     fib = generate_fibers(spec, length=periods * spec.geometry.ply_pitch, seed=seed,
@@ -201,7 +194,7 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
 
 @main.command()
 @click.argument("scene_path", metavar="SCENE", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+@click.option("-o", "--output", type=SuffixPath(".exr"), required=True,
               help="Linear float32 EXR; a tone-mapped PNG preview and a JSON summary are written next to it.")
 @click.option("--spp", type=click.IntRange(min=1), default=None, help="Samples per pixel (default: the scene's).")
 @click.option("--seed", type=int, default=None, help="Random seed (default: the scene's).")
@@ -214,23 +207,20 @@ def reference(scene_path, output, spp, seed, max_depth, exposure, as_json):
 
     Example: knitbake reference examples/scenes/straight_yarn_directional.toml -o ref.exr --spp 64
     """
-    from data_formats.images import write_exr, write_png
     from data_formats.scene import load_scene
-    from knitbake.trace.path_tracer import render
-    from knitbake.trace.reference import build_reference
+    from knitbake.trace.reference import trace_reference, write_reference
 
-    if not output.lower().endswith(".exr"):
-        raise FormatError(f"{output}: output must end in .exr")
     scene = load_scene(scene_path)
     spp = spp or scene.render.spp
     seed = scene.render.seed if seed is None else seed
     max_depth = max_depth or scene.render.max_depth
-    built = build_reference(scene, seed=seed)
-    facts = built.facts
-    click.echo(f"{scene_path}: {facts['fibers']} fibers, {facts['triangles']} triangles "
-               f"(sweep {facts['sweep_s']:.1f} s, tessellate {facts['tessellate_s']:.1f} s, "
-               f"Embree {facts['embree_build_s']:.1f} s)", err=True)
-    with click.progressbar(length=spp, label=f"rendering {built.camera.width}x{built.camera.height}, {spp} spp",
+
+    def built(facts):
+        click.echo(f"{scene_path}: {facts['fibers']} fibers, {facts['triangles']} triangles "
+                   f"(sweep {facts['sweep_s']:.1f} s, tessellate {facts['tessellate_s']:.1f} s, "
+                   f"Embree {facts['embree_build_s']:.1f} s)", err=True)
+
+    with click.progressbar(length=spp, label=f"rendering {scene.camera.width}x{scene.camera.height}, {spp} spp",
                            file=sys.stderr, show_eta=True, show_percent=True) as bar:
         last = [0]
 
@@ -238,26 +228,18 @@ def reference(scene_path, output, spp, seed, max_depth, exposure, as_json):
             bar.update(done - last[0])
             last[0] = done
 
-        image, stats = render(built.tracer, built.camera, spp, seed=seed, max_depth=max_depth, progress=progress)
-    write_exr(output, image)
-    preview = str(Path(output).with_suffix(".png"))
-    write_png(preview, image, exposure)
-    summary = {"scene": scene_path, "output": output, "preview": preview, "width": built.camera.width,
-               "height": built.camera.height, "spp": spp, "seed": seed, "max_depth": max_depth,
-               "render_s": stats.seconds, "rays": stats.rays, "rays_per_s": stats.rays_per_second, **facts,
-               "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
-    with atomic_path(Path(output).with_suffix(".json")) as tmp:  # read by `knitrun compare --reference`
-        Path(tmp).write_text(json.dumps(summary, indent=2, default=float))
+        image, facts = trace_reference(scene, spp, seed, max_depth, progress=progress, on_built=built)
+    summary = write_reference(output, image, {"scene": scene_path, **facts}, exposure)
     if as_json:
         echo_json(summary)
         return
-    click.echo(f"{output}: {stats.seconds:.1f} s, {stats.rays / 1e6:.1f} M rays, "
-               f"{stats.rays_per_second / 1e6:.2f} M rays/s; preview {preview}")
+    click.echo(f"{output}: {facts['render_s']:.1f} s, {facts['rays'] / 1e6:.1f} M rays, "
+               f"{facts['rays_per_s'] / 1e6:.2f} M rays/s; preview {summary['preview']}")
 
 
 @main.command("bake")
 @click.argument("yarn_name", metavar="YARN")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True, help="The asset pack (.h5).")
+@click.option("-o", "--output", type=SuffixPath(".h5", ".hdf5"), required=True, help="The asset pack (.h5).")
 @click.option("--quality", type=click.Choice(["draft", "standard", "final"]), default="draft", show_default=True,
               help="Resolution and sample counts of every table (the speed/accuracy trade: see BENCHMARKS.md).")
 @click.option("--only", default=None, help="Comma-separated table groups to bake (dual_scattering, correction, "
@@ -278,8 +260,6 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
 
     from knitbake.bake import bake, cache_dir, scene_needs
 
-    if not output.lower().endswith((".h5", ".hdf5")):
-        raise FormatError(f"{output}: output must end in .h5 or .hdf5")
     spec = resolve_yarn(yarn_name)
     needs = None
     if scene_path:

@@ -6,10 +6,9 @@ from pathlib import Path
 
 import click
 
-from cli.common import FriendlyGroup, echo_json, file_kind
+from cli.common import CONTEXT, FriendlyGroup, SuffixPath, echo_json, file_kind
 from data_formats import FormatError
-
-CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 110}
+from knitrun.render.ablations import ABLATION_LABELS, ABLATIONS
 
 
 @click.group(name="knitrun", cls=FriendlyGroup, context_settings=CONTEXT)
@@ -27,7 +26,7 @@ def main():
 
 @main.command()
 @click.argument("source", type=click.Path(dir_okay=False))
-@click.argument("target", type=click.Path(dir_okay=False))
+@click.argument("target", type=SuffixPath(".bcc", ".h5", ".hdf5"))
 @click.option("--frame", type=click.IntRange(min=0), default=0, show_default=True,
               help="Frame to write when the target is BCC (one frame per file).")
 @click.option("--units", default="cm", show_default=True, help="Units to record when the source is BCC (it has none).")
@@ -51,10 +50,8 @@ def convert(source, target, frame, units):
         if frame >= curves.points.shape[0]:
             raise FormatError(f"--frame {frame}: {source} has {curves.points.shape[0]} frame(s)")
         write_bcc(target, curves, frame=frame)
-    elif suffix in (".h5", ".hdf5"):
-        write_yarn_curves(target, curves)
     else:
-        raise FormatError(f"{target}: target must end in .bcc, .h5 or .hdf5")
+        write_yarn_curves(target, curves)
     click.echo(f"{source} ({kind}, {len(curves.closed)} curves) → {target}")
 
 
@@ -62,7 +59,7 @@ def convert(source, target, frame, units):
 @click.argument("source")
 @click.option("--rows", type=click.IntRange(min=1), help="Courses of a named pattern.  [default: 12]")
 @click.option("--cols", type=click.IntRange(min=1), help="Stitches per course of a named pattern.  [default: 12]")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.option("-o", "--output", required=True, type=SuffixPath(".h5", ".hdf5", ".obj"),
               help="MESH.h5 (knit-stitch-mesh) or MESH.obj (also writes MESH.labels).")
 @click.option("--json", "as_json", is_flag=True, help="Print the mesh summary as JSON.")
 def pattern(source, rows, cols, output, as_json):
@@ -80,8 +77,6 @@ def pattern(source, rows, cols, output, as_json):
     from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
 
     suffix = Path(output).suffix.lower()
-    if suffix not in (".h5", ".hdf5", ".obj"):
-        raise FormatError(f"{output}: output must end in .h5, .hdf5 or .obj")
     if Path(source).is_file():
         if rows is not None or cols is not None:
             raise FormatError(f"--rows/--cols size a named pattern, but {source} is a chart file")
@@ -110,7 +105,7 @@ def pattern(source, rows, cols, output, as_json):
                    "[default: 1]")
 @click.option("--obj-dir", type=click.Path(file_okay=False),
               help="Folder of OBJ frames with the mesh's topology (instead of --deform/--frames).")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.option("-o", "--output", required=True, type=SuffixPath(".h5", ".hdf5", ".bcc"),
               help="YARNS.h5 (all frames) or YARNS.bcc (the last frame).")
 @click.option("--iterations", type=click.IntRange(min=0), default=3, show_default=True,
               help="Gauss-Newton iterations per frame.")
@@ -136,8 +131,6 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     from knitrun.sim.simulate import simulate as run_simulation
 
     suffix = Path(output).suffix.lower()
-    if suffix not in (".h5", ".hdf5", ".bcc"):
-        raise FormatError(f"{output}: output must end in .h5, .hdf5 or .bcc")
     if obj_dir is not None and (deforms or frames is not None):
         raise FormatError("--obj-dir gives the frames: use it without --deform and --frames")
     specs = [parse_deformation(spec) for spec in deforms]
@@ -172,13 +165,12 @@ def _pack_overrides(values):
 
 @main.command()
 @click.argument("scene_path", metavar="SCENE", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True, help="Tone-mapped PNG image.")
-@click.option("--exr", "exr_path", type=click.Path(dir_okay=False), default=None, help="Also write the linear EXR.")
+@click.option("-o", "--output", type=SuffixPath(".png"), required=True, help="Tone-mapped PNG image.")
+@click.option("--exr", "exr_path", type=SuffixPath(".exr"), default=None, help="Also write the linear EXR.")
 @click.option("--pack", "pack_values", multiple=True, metavar="YARN=FILE",
               help="Asset pack for a yarn (its name or entry index); overrides the scene's `pack`. Repeatable.")
-@click.option("--ablation", type=click.Choice(["full", "plain_ds", "xi", "xi_shadowing", "no_tables", "factored"]),
-              default="full",
-              show_default=True, help="Which baked terms to use (seed 000 Fig. 7 ablation).")
+@click.option("--ablation", type=click.Choice(list(ABLATIONS)), default="full", show_default=True,
+              help="Which baked terms to use (the ablations of Huang et al. 2025 Fig. 7).")
 @click.option("--samples-per-segment", type=click.IntRange(1, 64), default=4, show_default=True,
               help="Polyline samples per segment of smooth (C0/BS/BZ) curves.")
 @click.option("--msaa", type=click.Choice(["1", "2", "4", "8", "16"]), default=None,
@@ -194,13 +186,8 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
 
     from data_formats.images import write_exr, write_png
     from data_formats.scene import load_scene
-    from knitrun.render.pipeline import ABLATIONS
     from knitrun.render.pipeline import render as render_scene
 
-    if not output.lower().endswith(".png"):
-        raise FormatError(f"{output}: output must end in .png")
-    if exr_path is not None and not exr_path.lower().endswith(".exr"):
-        raise FormatError(f"{exr_path}: --exr must end in .exr")
     scene = load_scene(scene_path)
     if msaa is not None:
         scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, msaa=int(msaa)))
@@ -240,7 +227,7 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, as_json)
 
     Example: knitrun compare examples/scenes/straight_yarn_directional.toml --pack cotton1=cotton1.h5 --spp 64 -o report/
     """
-    from knitbake.compare.report import ABLATION_LABELS, compare_scene
+    from knitbake.compare.report import compare_scene
 
     if reference is not None and spp is not None:
         raise FormatError("--reference and --spp exclude each other (--spp sets the reference's samples)")

@@ -13,10 +13,11 @@ from data_formats.scene import load_scene
 from data_formats.yarn_curves import write_yarn_curves
 from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
-from knitrun.sim.deformations import deformation_frames
 from knitbake.compare.image_metrics import compare_images
+from knitrun.render.ablations import ABLATIONS
+from knitrun.render.pipeline import render
+from knitrun.sim.deformations import deformation_frames
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
-from knitrun.render.pipeline import ABLATIONS, render
 from knitrun.sim.simulate import simulate
 from tests.test_bake import TINY
 from tests.test_render import FRONT, SKY, SUN, pack, straight, write_scene  # noqa: F401  (pack is a fixture)

@@ -16,17 +16,18 @@ from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import dumps_spec, load_preset
-from knitbake.stages import im_table as im
 from knitbake.bake import bake
+from knitbake.stages import im_table as im
+from knitrun.render.ablations import ABLATIONS
+from knitrun.render.pipeline import render
+from knitrun.render.strip_shading import resolve, shade_regular, variant_of
+from knitrun.render.texture_sampling import mip_stack, sample_mip
+from knitrun.render.yarn_look import no_full_table, ones_factor
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
 from knitrun.shading.equirect import texel_directions
 from knitrun.shading.im_lookup import kernel_axes
 from knitrun.shading.srbf_fit import fit_srbf
-from knitrun.render.pipeline import ABLATIONS, render
-from knitrun.render.strip_shading import resolve, shade_regular, variant_of
-from knitrun.render.texture_sampling import mip_stack, sample_mip
-from knitrun.render.yarn_look import no_full_table, ones_factor
 from tests.test_bake import TINY
 from tests.test_im_table import ROUGH, TEST_SHAPE
 

@@ -13,7 +13,6 @@ ablation ``strip_<name>.exr/.png``, ``flip_<name>.png`` (magma error map) and ``
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -22,39 +21,14 @@ from data_formats.atomic import atomic_path
 from data_formats.images import read_exr, write_exr, write_png
 from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import compare_images, flip_error
-from knitrun.render.pipeline import ABLATIONS, render
-
-ABLATION_ORDER = ("plain_ds", "xi", "xi_shadowing", "full", "no_tables", "factored")
-ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
-                   "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
-                   "factored": "full, rank-1 factored ξ, Ψ"}
-
-
-def _reference(scene, spp, seed, progress):
-    from knitbake.trace.path_tracer import render as trace
-    from knitbake.trace.reference import build_reference
-
-    t0 = time.perf_counter()
-    built = build_reference(scene, seed=seed)
-    image, stats = trace(built.tracer, built.camera, spp, seed=seed, max_depth=scene.render.max_depth,
-                         progress=progress)
-    return image, time.perf_counter() - t0, {"spp": spp, "rays": stats.rays, **built.facts}
+from knitbake.trace.reference import read_summary, reference_seconds, trace_reference
+from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER, ABLATIONS
+from knitrun.render.pipeline import render
 
 
 def _srgb_to_linear(c):
     """Display sRGB values in [0, 1] → linear, so that ``write_png`` (which encodes sRGB) shows them unchanged."""
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def _sidecar_seconds(reference):
-    """Build + render seconds from the JSON summary `knitbake reference` writes next to its EXR; None without it."""
-    path = Path(reference).with_suffix(".json")
-    try:
-        facts = json.loads(path.read_text())
-        return float(facts["render_s"]) + sum(float(facts.get(k, 0.0)) for k in
-                                               ("sweep_s", "tessellate_s", "embree_build_s"))
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
 
 
 def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exposure=0.0, ablations=ABLATION_ORDER,
@@ -69,14 +43,16 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     say = progress or (lambda message: None)
     if reference is not None:
         ref = read_exr(reference)
-        ref_seconds, ref_facts = _sidecar_seconds(reference), {"file": str(reference)}
+        summary = read_summary(reference)
+        ref_seconds, ref_facts = (reference_seconds(summary) if summary else None), {"file": str(reference)}
         if ref.shape[:2] != (scene.camera.height, scene.camera.width):
             raise ValueError(f"{reference}: {ref.shape[1]}x{ref.shape[0]} image, the scene renders "
                              f"{scene.camera.width}x{scene.camera.height}")
     else:
         spp = spp or scene.render.spp
         say(f"reference: path tracing {scene.camera.width}x{scene.camera.height} at {spp} spp")
-        ref, ref_seconds, ref_facts = _reference(scene, spp, scene.render.seed, None)
+        ref, ref_facts = trace_reference(scene, spp, scene.render.seed, scene.render.max_depth)
+        ref_seconds = reference_seconds(ref_facts)
     write_exr(out / "reference.exr", ref)
     write_png(out / "reference.png", ref, exposure)
 

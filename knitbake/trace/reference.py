@@ -4,31 +4,35 @@
 curves (HDF5 or BCC) → fibers (``fiber_sweep``) → tubes (``tessellate``) → Embree scene, one fiber-BCSDF
 parameter row per yarn entry (the spec's optics times the entry's ``color``), directional lights, the environment
 (file or the built-in sky) and the background. Units are the scene's.
+
+``trace_reference`` builds and renders; ``write_reference`` writes what ``knitbake reference`` leaves on disk: the
+linear EXR, a tone-mapped PNG beside it and the JSON summary (``summary_path``: the EXR's name with ``.json``),
+whose keys are those of ``trace_reference``'s facts plus the paths. ``read_summary`` reads it back (``knitrun
+compare --reference`` takes the reference's cost from it, ``reference_seconds``).
 """
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from data_formats.bcc import read_bcc
-from data_formats.bcc import sniff as is_bcc
-from data_formats.images import read_image
-from data_formats.scene import EnvironmentLight, Scene
-from data_formats.yarn_curves import read_yarn_curves
-from knitbake.trace.env_light import env_from_image
+from data_formats.atomic import atomic_path
+from data_formats.images import write_exr, write_png
+from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.fiber_sweep import sweep_fibers
-from knitbake.trace.path_tracer import TracerScene
 from knitbake.fibers.tessellate import tessellate_fibers
-from knitrun.shading.builtin_sky import sky_image
-from knitrun.render.camera import Camera
-from knitrun.shading.fiber_bcsdf import P_A_D, P_A_R, P_A_TT, params_from_optics
+from knitbake.trace.env_light import env_from_image
+from knitbake.trace.path_tracer import TracerScene, render
+from knitrun.render.camera import Camera, scene_camera
+from knitrun.shading.builtin_sky import environment_image
+from knitrun.shading.fiber_bcsdf import params_from_optics, tinted
 
 TUBE_SIDES = 6
-BUILTIN_ENVIRONMENTS = {"sky": sky_image}
 
 
 @dataclass
@@ -38,18 +42,6 @@ class ReferenceScene:
     facts: dict  # fibers, segments, triangles, build timings
 
 
-def _entry_params(entry) -> np.ndarray:
-    p = params_from_optics(entry.spec.optics)
-    colour = np.asarray(entry.color, float)
-    for base in (P_A_R, P_A_TT, P_A_D):
-        p[base:base + 3] *= colour
-    return p
-
-
-def _curves(path, units):
-    return read_bcc(path, units=units) if is_bcc(path) else read_yarn_curves(path)
-
-
 def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
     """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``."""
     t0 = time.perf_counter()
@@ -57,7 +49,7 @@ def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
     for k, entry in enumerate(scene.yarns):
         if entry.curves is None:
             raise ValueError(f"yarns[{k}] gives a stitch mesh: simulate it to yarn curves first (knitrun simulate)")
-        curves = _curves(entry.curves, scene.units)
+        curves = read_curves(entry.curves, scene.units)
         keep = np.isin(curves.yarn_type, entry.yarn_type_indices)
         specs = {i: entry.spec for i in entry.yarn_type_indices}
         radii = {i: entry.radius for i in entry.yarn_type_indices}
@@ -73,18 +65,67 @@ def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
     env = None
     if envs:
         e = envs[0]
-        image = BUILTIN_ENVIRONMENTS[e.builtin]() if e.builtin else read_image(e.file)
+        image = environment_image(e)
         env = env_from_image(image, e.scale)
-    tracer = TracerScene(mesh, np.concatenate(types), np.stack([_entry_params(e) for e in scene.yarns]),
+    tracer = TracerScene(mesh, np.concatenate(types), np.stack([tinted(params_from_optics(e.spec.optics), e.color) for e in scene.yarns]),
                          light_dirs=np.array([light.unit_direction for light in lights]).reshape(-1, 3),
                          light_irradiance=np.array([light.irradiance for light in lights]).reshape(-1, 3),
                          env=env, background=np.asarray(scene.background, float))
-    cam = scene.camera
-    camera = Camera(np.asarray(cam.position, float), np.asarray(cam.look_at, float), np.asarray(cam.up, float),
-                    cam.width, cam.height, fov_deg=cam.fov_deg or 40.0, ortho_height=cam.ortho_height or 0.0)
+    camera = scene_camera(scene)
     facts = {"fibers": fibers.n_fibers, "segments": fibers.n_segments, "triangles": int(mesh.triangles.shape[0]),
              "sweep_s": t_sweep, "tessellate_s": t_tess, "embree_build_s": time.perf_counter() - t0 - t_sweep - t_tess}
     return ReferenceScene(tracer, camera, facts)
+
+
+def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None):
+    """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``on_built(facts)``
+    is called once the tracer scene exists (before rendering), ``progress(done, total)`` per pass of samples.
+    facts: width, height, spp, seed, max_depth, render_s, rays, rays_per_s, the build facts of ``build_reference``
+    (fibers, segments, triangles, sweep_s, tessellate_s, embree_build_s) and mean_rgb."""
+    built = build_reference(scene, seed=seed)
+    if on_built is not None:
+        on_built(built.facts)
+    image, stats = render(built.tracer, built.camera, spp, seed=seed, max_depth=max_depth, progress=progress)
+    facts = {"width": built.camera.width, "height": built.camera.height, "spp": spp, "seed": seed,
+             "max_depth": max_depth, "render_s": stats.seconds, "rays": stats.rays,
+             "rays_per_s": stats.rays_per_second, **built.facts, "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
+    return image, facts
+
+
+def summary_path(exr) -> Path:
+    """The JSON summary beside a reference EXR."""
+    return Path(exr).with_suffix(".json")
+
+
+def write_reference(exr, image, facts: dict, exposure: float = 0.0) -> dict:
+    """Write a reference: ``exr`` (linear float32), its PNG preview at ``exposure`` stops and the JSON summary
+    (``facts`` plus the paths; each file written atomically). Returns the summary."""
+    preview = str(Path(exr).with_suffix(".png"))
+    write_exr(exr, image)
+    write_png(preview, image, exposure)
+    summary = {**facts, "output": str(exr), "preview": preview}
+    with atomic_path(summary_path(exr)) as tmp:
+        Path(tmp).write_text(json.dumps(summary, indent=2, default=float))
+    return summary
+
+
+def read_summary(exr) -> dict | None:
+    """The JSON summary ``write_reference`` wrote beside ``exr``; None when there is none or it is unreadable."""
+    try:
+        summary = json.loads(summary_path(exr).read_text())
+    except (OSError, ValueError):
+        return None
+    return summary if isinstance(summary, dict) else None
+
+
+def reference_seconds(summary: dict) -> float | None:
+    """The cost of a reference: fiber build (sweep, tessellation, Embree) plus path tracing, in seconds; None when
+    the summary does not say."""
+    try:
+        return float(summary["render_s"]) + sum(float(summary.get(k, 0.0))
+                                                for k in ("sweep_s", "tessellate_s", "embree_build_s"))
+    except (KeyError, TypeError, ValueError):
+        return None
 
 
 def _only_curves(curves, keep):

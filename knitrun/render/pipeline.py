@@ -24,10 +24,8 @@ Passes, each timed (``RenderResult.timings``, seconds):
    then where the reference has it, and moves along the yarn as the camera circles it, as a real yarn's does.
 6. ``resolve``: coverage-weighted MSAA resolve over the background, the flyaway layer on top.
 
-``Features`` switch the baked terms off for ablations (seed 000 Fig. 7): without ``xi`` the correction is 1,
-without ``fiber_shadowing`` Ψ^Fiber_G = 1 (and no fiber lies between a visible fiber and the light), without
-``flyaways`` no flyaway layer; ``full_tables`` False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N}
-(the paper's) instead of the pack's unfactorized tables.
+``Features`` (``knitrun.render.ablations``) switch the baked terms off for the ablations of Huang et al. 2025
+Fig. 7.
 """
 
 from __future__ import annotations
@@ -39,47 +37,23 @@ from pathlib import Path
 
 import numpy as np
 
-from data_formats.bcc import read_bcc
-from data_formats.bcc import sniff as is_bcc
+from data_formats.conventions import LUMINANCE
 from data_formats.curve_eval import yarn_frame
-from data_formats.images import read_image
-from data_formats.scene import EnvironmentLight, Scene
-from data_formats.yarn_curves import read_yarn_curves
-
-from knitrun.shading.builtin_sky import sky_image
-from knitrun.render.camera import Camera
+from data_formats.scene import EnvironmentLight, Scene, read_curves
+from knitrun.render.ablations import Features
+from knitrun.render.camera import scene_camera
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
-from knitrun.shading.srbf_fit import fit_srbf
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
 from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
 from knitrun.render.yarn_look import load_look, no_full_table, ones_factor
+from knitrun.shading.builtin_sky import environment_image
+from knitrun.shading.im_lookup import sg_integral
+from knitrun.shading.srbf_fit import fit_srbf
 
-BUILTIN_ENVIRONMENTS = {"sky": sky_image}
 SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
 MS_MERGE_DEG = 30.0  # lobes this close share one multiple-scattering evaluation
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-
-
-@dataclass(frozen=True)
-class Features:
-    """Which baked terms the renderer uses (all on: the full model)."""
-
-    xi: bool = True
-    fiber_shadowing: bool = True
-    flyaways: bool = True
-    full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
-
-
-ABLATIONS = {
-    "plain_ds": Features(xi=False, fiber_shadowing=False, flyaways=False),
-    "xi": Features(xi=True, fiber_shadowing=False, flyaways=False),
-    "xi_shadowing": Features(xi=True, fiber_shadowing=True, flyaways=False),
-    "full": Features(),
-    "no_tables": Features(xi=False, fiber_shadowing=False),  # the full renderer without ξ and Ψ^Fiber
-    "factored": Features(full_tables=False),
-}
 
 
 @dataclass
@@ -106,7 +80,7 @@ def _scene_curves(entry, units, frame):
         mesh = load_stitch_mesh(entry.stitch_mesh)
         curves, _ = simulate(mesh, mesh.vertices[None], radius=entry.radius)
         return curves, 0
-    curves = read_bcc(entry.curves, units=units) if is_bcc(entry.curves) else read_yarn_curves(entry.curves)
+    curves = read_curves(entry.curves, units)
     return curves, frame
 
 
@@ -157,8 +131,7 @@ def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MER
     """Distant lights for the environment's multiple scattering (``strip_shading`` docstring): lobes in order of
     decreasing irradiance luminance join the first cluster within ``merge_deg`` of them, else start one. Returns
     (directions (C, 3), irradiance (C, 3), [visibility (C, N) per receiver set])."""
-    energy = np.asarray(lobe_w) * (2.0 * np.pi / np.maximum(lobe_lambda, 1e-300)
-                                   * -np.expm1(-2.0 * np.asarray(lobe_lambda)))[:, None]
+    energy = np.asarray(lobe_w) * sg_integral(lobe_lambda)[:, None]
     luminance = energy @ LUMINANCE
     cos_merge = math.cos(math.radians(merge_deg))
     members, axes = [], []
@@ -184,12 +157,6 @@ def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MER
             [np.array(v, np.float64) if v else np.zeros((0, m)) for v, m in zip(vis, n)])
 
 
-def _camera(scene: Scene) -> Camera:
-    c = scene.camera
-    return Camera(np.array(c.position, float), np.array(c.look_at, float), np.array(c.up, float), c.width, c.height,
-                  fov_deg=c.fov_deg if c.fov_deg is not None else 40.0, ortho_height=c.ortho_height or 0.0)
-
-
 def _pack_path(k, entry, packs):
     """The pack of yarn entry k: ``packs`` by the entry's index, its ``yarn`` as written or its spec's name, else
     the scene's ``pack``."""
@@ -208,7 +175,7 @@ def _environment(scene: Scene):
     if not envs:
         return None
     env = envs[0]
-    image = BUILTIN_ENVIRONMENTS[env.builtin]() if env.builtin else read_image(env.file)
+    image = environment_image(env)
     return fit_srbf(np.asarray(image, np.float64) * np.asarray(env.scale, np.float64),
                     n_lobes=scene.render.srbf_count, seed=scene.render.seed)
 
@@ -259,7 +226,7 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
                      srbf_irradiance_error=fit.irradiance_error)
         lap("srbf_fit")
 
-    camera = _camera(scene)
+    camera = scene_camera(scene)
     msaa = scene.render.msaa
     pattern = SAMPLE_PATTERNS[msaa]
     radius = np.array([looks[k].radius for k in lines.entry])

@@ -58,11 +58,14 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from knitrun.shading.dual_scattering import D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel
-from knitrun.shading.fiber_bcsdf import context, evaluate
-from knitrun.shading.im_lookup import im_kernel
-from knitrun.shading.table_lookup import THETA_RANGE, axis_cell
+from data_formats.conventions import THETA_RANGE
+from knitrun.render.camera import tan_half_fov
 from knitrun.render.texture_sampling import mip_level, sample_mip
+from knitrun.shading.dual_scattering import D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel
+from knitrun.shading.fiber_bcsdf import context, evaluate, view_context
+from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
+from knitrun.shading.im_lookup import im_kernel
+from knitrun.shading.table_lookup import axis_cell
 
 DEGENERATE = 1e-6  # |ω_o × t| below this: the strip is edge-on (ASSET_PACK.md §3); the point is not drawn
 
@@ -151,7 +154,7 @@ def shading_points(gbuffer, camera, pattern, mask=None):
     fwd, right, up = camera.basis()
     _group_fill(gbuffer.curve, use, gbuffer.depth, start, np.asarray(pattern, np.float64),
                 np.asarray(camera.position, np.float64), np.stack([right, up, fwd]),
-                math.tan(math.radians(camera.fov_deg) / 2), float(camera.ortho_height), pixel_sample, weight,
+                tan_half_fov(camera), float(camera.ortho_height), pixel_sample, weight,
                 position, view_dir, footprint)
     i, j, a = pixel_sample.T
     points = {"start": start, "weight": weight, "position": position,
@@ -162,25 +165,15 @@ def shading_points(gbuffer, camera, pattern, mask=None):
     return points
 
 
-# --- small vector helpers ----------------------------------------------------------------------------------------
-
-@njit(cache=True)
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True)
-def _asin(x):
-    return math.asin(min(max(x, -1.0), 1.0))
-
+# --- the strip frame (ASSET_PACK.md §3) ---------------------------------------------------------------------------
 
 @njit(cache=True)
 def _strip_frame(t, wo, n, b):
     """n, b of the strip at unit tangent t seen from ω_o; False when edge-on."""
-    c = _dot(wo, t)
+    c = dot(wo, t)
     for k in range(3):
         n[k] = wo[k] - c * t[k]
-    norm = math.sqrt(_dot(n, n))
+    norm = math.sqrt(dot(n, n))
     if norm < DEGENERATE:
         return False
     for k in range(3):
@@ -192,13 +185,10 @@ def _strip_frame(t, wo, n, b):
 
 
 @njit(cache=True)
-def _azimuth_difference(t, wo, wi):
-    """φ = φ_o − φ_i about the unit tangent t (as the bake's fiber-frame azimuth)."""
-    co, ci = _dot(wo, t), _dot(wi, t)
-    o0, o1, o2 = wo[0] - co * t[0], wo[1] - co * t[1], wo[2] - co * t[2]
-    i0, i1, i2 = wi[0] - ci * t[0], wi[1] - ci * t[1], wi[2] - ci * t[2]
-    cx, cy, cz = i1 * o2 - i2 * o1, i2 * o0 - i0 * o2, i0 * o1 - i1 * o0
-    return math.atan2(cx * t[0] + cy * t[1] + cz * t[2], i0 * o0 + i1 * o1 + i2 * o2)
+def _strip_angles(w, t, n, b):
+    """(θ, φ) by which the pack's tables are indexed for a light direction ω (ASSET_PACK.md §3): θ = asin(ω·t) and
+    the table axis φ = φ_o − φ_i = −atan2(ω·b, ω·n) (azimuths measured from n toward b; the view's is 0)."""
+    return longitudinal_angle(t, w), -math.atan2(dot(w, b), dot(w, n))
 
 
 @njit(cache=True)
@@ -239,9 +229,18 @@ def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
 
 
 @njit(cache=True)
-def _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, theta_d, phi, xi, psi, scratch):
-    _factored_or_full(xi_full, xi_m, xi_n, v, theta_d, phi, xi, scratch)
+def _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, w, xi, psi, scratch):
+    """ξ(v, θ_d, φ) into ``xi`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` for light direction ω = ``w`` seen from θ_o
+    (θ_i and φ by ``_strip_angles``, θ_d = (θ_o − θ_i)/2)."""
+    theta_i, phi = _strip_angles(w, t, n, b)
+    _factored_or_full(xi_full, xi_m, xi_n, v, 0.5 * (theta_o - theta_i), phi, xi, scratch)
     _factored_or_full(psi_full, psi_gm, psi_gn, v, theta_i, phi, psi, scratch)
+
+
+@njit(cache=True)
+def _fiber_lit(psi):
+    """The fraction of a point's fibers lit directly at fiber level: mean RGB Ψ^Fiber_G clamped to [0, 1]."""
+    return min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
 
 
 @njit(cache=True)
@@ -249,7 +248,7 @@ def _texture_tangent(tex, t, n, b, tf):
     """World fiber tangent from a coverage-premultiplied strip-frame vector; t where it vanishes."""
     for k in range(3):
         tf[k] = tex[0] * t[k] + tex[1] * b[k] + tex[2] * n[k]
-    norm = math.sqrt(_dot(tf, tf))
+    norm = math.sqrt(dot(tf, tf))
     if norm < 1e-6:
         tf[:] = t
         return False
@@ -295,34 +294,27 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
         sample_mip(tan_data, tan_off, tan_rows, tan_cols, 0, level, u, v, tex)
         alpha[q] = min(max(cov[0], 0.0), 1.0)
         _texture_tangent(tex, t, n, b, tf)
-        theta_o = _asin(_dot(wo, t))
-        theta_o_f = _asin(_dot(wo, tf))
+        theta_o = longitudinal_angle(t, wo)
+        theta_o_f = longitudinal_angle(tf, wo)
         xi, psi, scratch, comp = np.ones(3), np.ones(3), np.empty(3), np.empty((7, 3))
         for light in range(light_dir.shape[0]):
             wi = light_dir[light]
-            theta_i = _asin(_dot(wi, t))
-            phi = -math.atan2(_dot(wi, b), _dot(wi, n))
-            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
-                         xi, psi, scratch)
-            fiber_lit = min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wi, xi, psi, scratch)
+            fiber_lit = _fiber_lit(psi)
             vis = light_vis[light, q]
             n_front = n_occluded + (1.0 - vis) * n_cross
-            ds_kernel(params, ds, _asin(_dot(wi, tf)), theta_o_f, _azimuth_difference(tf, wo, wi), n_front, D_F, D_B,
-                      vis * fiber_lit, comp)
+            ds_kernel(params, ds, longitudinal_angle(tf, wi), theta_o_f, azimuth_difference(tf, wo, wi), n_front, D_F,
+                      D_B, vis * fiber_lit, comp)
             for ch in range(3):
                 rgb[q, ch] += light_e[light, ch] * xi[ch] * comp[K_TOTAL, ch]
         im = np.empty(3)
         # the BCSDF context of the fiber-frame view, for I_M's R lobe
-        c_f = context(params, np.array([math.sin(theta_o_f), math.cos(theta_o_f), 0.0])) if lobe_dir.shape[0] \
-            else np.empty(0)
+        c_f = view_context(params, theta_o_f) if lobe_dir.shape[0] else np.empty(0)
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
-            theta_i = _asin(_dot(wj, t))
-            phi = -math.atan2(_dot(wj, b), _dot(wj, n))
-            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
-                         xi, psi, scratch)
-            theta_j_f = _asin(_dot(wj, tf))
-            phi_f = _azimuth_difference(tf, wo, wj)
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wj, xi, psi, scratch)
+            theta_j_f = longitudinal_angle(tf, wj)
+            phi_f = azimuth_difference(tf, wo, wj)
             im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c_f, theta_o_f, theta_j_f, -phi_f,
                       lobe_lambda[j], im)
             vis = lobe_vis[j, q]
@@ -330,14 +322,11 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
                 rgb[q, ch] += lobe_w[j, ch] * vis * xi[ch] * psi[ch] * im[ch]
         for c in range(ms_dir.shape[0]):  # multiple scattering: clusters of lobes as distant lights
             wc = ms_dir[c]
-            theta_i = _asin(_dot(wc, t))
-            phi = -math.atan2(_dot(wc, b), _dot(wc, n))
-            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, theta_i, 0.5 * (theta_o - theta_i), phi,
-                         xi, psi, scratch)
+            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wc, xi, psi, scratch)
             vis = ms_vis[c, q]
-            lit = vis * min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
-            theta_c_f = _asin(_dot(wc, tf))
-            ds_kernel(params, ds, theta_c_f, theta_o_f, _azimuth_difference(tf, wo, wc),
+            lit = vis * _fiber_lit(psi)
+            theta_c_f = longitudinal_angle(tf, wc)
+            ds_kernel(params, ds, theta_c_f, theta_o_f, azimuth_difference(tf, wo, wc),
                       n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit, comp)
             cos_c = math.cos(theta_c_f)
             for ch in range(3):
@@ -383,27 +372,26 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
         ny = np.empty(3)
         if not _strip_frame(tf, wo, ny, b):
             continue
-        c = context(params, np.array([_dot(wo, tf), _dot(wo, ny), 0.0]))
+        c = context(params, np.array([dot(wo, tf), dot(wo, ny), 0.0]))
         f, wl, psi, scratch = np.empty(3), np.empty(3), np.ones(3), np.empty(3)
         # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
         # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
         v_strip = v * half_width / radius
         on_body = abs(v_strip) <= 1.0
-        theta_o = _asin(_dot(wo, t))
         for light in range(light_dir.shape[0]):
             wi = light_dir[light]
-            wl[0], wl[1], wl[2] = _dot(wi, tf), _dot(wi, ny), -_dot(wi, b)
+            wl[0], wl[1], wl[2] = dot(wi, tf), dot(wi, ny), -dot(wi, b)
             evaluate(params, c, wl, f)
             cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
             lit = light_vis[light, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wi, psi,
                                                      scratch)
             for ch in range(3):
                 rgb[q, ch] += light_e[light, ch] * lit * f[ch] * cos_i
-        theta_o_f = _asin(_dot(wo, tf))
+        theta_o_f = longitudinal_angle(tf, wo)
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c, theta_o_f, _asin(_dot(wj, tf)),
-                      -_azimuth_difference(tf, wo, wj), lobe_lambda[j], f)
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c, theta_o_f, longitudinal_angle(tf, wj),
+                      -azimuth_difference(tf, wo, wj), lobe_lambda[j], f)
             lit = lobe_vis[j, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wj, psi, scratch)
             for ch in range(3):
                 rgb[q, ch] += lobe_w[j, ch] * lit * f[ch]
@@ -414,9 +402,9 @@ def _body_shadow(on_body, psi_full, psi_gm, psi_gn, v, t, n, b, wi, psi, scratch
     """Ψ^Fiber_G (mean RGB, clamped to [0, 1]) at strip coordinate v toward ω_i, or 1 off the yarn body."""
     if not on_body:
         return 1.0
-    phi = -math.atan2(_dot(wi, b), _dot(wi, n))
-    _factored_or_full(psi_full, psi_gm, psi_gn, v, _asin(_dot(wi, t)), phi, psi, scratch)
-    return min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
+    theta_i, phi = _strip_angles(wi, t, n, b)
+    _factored_or_full(psi_full, psi_gm, psi_gn, v, theta_i, phi, psi, scratch)
+    return _fiber_lit(psi)
 
 
 # --- resolve ---------------------------------------------------------------------------------------------------------

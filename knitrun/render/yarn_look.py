@@ -21,13 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from data_formats.asset_pack import read_pack
-from data_formats.scene import CM_PER_UNIT
+from data_formats.conventions import CM_PER_UNIT
 from data_formats.yarn_spec import loads_spec
-
-from knitrun.shading.dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables
-from knitrun.shading.fiber_bcsdf import P_A_D, P_A_R, P_A_TT, params_from_pack
-from knitrun.shading.im_lookup import kernel_axes
 from knitrun.render.texture_sampling import MipStack, mip_stack
+from knitrun.shading.dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables
+from knitrun.shading.fiber_bcsdf import params_from_pack, tinted
+from knitrun.shading.im_lookup import kernel_axes
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
@@ -106,9 +105,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         raise ValueError(f"{pack_path}: pack lacks {', '.join(missing)} (bake the yarn again without --only or --scene)")
     pack = read_pack(pack_path, tables=[k for k in stored if any(k == n or k.startswith(n + "/mip") for n in names)])
     colour = np.asarray(entry.color, np.float64)
-    params = params_from_pack(pack.fiber_bcsdf)
-    for base in (P_A_R, P_A_TT, P_A_D):
-        params[base:base + 3] *= colour
+    params = tinted(params_from_pack(pack.fiber_bcsdf), colour)
     to_scene = CM_PER_UNIT[pack.yarn["units"]] / CM_PER_UNIT[units]
     pack_radius = float(pack.yarn["radius"]) * to_scene
     scale = entry.radius / pack_radius
