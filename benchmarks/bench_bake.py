@@ -17,7 +17,7 @@ from pathlib import Path
 from data_formats.asset_pack import read_pack, validate
 from data_formats.yarn_spec import resolve_yarn
 from knitbake.bake import bake
-from knitbake.stages import correction as correction_bake
+from knitbake.stages.correction import forget_yarn_tracers
 
 
 def main():
@@ -31,7 +31,7 @@ def main():
              overrides={"correction": {"batches": 2, "n_theta": 2, "n_phi": 2}})
         print(f"{'quality':<10}{'stage':<17}{'seconds':>9}{'tables':>8}  {'max error':>10}  residual")
         for quality in args.qualities.split(","):
-            correction_bake._GEOMETRY_MEMO.clear()  # each quality builds its own fiber geometry, as a fresh process
+            forget_yarn_tracers()  # each quality builds its own fiber geometry, as a fresh process
             t0 = time.perf_counter()
             out = Path(tmp) / f"{quality}.h5"
             summary = bake(spec, out, quality, use_cache=False)

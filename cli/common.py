@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+from types import SimpleNamespace
 
 import click
 
@@ -16,9 +17,12 @@ from data_formats import FormatError, asset_pack, bcc, scene, stitch_mesh, yarn_
 from data_formats.hdf5_fields import HDF5_MAGIC
 from data_formats.jsonable import jsonable
 
+# An OBJ stitch mesh (+ its .labels sidecar) through the same three calls as the other kinds.
+_STITCH_MESH_OBJ = SimpleNamespace(sniff=stitch_mesh.sniff_obj, describe=stitch_mesh.describe_obj,
+                                   validate=stitch_mesh.validate_obj)
 # Recognised by content, most specific first: (kind, module with sniff/describe/validate).
 FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),
-              ("scene", scene), ("yarn-spec", yarn_spec))
+              ("scene", scene), ("yarn-spec", yarn_spec), ("stitch-mesh-obj", _STITCH_MESH_OBJ))
 USER_ERRORS = (FormatError, ValueError, OSError)
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 110}  # both programs' click settings
 
@@ -71,7 +75,8 @@ def file_kind(path):
     with open(path, "rb") as fh:
         if fh.read(8) == HDF5_MAGIC:
             raise FormatError(f"{path}: an HDF5 file that cannot be opened or is none of ours (truncated or corrupt?)")
-    raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5, BCC, stitch mesh, scene or yarn spec TOML)")
+    raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5 or BCC, stitch mesh HDF5 "
+                      f"or OBJ, scene or yarn spec TOML)")
 
 
 def echo_json(obj):

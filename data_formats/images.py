@@ -1,5 +1,5 @@
-"""Images: float32 linear HDR in OpenEXR (renders) and Radiance RGBE ``.hdr`` (environment maps), and tone-mapped
-8-bit PNG previews.
+"""Images: float32 linear HDR in OpenEXR (renders; read and written), Radiance RGBE ``.hdr`` (environment maps;
+read), and tone-mapped 8-bit PNG previews.
 
 Conventions: arrays are (H, W, 3) float32, linear RGB, row 0 at the top. EXR files hold one ``RGB`` layer (ZIP
 compression). PNG previews apply exposure 2^stops, then the sRGB transfer curve, then clamp to [0, 1].
@@ -53,22 +53,6 @@ def read_exr(path) -> np.ndarray:
     except Exception as exc:  # OpenEXR raises plain Exceptions for corrupt files
         raise FormatError(f"{path}: cannot read EXR ({' '.join(str(exc).split())})") from None
     return _check_image(img, path)
-
-
-def write_hdr(path, img) -> None:
-    """Radiance RGBE, uncompressed scanlines."""
-    img = _check_image(img, path)
-    if np.any(img < 0):
-        raise FormatError(f"{path}: RGBE cannot store negative values")
-    peak = img.max(axis=2)
-    mant, expo = np.frexp(peak)
-    scale = np.where(peak > 1e-32, mant * 256.0 / np.maximum(peak, 1e-32), 0.0)
-    rgbe = np.zeros(img.shape[:2] + (4,), np.uint8)
-    rgbe[..., :3] = np.clip(img * scale[..., None], 0, 255).astype(np.uint8)
-    rgbe[..., 3] = np.where(peak > 1e-32, expo + 128, 0).astype(np.uint8)
-    head = f"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {img.shape[0]} +X {img.shape[1]}\n".encode()
-    with atomic_path(path) as tmp:
-        Path(tmp).write_bytes(head + rgbe.tobytes())
 
 
 def read_hdr(path) -> np.ndarray:

@@ -96,15 +96,21 @@ def face_edges(face_offsets, face_vertices, stitch_type):
     return face_vertices, face_vertices[nxt], face, slot, kind
 
 
+def _first_repeat(key, order):
+    """The indices (i, j) of the first two equal entries of ``key`` in the stable sort ``order``, or None."""
+    dup = np.flatnonzero(key[order][1:] == key[order][:-1])
+    return None if dup.size == 0 else (order[dup[0]], order[dup[0] + 1])
+
+
 def derive_adjacency(n_vertices, face_offsets, face_vertices, stitch_type, where="stitch mesh"):
     """(course_left, course_right, wale_below, wale_above) from shared edges of faces in the documented vertex order;
     ``FormatError`` naming the faces if an edge is used twice in one direction or pairs the wrong kinds of edges."""
     src, dst, face, slot, kind = face_edges(face_offsets, face_vertices, stitch_type)
     key = src * n_vertices + dst
     order = np.argsort(key, kind="stable")
-    dup = np.flatnonzero(key[order][1:] == key[order][:-1])
-    if dup.size:
-        e, e2 = order[dup[0]], order[dup[0] + 1]
+    pair = _first_repeat(key, order)
+    if pair is not None:
+        e, e2 = pair
         raise FormatError(f"{where}: faces {face[e]} and {face[e2]} both use edge {src[e]}->{dst[e]} in the same "
                           f"direction, expected neighbouring faces to run counter-clockwise seen from the front")
     twin_key = dst * n_vertices + src
@@ -312,10 +318,9 @@ def _check_courses(m, where):
         raise FormatError(f"{where}: face {f} (course {m.course[f]}): the face above, {g}, is in course "
                           f"{m.course[g]}, expected {m.course[f] + 1}")
     key = m.course * (int(m.column.max()) + 1) + m.column
-    order = np.argsort(key, kind="stable")
-    dup = np.flatnonzero(key[order][1:] == key[order][:-1])
-    if dup.size:
-        f, g = order[dup[0]], order[dup[0] + 1]
+    pair = _first_repeat(key, np.argsort(key, kind="stable"))
+    if pair is not None:
+        f, g = pair
         raise FormatError(f"{where}: faces {f} and {g} are both at course {m.course[f]}, column {m.column[f]}, "
                           f"expected one chain of faces per course")
 

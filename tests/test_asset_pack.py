@@ -11,78 +11,7 @@ import pytest
 from data_formats import asset_pack as ap
 from data_formats.asset_pack import checks as ap_checks, writer as ap_writer
 from data_formats.errors import FormatError
-
-YARN = {"name": "cotton1", "units": "cm", "radius": 0.04, "period": 0.15, "plies": 3}
-BCSDF = {"r_color": [0.989, 0.959, 0.874], "tt_color": [0.999, 0.999, 0.999], "d_color": [0.1, 0.1, 0.1],
-         "beta_r": math.radians(1.0), "beta_tt": math.radians(27.197), "gamma_tt": math.radians(38.269),
-         "alpha_r": math.radians(-3.0), "alpha_tt": math.radians(1.5)}
-
-
-def provenance():
-    return {"yarn_spec_toml": 'name = "cotton1"\n[geometry]\nplies = 3\n',
-            "bake_settings": {"quality": "draft", "batches": 4, "directions": [8, 8]},
-            "seed": 7, "code_version": "0.1.0", "created": "2026-01-31T12:00:00+00:00",
-            "timings": {"dual_scattering": 1.5, "correction": 30.25},
-            "sample_counts": {"correction/xi_M": {"batches": 4, "paths_per_batch": 1000}, "textures": 16}}
-
-
-SIZES = {"N_theta": 7, "N_v": 5, "N_phi": 8, "H": 8, "W": 16, "N_a": 3, "N_b": 4, "N_c": 2, "N_d": 5}
-FLY_HW = {"H": 4, "W": 8}
-
-
-def _shape(spec, level):
-    out = []
-    for p in spec.shape:
-        if isinstance(p, int):
-            out.append(p)
-        else:
-            base = (FLY_HW if spec.family == "flyaway" else SIZES)[p]
-            out.append(max(1, base >> (level or 0)))
-    return tuple(out)
-
-
-def _random_table(rng, spec, shape):
-    """Random finite values inside the spec's allowed ranges."""
-    a = rng.uniform(0.05, 0.9, size=shape)
-    if spec.value_range == (None, None) and spec.channel_ranges is None:
-        a = a - 0.5  # signed (shifts)
-    if spec.vector:
-        v = rng.normal(size=shape[:-1] + (spec.vector,))
-        v[..., 0] = np.abs(v[..., 0])
-        v /= np.linalg.norm(v, axis=-1, keepdims=True)
-        a[..., : spec.vector] = v * rng.uniform(0, 1, size=shape[:-1] + (1,))
-    return a
-
-
-def full_tables(seed=0, levels=3):
-    rng = np.random.default_rng(seed)
-    tables, errors, attrs = {}, {}, {}
-    for spec in ap.TABLES:
-        names = [(spec.name.replace("{k}", str(k)), k) for k in range(levels)] if spec.mip else [(spec.name, None)]
-        for name, level in names:
-            shape = _shape(spec, level)
-            tables[name] = _random_table(rng, spec, shape)
-            # per-entry errors for the Monte Carlo tables, a scalar for the rest
-            if spec.family in ("correction", "dual_scattering") and shape:
-                errors[name] = rng.uniform(0, 0.01, size=shape)
-            else:
-                errors[name] = 0.002
-    for k in range(levels):
-        attrs[f"textures/flyaway/mip{k}"] = {"half_width": 0.09, "error_kind": "exact (deterministic ray casting)"}
-    attrs["environment/I_M_TT_D"] = {"axes": [
-        {"name": "cos_theta_j", "range": [0, 1], "definition": "cos θ_j"},
-        {"name": "sin_theta_o", "range": [-1, 1], "definition": "sin θ_o", "units": "1"},
-        {"name": "phi_j_minus_phi_o", "range": [-math.pi, math.pi], "wrap": "repeat", "units": "rad",
-         "definition": "φ_j − φ_o"},
-        {"name": "log10_lambda", "range": [-0.5, 4.0], "definition": "log10 λ_j"}]}
-    return tables, errors, attrs
-
-
-def write_full(path, **kw):
-    tables, errors, attrs = full_tables(**kw)
-    ap.write_pack(path, YARN, provenance(), BCSDF, tables, errors, attrs)
-    return tables, errors, attrs
-
+from tests.helpers import BCSDF, SIZES, YARN, full_tables, provenance, write_full
 
 def write_minimal(path):
     ap.write_pack(path, YARN, provenance(), BCSDF, {}, {})

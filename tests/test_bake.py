@@ -13,16 +13,7 @@ from cli.knitbake_cli import main as knitbake
 from data_formats.asset_pack import describe, read_pack, validate
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import STAGE_ORDER, bake, scene_needs, stages_for
-
-TINY = {
-    "dual_scattering": {"n_theta": 8},
-    "correction": {"n_v": 4, "n_theta": 2, "n_phi": 2, "rows": 8, "spp": 1, "batches": 2, "ds": {"n_theta": 8}},
-    "shadowing": {"n_v": 4, "n_theta": 2, "n_phi": 2, "rows": 8, "spp": 1, "batches": 2},
-    "textures": {"width": 32, "height": 8, "samples": 1, "ao_rays": 2},
-    "flyaway": {"width": 32, "height": 8, "samples": 1},
-    "environment": {"shape": (3, 3, 4, 3)},
-}
-
+from tests.helpers import TINY
 
 def small_yarn():
     spec = load_preset("silk1")

@@ -9,8 +9,9 @@ from click.testing import CliRunner
 
 from cli.knitbake_cli import main as knitbake
 from cli.knitrun_cli import main as knitrun
+from data_formats.stitch_mesh import write_obj_stitch_mesh
 from data_formats.yarn_spec import load_preset, loads_spec, preset_names
-from tests.test_asset_pack import write_full
+from tests.helpers import sample, write_full
 
 
 def run(prog, *args):
@@ -114,6 +115,17 @@ def test_inspect_spec_and_unknown_files(tmp_path):
     junk.write_bytes(b"\x00\x01 not a knit file")
     assert_one_line_error(run(knitbake, "inspect", junk), "junk.bin", "not a file the toolchain reads")
     assert_one_line_error(run(knitbake, "validate", tmp_path / "absent.h5"), "absent.h5", "no such file")
+
+
+def test_inspect_and_validate_an_obj_stitch_mesh(tmp_path):
+    obj = tmp_path / "m.obj"
+    write_obj_stitch_mesh(obj, sample())
+    info = json.loads(run(knitbake, "inspect", obj, "--json").stdout)
+    assert info["kind"] == "stitch-mesh-obj" and info["faces"] == 11 and info["labels"] == str(tmp_path / "m.labels")
+    assert run(knitbake, "validate", obj).stdout.strip() == f"{obj}: valid stitch-mesh-obj"
+    (tmp_path / "m.labels").write_text("knit\n")  # 1 label for 11 faces
+    invalid = run(knitbake, "validate", obj)
+    assert invalid.exit_code == 1 and "INVALID stitch-mesh-obj" in invalid.stderr and "1 labels" in invalid.stderr
 
 
 def test_knitrun_convert_round_trip(tmp_path):

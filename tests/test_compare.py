@@ -8,7 +8,7 @@ from click.testing import CliRunner
 
 from cli.knitrun_cli import main as knitrun
 from knitbake.compare.image_metrics import compare_images, flip_error
-from tests.test_render import FRONT, SUN, pack, straight, write_scene  # noqa: F401  (pack is a fixture)
+from tests.helpers import FRONT, SUN, straight, write_scene
 
 
 def test_metrics_are_zero_for_identical_images_and_grow_with_the_difference():
@@ -34,7 +34,7 @@ def test_metrics_refuse_mismatched_or_non_finite_images():
         compare_images(b, a)
 
 
-def test_cli_compare_writes_a_complete_report(tmp_path, pack):  # noqa: F811
+def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     scene = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     out = tmp_path / "report"
     result = CliRunner().invoke(knitrun, ["compare", str(scene), "--spp", "1", "--pack", f"cotton1={pack}",

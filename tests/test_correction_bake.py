@@ -14,8 +14,8 @@ from knitbake.stages import correction as cb
 from knitbake.stages.ds_precompute import precompute_dual_scattering
 from knitbake.trace.path_tracer import Camera, TracerScene, render
 from knitrun.shading import fiber_bcsdf as fb
+from tests.helpers import DEG
 
-DEG = math.pi / 180
 
 
 def test_factor_rank1_recovers_a_product_and_reports_residual():

@@ -13,8 +13,8 @@ from knitrun.shading import dual_scattering as ds
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.fiber_frame import wrap_angle
 from knitrun.shading.table_lookup import lookup_axis, lookup_theta
+from tests.helpers import DEG
 
-DEG = math.pi / 180
 COLOURS = ([0.05, 0.1, 0.2], [0.3, 0.5, 0.7], [0.0, 0.1, 0.05])  # absorbing; D = 0 in the red channel
 LOSSLESS = ([0.3] * 3, [0.6] * 3, [0.1] * 3)
 ROUGHNESS = [(3 * DEG, 10 * DEG, 25 * DEG), (10 * DEG, 27 * DEG, 38 * DEG), (30 * DEG, 45 * DEG, 90 * DEG)]

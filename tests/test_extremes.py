@@ -19,8 +19,7 @@ from knitrun.render.pipeline import render
 from knitrun.sim.deformations import deformation_frames
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.sim.simulate import simulate
-from tests.test_bake import TINY
-from tests.test_render import FRONT, SKY, SUN, pack, straight, write_scene  # noqa: F401  (pack is a fixture)
+from tests.helpers import FRONT, SKY, SUN, TINY, straight, write_scene
 
 PATCH_CAMERA = """[camera]
 position = [0.6, 0.5, 6.0]
@@ -31,7 +30,7 @@ height = 48"""
 
 
 @pytest.mark.parametrize("deform", ["stretch-x=20", "stretch-y=0.05", "shear=3", "stretch-x=0.05"])
-def test_extreme_deformation_simulates_renders_and_compares(tmp_path, pack, deform):  # noqa: F811
+def test_extreme_deformation_simulates_renders_and_compares(tmp_path, pack, deform):
     mesh = chart_to_mesh(pattern_chart("stockinette", 4, 4))
     curves, _ = simulate(mesh, deformation_frames(mesh.vertices, [deform], 2))
     assert np.all(np.isfinite(curves.points))

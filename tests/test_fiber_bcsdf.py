@@ -8,8 +8,9 @@ import pytest
 from scipy import special, stats
 
 from knitrun.shading import fiber_bcsdf as fb
+from tests.chi2 import chi2_pvalue, direction_counts, pooled_pvalue
+from tests.helpers import DEG
 
-DEG = math.pi / 180
 THETA_O = [0.0, 30 * DEG, -60 * DEG, 85 * DEG, -89.9 * DEG]
 
 
@@ -54,34 +55,11 @@ def test_absorbing_fiber_returns_its_albedo():
     np.testing.assert_allclose(weight.mean(axis=0), [0.35, 0.7, 0.95], rtol=0.01)
 
 
-def chi2_bins(p, theta_o, n_samples, rng, n_theta=24, n_phi=48, sub=12):
-    """Observed and expected counts over a (θ_i, φ_i) grid; expected by midpoint integration of the pdf."""
+def chi2_bins(p, theta_o, n_samples, rng):
+    """Observed and expected counts of ``sample_batch`` for a view at (θ_o, φ_o = 0.4) (``tests.chi2``)."""
     wo_dir = fb.direction(theta_o, 0.4)
-    wo = np.tile(wo_dir, (n_samples, 1))
-    wi, _, _ = fb.sample_batch(p, wo, rng.random((n_samples, 3)))
-    theta = np.arcsin(np.clip(wi[:, 0], -1, 1))
-    phi = np.mod(np.arctan2(wi[:, 2], wi[:, 1]), 2 * np.pi)
-    observed, _, _ = np.histogram2d(theta, phi, bins=[n_theta, n_phi], range=[[-np.pi / 2, np.pi / 2], [0, 2 * np.pi]])
-    dt, dp = np.pi / (n_theta * sub), 2 * np.pi / (n_phi * sub)
-    t = -np.pi / 2 + dt * (np.arange(n_theta * sub) + 0.5)
-    ph = dp * (np.arange(n_phi * sub) + 0.5)
-    tt, pp = np.meshgrid(t, ph, indexing="ij")
-    dirs = fb.direction(tt.ravel(), pp.ravel())
-    dens = fb.pdf_batch(p, np.tile(wo_dir, (dirs.shape[0], 1)), dirs) * np.cos(tt.ravel())
-    expected = dens.reshape(n_theta, sub, n_phi, sub).sum(axis=(1, 3)) * dt * dp * n_samples
-    return observed.ravel(), expected.ravel()
-
-
-def pooled_chi2_pvalue(observed, expected, min_expected=5.0):
-    """χ² p-value with cells of expected count < min_expected pooled into one cell (Mitsuba's rule)."""
-    small = expected < min_expected
-    obs = np.append(observed[~small], observed[small].sum())
-    exp = np.append(expected[~small], expected[small].sum())
-    keep = exp > 0
-    obs, exp = obs[keep], exp[keep]
-    exp *= obs.sum() / exp.sum()  # the pdf integrates to 1 up to quadrature error
-    chi2 = ((obs - exp) ** 2 / exp).sum()
-    return stats.chi2.sf(chi2, obs.size - 1)
+    wi, _, _ = fb.sample_batch(p, np.tile(wo_dir, (n_samples, 1)), rng.random((n_samples, 3)))
+    return direction_counts(wi, lambda d: fb.pdf_batch(p, np.tile(wo_dir, (d.shape[0], 1)), d))
 
 
 CHI2_CASES = [(lossless(5 * DEG, 10 * DEG, 25 * DEG), t) for t in (0.0, 45 * DEG, -80 * DEG, 89 * DEG)] + \
@@ -93,8 +71,7 @@ def test_chi2_sampling_matches_pdf():
     alpha = 1 - (1 - 0.01) ** (1 / len(CHI2_CASES))  # Šidák correction over all cases
     rng = np.random.default_rng(3)
     for p, theta_o in CHI2_CASES:
-        observed, expected = chi2_bins(p, theta_o, 400_000, rng)
-        assert pooled_chi2_pvalue(observed, expected) > alpha, theta_o
+        assert pooled_pvalue(*chi2_bins(p, theta_o, 400_000, rng)) > alpha, theta_o
 
 
 def test_chi2_detects_a_wrong_pdf():
@@ -103,13 +80,9 @@ def test_chi2_detects_a_wrong_pdf():
     wide = p.copy()
     wide[fb.P_BETA_TT] *= 1.1
     rng = np.random.default_rng(4)
-    wo = np.tile(fb.direction(0.3, 0.4), (400_000, 1))
-    wi, _, _ = fb.sample_batch(wide, wo, rng.random((wo.shape[0], 3)))
-    theta = np.arcsin(np.clip(wi[:, 0], -1, 1))
-    phi = np.mod(np.arctan2(wi[:, 2], wi[:, 1]), 2 * np.pi)
-    observed, _, _ = np.histogram2d(theta, phi, bins=[24, 48], range=[[-np.pi / 2, np.pi / 2], [0, 2 * np.pi]])
-    _, expected = chi2_bins(p, 0.3, 400_000, rng)
-    assert pooled_chi2_pvalue(observed.ravel(), expected) < 1e-6
+    wo_dir = fb.direction(0.3, 0.4)
+    wi, _, _ = fb.sample_batch(wide, np.tile(wo_dir, (400_000, 1)), rng.random((400_000, 3)))
+    assert chi2_pvalue(wi, lambda d: fb.pdf_batch(p, np.tile(wo_dir, (d.shape[0], 1)), d)) < 1e-6
 
 
 def test_sample_weight_equals_eval_cos_over_pdf():

@@ -1,4 +1,5 @@
-"""Fibers swept along yarn curves (knitbake.fibers.fiber_sweep), curve evaluation and the closed-form stockinette curves."""
+"""Fibers swept along yarn curves (knitbake.fibers.fiber_sweep), curve evaluation and the closed-form stockinette
+curves."""
 
 import dataclasses
 from pathlib import Path

@@ -14,17 +14,10 @@ from knitbake.bake import QUALITY
 from knitbake.stages import im_table as im
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.im_lookup import i0e, im_lookup, sg
-from tests.test_asset_pack import BCSDF, YARN, provenance
+from tests.helpers import BCSDF, DEG, ROUGH, TEST_SHAPE, YARN, provenance
 
-DEG = math.pi / 180
-# rough enough for a small table to reach 2% (see test_lookup_matches_direct_quadrature); shifted lobes (α ≠ 0)
-ROUGH = fb.params_from_values([0.25, 0.2, 0.15], [0.45, 0.4, 0.35], [0.25, 0.3, 0.35], 25 * DEG, 35 * DEG,
-                              80 * DEG, -5 * DEG, 2.5 * DEG)
 MEDIUM = fb.params_from_values([0.3, 0.25, 0.2], [0.5, 0.45, 0.4], [0.1, 0.15, 0.2], 8 * DEG, 12 * DEG, 25 * DEG,
                                -3 * DEG, 1.5 * DEG)
-TEST_SHAPE = (16, 40, 12, 64)
-
-
 def albedo(p):
     return p[fb.P_A_R:fb.P_A_R + 3] + p[fb.P_A_TT:fb.P_A_TT + 3] + p[fb.P_A_D:fb.P_A_D + 3]
 
@@ -218,8 +211,7 @@ def test_cotton1_standard_quality_meets_the_lookup_target():
     """The issue's target on the default yarn: I_M as the renderer evaluates it (the standard quality's table plus
     the R-lobe rule) against direct quadrature, max relative error < 2% wherever I_M > 1% of its maximum, and < 1% of
     each λ decade's maximum, at random points including λ = 0.5, λ = 10⁴, the R ridge and θ within 1e-3 of ±π/2.
-    (Measured: 1.2% and 0.24%; silk1 and polyester1, β_TT = 10°, reach 5.3% and 3.6% relative at this shape: see
-    knitrun.shading.im_lookup, Accuracy.)"""
+    (The measured errors of cotton1 and of the narrower-lobed presets per quality: BENCHMARKS.md, The bake.)"""
     params = fb.params_from_optics(load_preset("cotton1").optics)
     table, _, axes = im.bake_im_table(params, QUALITY["standard"]["environment"]["shape"], nodes=4)
     accuracy = im.lookup_accuracy(table, axes, params)

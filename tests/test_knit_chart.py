@@ -8,9 +8,7 @@ import pytest
 from data_formats.errors import FormatError
 from data_formats.stitch_mesh import STITCH_TYPES, validate_stitch_mesh
 from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, parse_chart, pattern_chart
-from tests.test_stitch_mesh import assert_same, sample
-
-KNIT, PURL, YO, K2TOG, SSK = range(5)
+from tests.helpers import K2TOG, KNIT, PURL, SSK, YO, assert_same, sample
 
 SAMPLE_CHART = r"""
 # the hand-built mesh of test_stitch_mesh.sample()

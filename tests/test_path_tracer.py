@@ -15,8 +15,10 @@ from knitbake.trace.env_light import env_from_image, env_pdf, env_sample, unifor
 from knitbake.trace.path_tracer import Camera, TracerScene, render
 from knitrun.shading import equirect
 from knitrun.shading import fiber_bcsdf as fb
+from knitrun.shading.builtin_sky import sky_image
+from tests.chi2 import chi2_pvalue
+from tests.helpers import DEG
 
-DEG = math.pi / 180
 LOSSLESS = fb.params_from_values([0.3] * 3, [0.6] * 3, [0.1] * 3, 5 * DEG, 10 * DEG, 25 * DEG, -3 * DEG, 1.5 * DEG)
 ABSORBING = fb.params_from_values([0.05, 0.1, 0.2], [0.3, 0.5, 0.6], [0.05, 0.05, 0.1], 4 * DEG, 12 * DEG,
                                   30 * DEG)
@@ -136,6 +138,31 @@ def test_environment_sampling_pdf_is_consistent():
             total += env_pdf(env.radiance, env.pixel_prob, d) * math.sin(t)
     total *= (np.pi / n) * (np.pi / n * 8)
     assert total == pytest.approx(1.0, rel=0.01)
+
+
+def _env_directions(env, n, rng):
+    """``n`` directions drawn by ``env_sample``, as (N, 3) in the χ² helper's frame (polar axis +y: (y, z, x))."""
+    out = np.empty((n, 3))
+    for k, u in enumerate(rng.random((n, 4))):
+        env_sample(env.radiance, env.row_cdf, env.col_cdf, env.pixel_prob, *u, out[k])
+    return out[:, [1, 2, 0]]
+
+
+def _env_pdf(env):
+    """``env_pdf`` of directions given in the χ² helper's frame."""
+    return lambda d: np.array([env_pdf(env.radiance, env.pixel_prob, np.ascontiguousarray(x[[2, 0, 1]])) for x in d])
+
+
+def test_chi2_environment_sampling_matches_its_pdf():
+    """χ² (tests/chi2.py) of ``env_sample`` against ``env_pdf`` on the built-in sky (a sun texel 10⁴× the sky, a
+    gradient, the ground), one bin per texel; and the test's power: samples drawn from another image's distribution
+    are rejected."""
+    env = env_from_image(sky_image(16, 32))
+    bins = {"n_theta": 16, "n_phi": 32, "sub": 4}
+    rng = np.random.default_rng(5)
+    assert chi2_pvalue(_env_directions(env, 100_000, rng), _env_pdf(env), **bins) > 0.01
+    flipped = env_from_image(sky_image(16, 32)[::-1])  # sky below, sun under the horizon
+    assert chi2_pvalue(_env_directions(flipped, 100_000, rng), _env_pdf(env), **bins) < 1e-6
 
 
 def test_bad_render_settings():

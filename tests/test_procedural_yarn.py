@@ -1,4 +1,5 @@
-"""The procedural fiber generator against the model it implements (seed 002 §2.2/§3.1, seed 000 eqs. 12–13)."""
+"""The procedural fiber generator against the model it implements (Wu and Yuksel 2019 §2.2/§3.1, Huang et al. 2025 eqs.
+12–13)."""
 
 import dataclasses
 import math

@@ -1,6 +1,6 @@
-"""The strip renderer end to end (knitrun.render.pipeline and `knitrun render`): determinism, finite images at the extremes
-(camera inside a yarn, grazing views, zero-length segments, an empty view), SRBF counts 1/16/64, ablations, pack
-errors; plus the texture sampler, the flyaway variant hash and the resolve."""
+"""The strip renderer end to end (knitrun.render.pipeline and `knitrun render`): determinism, finite images at the
+extremes (camera inside a yarn, grazing views, zero-length segments, an empty view), SRBF counts 1/16/64, ablations,
+pack errors; plus the texture sampler, the flyaway variant hash and the resolve."""
 
 import dataclasses
 import json
@@ -14,7 +14,6 @@ from click.testing import CliRunner
 from cli.knitrun_cli import main as knitrun
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
-from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
 from knitbake.stages import im_table as im
@@ -28,63 +27,7 @@ from knitrun.shading.builtin_sky import sky_image
 from knitrun.shading.equirect import texel_directions
 from knitrun.shading.im_lookup import kernel_axes
 from knitrun.shading.srbf_fit import fit_srbf
-from tests.test_bake import TINY
-from tests.test_im_table import ROUGH, TEST_SHAPE
-
-
-@pytest.fixture(scope="module")
-def pack(tmp_path_factory):
-    spec = load_preset("cotton1")
-    spec = dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=15))
-    out = tmp_path_factory.mktemp("pack") / "cotton1.h5"
-    bake(spec, out, overrides=TINY, seed=1, use_cache=False)
-    return out
-
-
-def write_scene(folder, curves, *, camera, lights, render="", name="s"):
-    """A scene over ``curves`` (list of (n, 3) point arrays, PL) with cotton1 yarn; returns its path."""
-    pts = [np.asarray(c, float) for c in curves]
-    offsets = np.concatenate([[0], np.cumsum([len(c) for c in pts])]).astype(np.int64)
-    points = np.concatenate(pts) if pts else np.zeros((0, 3))
-    write_yarn_curves(folder / f"{name}.h5", make_yarn_curves(points[None], offsets, yarn_types=["cotton1"],
-                                                             units="cm"))
-    text = f"""format = "knit-scene"
-version = "1.0"
-units = "cm"
-background = [0.1, 0.2, 0.3]
-[[yarns]]
-curves = "{name}.h5"
-yarn = "cotton1"
-{camera}
-{lights}
-[render]
-msaa = 4
-shadow_map_size = 256
-srbf_count = 4
-{render}
-"""
-    path = folder / f"{name}.toml"
-    path.write_text(text)
-    return path
-
-
-FRONT = """[camera]
-position = [0.0, 0.0, 1.0]
-look_at = [0.0, 0.0, 0.0]
-fov_deg = 30.0
-width = 64
-height = 48"""
-SUN = """[[lights]]
-type = "directional"
-direction = [0.3, 0.6, 1.0]
-irradiance = [2.0, 2.0, 2.0]"""
-SKY = """[[lights]]
-type = "environment"
-builtin = "sky\""""
-
-
-def straight(n=9, length=0.6, z=0.0):
-    return np.stack([np.linspace(-length / 2, length / 2, n), np.zeros(n), np.full(n, z)], axis=1)
+from tests.helpers import FRONT, ROUGH, SKY, SUN, TEST_SHAPE, TINY, straight, write_scene
 
 
 def _render(path, pack, **kw):
@@ -284,12 +227,24 @@ def test_texture_sampling_hits_texel_centres_and_wraps_u():
     assert np.allclose(out, b)
 
 
-def test_flyaway_variant_hash_is_stable_and_uses_all_three():
-    picks = np.array([[variant_of(c, p) for p in range(200)] for c in range(5)])
-    assert np.array_equal(picks, [[variant_of(c, p) for p in range(200)] for c in range(5)])
-    counts = np.bincount(picks.ravel(), minlength=3)
+def _splitmix_variant(curve, period_index):
+    """The flyaway variant hash of ``strip_shading.variant_of`` in plain Python integers (splitmix64's finaliser of
+    curve·φ64 + the period index's low 48 bits, mod 3): the fixed definition the kernel must keep."""
+    mask = (1 << 64) - 1
+    x = (curve * 0x9E3779B97F4A7C15 + (period_index & 0xFFFFFFFFFFFF)) & mask
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & mask
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & mask
+    return (x ^ (x >> 31)) % 3
+
+
+def test_flyaway_variant_hash_is_the_fixed_hash_and_uses_all_three():
+    """The kernel's hash equals its definition (so a yarn keeps its flyaway pattern across versions, frames and
+    thread counts), negative periods (curves that start before s = 0) included, and spreads over all three."""
+    pairs = [(c, p) for c in range(5) for p in range(-50, 200)] + [(123_456, 7), (2**40, 2**47 - 1)]
+    picks = np.array([variant_of(c, p) for c, p in pairs])
+    np.testing.assert_array_equal(picks, [_splitmix_variant(c, p) for c, p in pairs])
+    counts = np.bincount(picks, minlength=3)
     assert counts.min() > 0.25 * picks.size  # each variant about a third
-    assert variant_of(0, -1) in (0, 1, 2)
 
 
 def test_resolve_weights_coverage_over_the_background():

@@ -120,7 +120,7 @@ def test_rest_arclength_is_fixed_over_a_stretch_and_release():
     assert len(report["ms_per_frame"]) == 5 and report["ms_per_frame_median"] > 0
 
 
-# --- seed 000 Fig. 9: knots stay uniform, yarn length error below naive interpolation ------------------------------
+# --- Huang et al. 2025 Fig. 9: knots stay uniform, yarn length error below naive interpolation ----------------
 
 def fig9_metrics(model, vertices, **mode):
     """(RMS relative control-segment length error, spacing ratios of consecutive knots along the courses)."""

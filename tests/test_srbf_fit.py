@@ -1,4 +1,5 @@
-"""SRBF environment fit (knitrun.shading.srbf_fit): recovery of known lobes, the built-in sky, determinism, edge cases."""
+"""SRBF environment fit (knitrun.shading.srbf_fit): recovery of known lobes, the built-in sky, determinism, edge
+cases."""
 
 import numpy as np
 import pytest
@@ -40,8 +41,8 @@ def test_sky_errors_decrease_with_lobes():
 
 def test_lobes_keep_the_suns_energy_at_low_resolution():
     """A sun smaller than a texel: λ is capped (``lambda_max``) so the lobes carry the energy of the texels they
-    fit, ∫ Σ W G dω (closed form per lobe) within 25 % of ∫ L dω (measured: +20 % at 32 rows), instead of matching the sun texel's radiance with a
-    needle that holds a fraction of it."""
+    fit, ∫ Σ W G dω (closed form per lobe) within 25 % of ∫ L dω (measured: +20 % at 32 rows), instead of matching the
+    sun texel's radiance with a needle that holds a fraction of it."""
     for height in (32, 64):
         img = sky_image(height, 2 * height)
         dirs = texel_directions(height, 2 * height).reshape(-1, 3)

@@ -8,38 +8,10 @@ import numpy as np
 import pytest
 
 from data_formats.errors import FormatError
-from data_formats.stitch_mesh import (STITCH_TYPES, StitchMesh, describe, describe_obj, make_stitch_mesh,
-                                      read_obj_stitch_mesh, read_stitch_mesh, sniff, sniff_obj, validate, validate_obj,
-                                      validate_stitch_mesh, write_obj_stitch_mesh, write_stitch_mesh)
-
-KNIT, PURL, YO, K2TOG, SSK = range(5)
-
-
-def sample():
-    """Three courses on unit cells, every stitch type, one wider course (hand-built; chart "\\kk / p/ok / kkkk").
-
-    Boundary lines y = 0, 1, 2, 3 hold vertices 0-4, 5-9, 10-14, 15-18 at x = 0, 1, ...
-    course 0: faces 0-3 knit; course 1: 4 purl, 5 k2tog over faces 1 and 2, 6 yarn-over at vertex 8, 7 knit;
-    course 2: 8 ssk over faces 4 and 5, 9 knit over the yarn-over, 10 knit."""
-    xy = [(x, 0) for x in range(5)] + [(x, 1) for x in range(5)] + [(x, 2) for x in range(5)] \
-        + [(x, 3) for x in range(4)]
-    vertices = np.array([(x, y, 0.0) for x, y in xy], float)
-    faces = [(0, 1, 6, 5), (1, 2, 7, 6), (2, 3, 8, 7), (3, 4, 9, 8),
-             (5, 6, 11, 10), (6, 7, 8, 12, 11), (8, 13, 12), (8, 9, 14, 13),
-             (10, 11, 12, 16, 15), (12, 13, 17, 16), (13, 14, 18, 17)]
-    types = [KNIT] * 4 + [PURL, K2TOG, YO, KNIT] + [SSK, KNIT, KNIT]
-    offsets = np.concatenate([[0], np.cumsum([len(f) for f in faces])])
-    return make_stitch_mesh(vertices, offsets, [v for f in faces for v in f], types, yarn_type="cotton1")
-
-
-def assert_same(a, b):
-    for field in dataclasses.fields(StitchMesh):
-        x, y = getattr(a, field.name), getattr(b, field.name)
-        if isinstance(x, np.ndarray):
-            assert x.dtype == y.dtype and x.shape == y.shape, field.name
-            np.testing.assert_array_equal(x, y, err_msg=field.name)
-        else:
-            assert x == y, field.name
+from data_formats.stitch_mesh import (STITCH_TYPES, describe, describe_obj, read_obj_stitch_mesh, read_stitch_mesh,
+                                      sniff, sniff_obj, validate, validate_obj, validate_stitch_mesh,
+                                      write_obj_stitch_mesh, write_stitch_mesh)
+from tests.helpers import K2TOG, KNIT, assert_same, sample
 
 
 def test_make_stitch_mesh_derives_hand_checked_adjacency_courses_and_yarn():

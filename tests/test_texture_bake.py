@@ -1,4 +1,5 @@
-"""Regular-fiber and flyaway texture bake (seed 000 §4.2–4.4; ASSET_PACK.md §3, §8): cotton1 at 64 × 16, S = 2."""
+"""Regular-fiber and flyaway texture bake (Huang et al. 2025 §4.2–4.4; ASSET_PACK.md §3, §8): cotton1 at 64 × 16, S =
+2."""
 
 import dataclasses
 import math

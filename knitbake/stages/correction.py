@@ -1,5 +1,5 @@
-"""Bake the per-yarn corrections of seed 000 §4.3: the DS correction ξ ≈ ξ_M(v, θ_d) ξ_N(v, φ) and the fiber-level
-shadowing Ψ^Fiber_G ≈ Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ), each with a rank-1 factorization residual and per-entry
+"""Bake the per-yarn corrections of Huang et al. 2025 §4.3: the DS correction ξ ≈ ξ_M(v, θ_d) ξ_N(v, φ) and the
+fiber-level shadowing Ψ^Fiber_G ≈ Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ), each with a rank-1 factorization residual and per-entry
 standard errors from independent sample batches.
 
 Set-up (the conventions of ``data_formats/ASSET_PACK.md`` §3): one straight yarn of the spec, regular fibers only,
@@ -14,8 +14,8 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
 * **Correction** ξ(v; θ_d, φ) = Ψ_*/Ψ_DS: the camera looks from θ_o = θ_d, the light comes from θ_i = −θ_d,
   φ_i = −φ (so (θ_o − θ_i)/2 = θ_d). Ψ_* is the path-traced radiance of the hits in the bin (multiple scattering
   inside the yarn, ``yarn_only_radius``), Ψ_DS the dual-scattering estimate of the same hits
-  (``knitrun.shading.dual_scattering``) as the renderer evaluates it: lit or not by the explicit fibers, and a shadowed hit
-  behind the renderer's n_occluded fibers (``dual_scattering.fiber_counts``), not its own count, so that
+  (``knitrun.shading.dual_scattering``) as the renderer evaluates it: lit or not by the explicit fibers, and a shadowed
+  hit behind the renderer's n_occluded fibers (``dual_scattering.fiber_counts``), not its own count, so that
   ξ·Ψ_DS^renderer reproduces Ψ_* whatever the error of that count; ξ of a bin = Σ Ψ_* / Σ Ψ_DS. ξ's
   factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
   ξ·Ψ_DS that shading produces: a bin where the DS estimate is tiny (an edge bin lit from the far side) has a
@@ -63,6 +63,11 @@ def yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
             _GEOMETRY_MEMO.clear()
         _GEOMETRY_MEMO[key] = _build_yarn_tracer(spec, seed)
     return _GEOMETRY_MEMO[key]
+
+
+def forget_yarn_tracers() -> None:
+    """Drop the memoised tracer scenes of ``yarn_tracer`` (a benchmark timing each bake as a fresh process would)."""
+    _GEOMETRY_MEMO.clear()
 
 
 def _build_yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:

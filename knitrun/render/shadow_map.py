@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from data_formats.conventions import HALF_PI
 from knitrun.render.camera import Camera, view_matrix
 from knitrun.render.strip_raster import rasterize_strips
 
@@ -95,7 +96,7 @@ def shadow_visibility(sm: ShadowMap, positions, bias, light_angular_radius: floa
     bad = np.flatnonzero(~(np.isfinite(bias) & (bias >= 0)))
     if bad.size:
         raise ValueError(f"bias[{bad[0]}] = {bias[bad[0]]}, expected finite and >= 0")
-    if not 0 <= light_angular_radius < 0.5 * math.pi:
+    if not 0 <= light_angular_radius < HALF_PI:
         raise ValueError(f"light_angular_radius = {light_angular_radius}, expected in [0, pi/2)")
     if not (math.isfinite(pcf_radius_texels) and pcf_radius_texels >= 0):
         raise ValueError(f"pcf_radius_texels = {pcf_radius_texels}, expected finite and >= 0")

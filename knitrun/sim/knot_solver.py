@@ -1,6 +1,6 @@
 """Knot interpolation and per-face Gauss-Newton: deformed stitch-mesh vertices → yarn control points of every face
-(seed 000 §3.2 and §5.2). Numba kernels, one face per thread (``prange`` over chunks of faces); every face reads the
-shared vertices and writes only its own outputs.
+(Huang et al. 2025 §3.2 and §5.2). Numba kernels, one face per thread (``prange`` over chunks of faces); every face
+reads the shared vertices and writes only its own outputs.
 
 Per face, per frame
 -------------------
@@ -70,6 +70,17 @@ R_XY, R_MINV, R_KNOTS, R_NORMAL, R_TARGETS = 0, 10, 14, 22, 25  # layout of a fa
 REST_SIZE = R_TARGETS + MAX_RESIDUALS
 W_X, W_DTH, W_DLN, W_SEG = 0, 3, 5, 7  # workspace columns: point (3), ∂/∂θ (2), ∂/∂l (2), segment unit + 1/L (4)
 W_SIZE = 11
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def gather_face(vertices, face_offsets, face_vertices, f, v):
+    """Copy face f's vertex positions, in the face's slot order, into ``v[:nv]``; returns nv."""
+    start = face_offsets[f]
+    nv = face_offsets[f + 1] - start
+    for i in range(nv):
+        for k in range(3):
+            v[i, k] = vertices[face_vertices[start + i], k]
+    return nv
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -443,11 +454,7 @@ def solve_faces(vertices, face_offsets, face_vertices, stitch_type, point_offset
         out = np.empty((MAX_POINTS, 3))
         for f in range(chunk * n_faces // n_chunks, (chunk + 1) * n_faces // n_chunks):
             code = stitch_type[f]
-            start = face_offsets[f]
-            nv = face_offsets[f + 1] - start
-            for i in range(nv):
-                for k in range(3):
-                    v[i, k] = vertices[face_vertices[start + i], k]
+            nv = gather_face(vertices, face_offsets, face_vertices, f, v)
             for k in range(REST_SIZE):
                 rest_f[k] = rest[f, k]
             cp, sp = face_setup(v, nv, code, ti, tf, rest_f, beta, frame, fmat, knots, theta, ws)
@@ -498,11 +505,7 @@ def prepare_faces(vertices, face_offsets, face_vertices, stitch_type, template_i
     for f in range(stitch_type.shape[0]):
         rj[:] = 0.0
         code = stitch_type[f]
-        start = face_offsets[f]
-        nv = face_offsets[f + 1] - start
-        for i in range(nv):
-            for k in range(3):
-                v[i, k] = vertices[face_vertices[start + i], k]
+        nv = gather_face(vertices, face_offsets, face_vertices, f, v)
         face_frame(v, nv, up, frame)
         m00 = m01 = m11 = 0.0
         for i in range(nv):
