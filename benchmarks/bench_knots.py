@@ -1,5 +1,5 @@
 """Knot simulator: ms per frame for 1K, 10K and 100K faces with 1 and 2 Numba threads, the 200K-rendering-point
-target, compile time (cold and cached), Gauss-Newton versus a converged dense solve, and the seed 000 Fig. 9
+target, compile time (cold and cached), Gauss-Newton versus a converged dense solve, and the Huang et al. 2025 Fig. 9
 comparison (naive interpolation of control points / knot interpolation / knot optimisation).
 
 Every timing is the median over ``--frames`` frames of a stretch-and-release animation (stretch-x=1.5 and shear=0.3,

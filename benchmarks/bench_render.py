@@ -1,8 +1,8 @@
 """Strip renderer: ms per frame and per pass for a stockinette patch, under a directional light and under the
 built-in sky fitted with 16 SRBFs, and how the cost grows with control points and pixels.
 
-Patch: ``knitrun.sim.crane_stockinette.stockinette_curves(rows, 21)`` (48 points per stitch, yarn radius 0.03 cm; 60 rows
-≈ 60K control points, about 5 × 10 cm), cotton1, seen from the front (pinhole, fov 40°, whole patch in view),
+Patch: ``knitrun.sim.crane_stockinette.stockinette_curves(rows, 21)`` (48 points per stitch, yarn radius 0.03 cm; 60
+rows ≈ 60K control points, about 5 × 10 cm), cotton1, seen from the front (pinhole, fov 40°, whole patch in view),
 MSAA 4, shadow maps 2048² (lobes 512²). Every figure is the median of ``--frames`` renders after one warm-up
 render (which pays Numba's compile or cache load). ``load`` re-reads the pack and re-evaluates the curves each
 frame (an interactive viewer would keep them); the per-frame work is the other passes.

@@ -1,5 +1,5 @@
-"""Check the renderer's n_occluded = n_cross/2 (``knitrun.shading.dual_scattering.fiber_counts``): on the bake's straight
-yarn, the bin-averaged DS estimate the renderer uses (exact lit fraction, one fiber count f·n_cross for every
+"""Check the renderer's n_occluded = n_cross/2 (``knitrun.shading.dual_scattering.fiber_counts``): on the bake's
+straight yarn, the bin-averaged DS estimate the renderer uses (exact lit fraction, one fiber count f·n_cross for every
 shadowed hit) against the per-hit DS with each hit's own count of fibers toward the light, over 48 light/view
 directions. Prints the mean |error| relative to the per-hit DS for several f. (ξ divides by the renderer's estimate,
 so this error matters where ξ is not applied: the no-tables ablation and the environment's multiple scattering.)

@@ -225,7 +225,8 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
 def compare(scene_path, out_dir, reference, spp, pack_values, exposure, as_json):
     """Compare the strip renderer (full model and its ablations) with the reference path tracer.
 
-    Example: knitrun compare examples/scenes/straight_yarn_directional.toml --pack cotton1=cotton1.h5 --spp 64 -o report/
+    Example: knitrun compare examples/scenes/straight_yarn_directional.toml --pack cotton1=cotton1.h5 --spp 64 -o
+    report/
     """
     from knitbake.compare.report import compare_scene
 

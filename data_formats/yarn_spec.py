@@ -4,7 +4,7 @@ Units and conventions
 ---------------------
 * Every length is in the file's ``units`` (``"mm"``, ``"cm"`` or ``"m"``; all presets use ``"cm"``). Densities of
   flyaways are counts per unit length per ply. Optical angles are in degrees in the file.
-* Geometry follows the procedural yarn model of Zhao et al. 2016 as written in seed 002 §2.2/§3.1:
+* Geometry follows the procedural yarn model of Zhao et al. 2016 as written in Wu and Yuksel 2019 §2.2/§3.1:
   K plies whose centres lie on a helix of radius ``ply_distance`` around the yarn axis with pitch ``ply_pitch``
   (length per full turn); in each ply ``fibers_per_ply`` fibers, each a helix around the ply centre with pitch
   ``fiber_pitch``, placed by the cross-section density p(R) = (1−2ε)((e − e^R)/(e − 1))^β + ε on the unit disk
@@ -12,11 +12,11 @@ Units and conventions
   ``migration_frequency`` (s: migration cycles per fiber turn). The normalised ply cross-section is scaled to an
   ellipse with semi-axes ``ply_semi_axes = [along the ply's binormal (tangential, long), along its normal
   (radial, short)]``.
-* Flyaways (seed 000 eqs. 12–13): hair fibers R(t) = R_0 + R_e(1 − (1 − t)^α), θ(t) = θ_0 + θ_e t,
+* Flyaways (Huang et al. 2025 eqs. 12–13): hair fibers R(t) = R_0 + R_e(1 − (1 − t)^α), θ(t) = θ_0 + θ_e t,
   z(t) = z_0 + z_e t around the ply centre, with Gaussian noise on their direction of progress; loop fibers raise
   one migration cycle of a fiber to ``loop_radius`` (distance from the ply centre). Every random quantity is a
   Gaussian given by ``*_mean`` and ``*_std``.
-* Optics: the fiber BCSDF of seed 000 eq. 7 (R, TT and D lobes): lobe colours are RGB albedo weights in [0, 1],
+* Optics: the fiber BCSDF of Huang et al. 2025 eq. 7 (R, TT and D lobes): lobe colours are RGB albedo weights in [0, 1],
   β are longitudinal widths, γ_TT the azimuthal TT width, α the longitudinal shifts.
 
 The field table ``FIELDS`` is the single schema: it drives parsing, validation, defaults, the written spec
@@ -92,7 +92,7 @@ FIELDS = (
     _f("flyaways", "hair_angular_span_mean", "float", -100.0, 100.0, 0.0, "rad", "θ_e: angular span of a hair"),
     _f("flyaways", "hair_angular_span_std", "float", 0.0, 100.0, 0.0, "rad", ""),
     _f("flyaways", "hair_curvature_alpha", "float", 0.05, 20.0, 1.0, "",
-       "α of seed 000 eq. 13 (1 = straight radial growth, >1 bends out early)"),
+       "α of Huang et al. 2025 eq. 13 (1 = straight radial growth, >1 bends out early)"),
     _f("flyaways", "hair_direction_noise", "float", 0.0, 1.0, 0.0, "rad",
        "std of the random turn of a hair's direction of progress per unit of t"),
     _f("flyaways", "loop_density", "float", 0.0, 1e6, 0.0, "1/length", "ρ_loop: loop fibers per unit length per ply"),

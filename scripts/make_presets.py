@@ -4,7 +4,7 @@
 Usage: python scripts/make_presets.py [REFERENCE_DIR]   (default: ../shared/reference next to the repository)
 
 Conversions (each stated in the preset's provenance):
-* ``ply_distance = yarn_radius / 2`` — seed 002 §3.1 places ply centres at ½ R_ply from the yarn axis.
+* ``ply_distance = yarn_radius / 2`` — Wu and Yuksel 2019 §3.1 places ply centres at ½ R_ply from the yarn axis.
 * ``ply_semi_axes = [e_long / 2, e_short / 2]`` — the tables' ellipse values read as full axis lengths, consistent
   with the ½ on R_ply; with this reading the fiber packing fraction of every preset lies between 0.05 and 0.6, as
   in real yarns (checked by tests/test_yarn_spec.py), while semi-axes = e would overlap the plies.
@@ -28,8 +28,8 @@ from data_formats.yarn_spec import PRESET_DIR, save_spec, spec_from_dict  # noqa
 
 FIBER_RADIUS_CM = {"cotton": 0.0008, "polyester": 0.0009, "rayon": 0.0007, "silk": 0.0006}
 OPTICS_FAMILY = {"cotton": "cotton", "polyester": "polyester", "rayon": "silk", "silk": "silk"}
-HAIR_CURVATURE_ALPHA = 2.0  # seed 000 eq. 13; the paper shows α > 1 for realistic side views
-HAIR_DIRECTION_NOISE = 0.15  # rad per unit t; seed 000 §4.4 adds noise without a value
+HAIR_CURVATURE_ALPHA = 2.0  # Huang et al. 2025 eq. 13; the paper shows α > 1 for realistic side views
+HAIR_DIRECTION_NOISE = 0.15  # rad per unit t; Huang et al. 2025 §4.4 adds noise without a value
 FIBER_ALBEDO = 0.95  # brightest channel of A_R + A_TT after rescaling Khungurn's colours
 
 
@@ -57,11 +57,11 @@ def preset(name, y, f, optics_rows):
         "provenance": {
             "geometry": "Zhao, Luan & Bala 2016, 'Fitting procedural yarn models for realistic cloth rendering', "
                         "ACM TOG 35(4), as in shared/reference/yarn_params_zhao2016.csv; ply_distance = "
-                        "yarn_radius/2 (seed 002 §3.1), ply_semi_axes = [e_long/2, e_short/2] (full axes read as "
-                        "lengths), rho_max = 1",
+                        "yarn_radius/2 (Wu and Yuksel 2019 §3.1), ply_semi_axes = [e_long/2, e_short/2] (full axes "
+                        "read as lengths), rho_max = 1",
             "flyaways": "Zhao et al. 2016 via shared/reference/flyaway_params_zhao2016.csv; std = 0.5*sigma; "
                         f"hair_curvature_alpha = {HAIR_CURVATURE_ALPHA} and hair_direction_noise = "
-                        f"{HAIR_DIRECTION_NOISE} rad are our choices (seed 000 eq. 13 gives no values)",
+                        f"{HAIR_DIRECTION_NOISE} rad are our choices (Huang et al. 2025 eq. 13 gives no values)",
             "optics": f"Khungurn et al. 2015 '{OPTICS_FAMILY[fam]}' via shared/reference/fiber_bcsdf_khungurn2015.csv; "
                       f"R and TT colours scaled by {scale:.4f} so the brightest channel of R+TT is {FIBER_ALBEDO} "
                       "(our lobes are energy-normalised); d_color and lobe shifts not in the source (0)",

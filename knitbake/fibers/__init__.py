@@ -1,1 +1,2 @@
-"""Explicit fibers: the procedural yarn generator, the fiber set, fibers swept along yarn curves, tessellation into tubes."""
+"""Explicit fibers: the procedural yarn generator, the fiber set, fibers swept along yarn curves, tessellation into
+tubes."""

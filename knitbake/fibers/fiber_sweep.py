@@ -11,8 +11,8 @@ Conventions
   current arc length: a curve stretched between frames carries every fiber point to the same rest coordinate, and
   the twist of the fibers is a function of σ only — fibers do not swim.
 * **Frame** (the yarn frame of ``data_formats.curve_eval``, shared with the strip renderer, which aligns its
-  textures' phase to it). (x, y) are laid along (N, B) of a rotation-minimising frame, B = T × N, transported along the dense
-  curve by the double reflection method (Wang et al. 2008, "Computation of rotation minimizing frames", ACM TOG
+  textures' phase to it). (x, y) are laid along (N, B) of a rotation-minimising frame, B = T × N, transported along the
+  dense curve by the double reflection method (Wang et al. 2008, "Computation of rotation minimizing frames", ACM TOG
   27(1)) with central-difference tangents. Between samples the tangent and normal are interpolated linearly and
   re-orthonormalised. A straight curve along +z starting at the origin therefore reproduces the generator's
   fibers exactly.

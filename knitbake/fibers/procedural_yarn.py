@@ -1,4 +1,5 @@
-"""Procedural fibers of a straight yarn (Zhao et al. 2016 as in seed 002 §2.2/§3.1; flyaways after seed 000 §4.4).
+"""Procedural fibers of a straight yarn (Zhao et al. 2016 as in Wu and Yuksel 2019 §2.2/§3.1; flyaways after Huang et
+al. 2025 §4.4).
 
 Conventions
 -----------
@@ -17,7 +18,7 @@ Conventions
   ``info["radius_change_max"]`` per period — a slow extra migration.
 * Flyaways are not periodic. Loops: a Poisson process of rate ρ_loop per ply along z; each follows a host fiber for
   one migration cycle (α_f/s long) with its radius raised smoothly to ``loop_radius`` (absolute distance from the
-  ply centre) and back. Hairs: a Poisson process of rate ρ_hair per ply; seed 000 eqs. 12–13 in the ply frame,
+  ply centre) and back. Hairs: a Poisson process of rate ρ_hair per ply; Huang et al. 2025 eqs. 12–13 in the ply frame,
   R(t) = R_0 + R_e(1 − (1 − t)^α), θ(t) = θ_0 + θ_e t, z(t) = z_0 + z_e t, then the direction of progress of each
   segment takes a random walk of ``hair_direction_noise`` rad per unit t (segment lengths kept).
 * Deterministic for a seed whatever the thread count: every random number is drawn up front from one numpy
@@ -39,7 +40,7 @@ FLYAWAY_POINTS = 17  # points per loop or hair polyline
 
 
 def density(r, eps, beta):
-    """Cross-section density p(R) of seed 002 / Zhao et al. 2016 on the unit disk (R in [0, 1], p ≤ 1)."""
+    """Cross-section density p(R) of Wu and Yuksel 2019 / Zhao et al. 2016 on the unit disk (R in [0, 1], p ≤ 1)."""
     r = np.asarray(r, dtype=float)
     return (1 - 2 * eps) * ((math.e - np.exp(r)) / (math.e - 1)) ** beta + eps
 
@@ -263,7 +264,8 @@ def _loops(spec, rng, length, z_start, period, member, shape, frame):
 
 
 def _hairs(spec, rng, length, z_start, frame):
-    """Hair fibers (seed 000 eqs. 12–13) in the ply frame, with a random walk on their direction of progress."""
+    """Hair fibers (Huang et al. 2025 eqs. 12–13) in the ply frame, with a random walk on their direction of
+    progress."""
     g, fl = spec.geometry, spec.flyaways
     n = rng.poisson(fl.hair_density * length * g.plies) if fl.hair_density > 0 else 0
     ply = rng.integers(0, g.plies, n)

@@ -1,1 +1,2 @@
-"""The bake stages (each ends in a ``bake_*_stage`` function that ``knitbake.bake`` calls): dual scattering, correction and shadowing, textures and flyaways, the I_M table."""
+"""The bake stages (each ends in a ``bake_*_stage`` function that ``knitbake.bake`` calls): dual scattering, correction
+and shadowing, textures and flyaways, the I_M table."""

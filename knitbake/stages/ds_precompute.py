@@ -1,6 +1,6 @@
-"""Dual-scattering precomputation (Zinke et al. 2008 §4; seed 000 eq. 8; ASSET_PACK.md §5) for the fiber BCSDF of
-``knitrun.shading.fiber_bcsdf``: the nine ``/dual_scattering/*`` tables over the cell centres θ of [−π/2, π/2], per RGB
-channel, each with a per-entry error.
+"""Dual-scattering precomputation (Zinke et al. 2008 §4; Huang et al. 2025 eq. 8; ASSET_PACK.md §5) for the fiber BCSDF
+of ``knitrun.shading.fiber_bcsdf``: the nine ``/dual_scattering/*`` tables over the cell centres θ of [−π/2, π/2], per
+RGB channel, each with a per-entry error.
 
 Definitions
 -----------

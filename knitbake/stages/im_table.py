@@ -1,11 +1,11 @@
-"""Bake the environment-light table I_M^{TT,D} (seed 000 §4.5, eq. 16; ASSET_PACK.md §9) by deterministic quadrature,
-and integrate I_M directly (``im_direct``, the ground truth of the tests).
+"""Bake the environment-light table I_M^{TT,D} (Huang et al. 2025 §4.5, eq. 16; ASSET_PACK.md §9) by deterministic
+quadrature, and integrate I_M directly (``im_direct``, the ground truth of the tests).
 
 I_M(θ_o, θ_j, Δφ, λ) = ∫ G(ω_i; ω_j, λ) f(ω_i, ω_o) cos θ_i dω_i with G = exp(λ(ω_i·ω_j − 1)), Δφ = φ_j − φ_o;
-parameterisation and lookup in ``knitrun.shading.im_lookup``, BCSDF in ``knitrun.shading.fiber_bcsdf`` (dω = cos θ dθ dφ). The pack's
-table holds the TT and D lobes only: the renderer integrates the narrow R lobe itself (``im_lookup.r_lobe_integral``,
-the R formula below with a fixed 12-node rule), because no grid of practical size resolves a 1° R lobe under a sharp
-SRBF (see ``knitrun.shading.im_lookup``).
+parameterisation and lookup in ``knitrun.shading.im_lookup``, BCSDF in ``knitrun.shading.fiber_bcsdf`` (dω = cos θ dθ
+dφ). The pack's table holds the TT and D lobes only: the renderer integrates the narrow R lobe itself
+(``im_lookup.r_lobe_integral``, the R formula below with a fixed 12-node rule), because no grid of practical size
+resolves a 1° R lobe under a sharp SRBF (see ``knitrun.shading.im_lookup``).
 
 Quadrature
 ----------
@@ -25,8 +25,9 @@ logistic tail is ≤ 4e^{−x/s}). The window is cut into equal panels no wider 
 (σ_p, 1/√λ or 1/√κ, s, 0.5 rad for the slow factors cos²θ_i and I0e, and the fall-off length of a lobe cut off at
 θ_i = ±π/2), each integrated by n-point Gauss–Legendre. This adapts to both ends of λ: at λ = 10⁴ the SG is 0.01 rad
 wide and gets panels of 0.02 rad; at λ = 0.5 the lobes set the panels. The bake takes Φ from a per-Δφ table over
-u = ln(1 + κ) (``_azimuth_table``) instead of one azimuthal quadrature per θ_i node (13× faster); ``im_direct``
-integrates Φ directly. Nothing is random: a bake is bit-for-bit reproducible.
+u = ln(1 + κ) (``_azimuth_table``) instead of one azimuthal quadrature per θ_i node (much faster: BENCHMARKS.md,
+section "The bake: speed and error per quality"); ``im_direct`` integrates Φ directly. Nothing is random: a bake is
+bit-for-bit reproducible.
 
 Error estimate (per entry, returned by ``bake_im_table``; the pack stores its maximum, ``ERROR_KIND``):
 Σ_p A_p |J_p(n) − J_p(n/2)| — per lobe, the same panels
@@ -34,8 +35,9 @@ with n and n/2 nodes — plus A_TT times the Φ table's largest interpolation er
 its nodes). Gauss–Legendre converges geometrically on these smooth panels, so |J(n) − J(n/2)| is about the error of
 the n/2 rule: a conservative bound for the stored n-node value (typically by orders of magnitude). Windows drop
 less than e^{−30} of each factor's peak. The table's accuracy as a *lookup* is set by interpolation between the
-samples, not by quadrature: ``lookup_accuracy`` measures it (every bake stores the result), ``knitrun.shading.im_lookup``
-(Accuracy) tabulates it per quality and ``tests/test_im_table.py`` holds it to the issue's target.
+samples, not by quadrature: ``lookup_accuracy`` measures it (every bake stores the result),
+``knitrun.shading.im_lookup`` (Accuracy) explains it, BENCHMARKS.md (section "The bake: speed and error per quality")
+reports it per quality and preset, and ``tests/test_im_table.py`` holds it to the issue's target.
 """
 
 from __future__ import annotations
@@ -248,7 +250,8 @@ def im_direct(params, theta_o, theta_j, dphi, lam, nodes: int = DIRECT_NODES, ta
 
     θ_o, θ_j in [−π/2, π/2] (clamped), dphi = φ_j − φ_o (any real, radians), lam > 0. The bake's panels with twice
     its nodes, windows to e^{−40} and the azimuthal integral of TT done directly: agrees with a dense brute-force
-    grid to ~1e-8 relative (tests/test_im_table.py bounds it at 1e-4 and checks the limits)."""
+    grid within 1e-4 relative (tests/test_im_table.py holds that bound and checks the limits; the measured agreement
+    is in BENCHMARKS.md, section "The bake: speed and error per quality")."""
     args = np.broadcast_arrays(*[np.asarray(x, float) for x in (theta_o, theta_j, dphi, lam)])
     if np.any(~(args[3] > 0)) or not all(np.all(np.isfinite(a)) for a in args):
         raise ValueError("im_direct: angles must be finite and λ > 0")
@@ -285,16 +288,18 @@ def im_axes(shape, lam_range=LAMBDA_RANGE) -> list:
 
 
 def bake_im_table(params, shape=DEFAULT_SHAPE, nodes: int = NODES, lam_range=LAMBDA_RANGE, progress=None):
-    """Bake I_M^{TT,D} (the TT and D lobes of I_M) for the fiber BCSDF ``params`` (``knitrun.shading.fiber_bcsdf`` vector) on
-    the grid of ``im_axes(shape)``.
+    """Bake I_M^{TT,D} (the TT and D lobes of I_M) for the fiber BCSDF ``params`` (``knitrun.shading.fiber_bcsdf``
+    vector) on the grid of ``im_axes(shape)``.
 
     shape: samples along (θ_o, θ_j, |φ_j − φ_o|, log10 λ), each ≥ 2. The default (24, 48, 24, 96) — 2.65 M entries,
     32 MB as float32 plus as much for the per-entry errors — puts 7.8° between θ_o and |Δφ| samples, 3.8° between
-    θ_j samples and 0.045 decades between λ samples; it bakes in 15–25 s on 2 cores. The lookup accuracy this buys
-    depends on the lobe widths: see ``knitrun.shading.im_lookup`` (Accuracy). nodes: Gauss–Legendre nodes per panel (even;
-    the error estimate uses nodes // 2; 8 gives ~1e-8 relative, 4 ~1e-4 at half the cost). lam_range: the λ
-    domain (the end samples lie on it). progress(done, total) is called after each θ_o slab. Returns (table (N_a, N_b, N_c, N_d, 3) float64, per-entry error (same shape, ≥ 0),
-    axes_attrs (``im_axes(shape)``)). Deterministic: the same inputs give the same table bit for bit."""
+    θ_j samples and 0.045 decades between λ samples. Its bake time and the lookup accuracy it buys, which depends on
+    the lobe widths (``knitrun.shading.im_lookup``, Accuracy), are measured in BENCHMARKS.md, section "The bake: speed
+    and error per quality". nodes: Gauss–Legendre nodes per panel (even; the error estimate uses nodes // 2; 4 nodes
+    halve the cost of 8 and are less accurate, measured in the same section). lam_range: the λ domain (the end
+    samples lie on it). progress(done, total) is called after each θ_o slab. Returns (table (N_a, N_b, N_c, N_d, 3)
+    float64, per-entry error (same shape, ≥ 0), axes_attrs (``im_axes(shape)``)). Deterministic: the same inputs give
+    the same table bit for bit."""
     if nodes < 2 or nodes % 2:
         raise ValueError(f"nodes {nodes}: expected an even number ≥ 2")
     p = np.asarray(params, float)
@@ -317,10 +322,10 @@ def bake_im_table(params, shape=DEFAULT_SHAPE, nodes: int = NODES, lam_range=LAM
 
 
 def lookup_accuracy(table, axes, params, n: int = LOOKUP_CHECK_POINTS, seed: int = 0) -> dict:
-    """The accuracy of I_M as a renderer evaluates it (``knitrun.shading.im_lookup.im_lookup``: this table plus the R-lobe
-    rule) against ``im_direct``, at ``n`` points: θ_o, θ_j uniform, |Δφ| uniform, λ log-uniform over the table's λ
-    range, with 10 % at each λ end, 10 % on the R ridge θ_j ≈ 2α_R − θ_o and 10 % within 1e-3 rad of the poles.
-    Returns {"lookup_rel_error": max relative error where I_M > 1 % of its largest value over the points,
+    """The accuracy of I_M as a renderer evaluates it (``knitrun.shading.im_lookup.im_lookup``: this table plus the
+    R-lobe rule) against ``im_direct``, at ``n`` points: θ_o, θ_j uniform, |Δφ| uniform, λ log-uniform over the
+    table's λ range, with 10 % at each λ end, 10 % on the R ridge θ_j ≈ 2α_R − θ_o and 10 % within 1e-3 rad of the
+    poles. Returns {"lookup_rel_error": max relative error where I_M > 1 % of its largest value over the points,
     "lookup_error_per_decade": max over λ decades of (max error / that decade's largest I_M)} (worst channel).
     Deterministic for a seed; costs about as much as baking a table of 10⁵ entries."""
     from knitrun.shading.im_lookup import im_lookup

@@ -1,4 +1,4 @@
-"""Regular-fiber and flyaway textures of one yarn period by orthographic ray casting (seed 000 §4.2–4.4, §5.1;
+"""Regular-fiber and flyaway textures of one yarn period by orthographic ray casting (Huang et al. 2025 §4.2–4.4, §5.1;
 asset pack ``/textures``, ASSET_PACK.md §3 and §8).
 
 Conventions
@@ -39,8 +39,10 @@ The regular fibers are exactly P-periodic and the margins hold the neighbouring 
 view of an endless yarn: u = 1 continues into u = 0. The tubes are not exactly periodic: a tube's polygon turns
 along the fiber (rotation-minimising frame), so at the seam the polygons of the two sides are turned against
 each other and sub-samples within the tessellation error r·(1 − cos(π/sides)) of a silhouette, or of two
-crossing fibers, may see another fiber. ``regular_seam_error`` measures this (cotton1 at 256 × 64, S = 4: 0.08 %
-of the sub-samples change coverage, mean |Δ normal| 0.006).
+crossing fibers, may see another fiber. ``regular_seam_error`` measures this;
+``tests/test_texture_bake.py::test_regular_textures_are_seamless`` holds cotton1 at 64 × 16, S = 2 to a mean coverage
+difference ≤ 0.005 and a mean |Δ normal| ≤ 0.02 (and bounds tangent and AO), and the error at the standard quality's
+256 × 64, S = 4 is measured in BENCHMARKS.md, section "Texture seam".
 
 Flyaway seam design (three variants that tile in any order)
 -----------------------------------------------------------

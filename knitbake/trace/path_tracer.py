@@ -5,8 +5,8 @@ Design
 * Waves: all live paths advance one bounce per wave. Numba kernels generate camera rays, shade hits (next-event
   estimation, BCSDF sampling, Russian roulette) and write each path's own slots only; ``RayScene`` intersects the
   wave's rays on 2 Python threads (Embree releases the GIL). No kernel runs while another Python thread runs one.
-* Fibers scatter as far-field curves: at a hit on fiber f the BCSDF of f's yarn type (``knitrun.shading.fiber_bcsdf``) is
-  evaluated in the frame of the hit segment's axis (x = tangent); the scattered or shadow ray leaves from the far
+* Fibers scatter as far-field curves: at a hit on fiber f the BCSDF of f's yarn type (``knitrun.shading.fiber_bcsdf``)
+  is evaluated in the frame of the hit segment's axis (x = tangent); the scattered or shadow ray leaves from the far
   side of that segment's tube (the point at the tube radius, at the hit's axial position, on the side the new
   direction points to), so a fiber never shadows or re-hits itself. This is the convention of a BCSDF, which
   already integrates over the fiber's width.

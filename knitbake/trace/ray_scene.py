@@ -11,8 +11,9 @@ Conventions
   diagonal and the largest absolute coordinate: float32 rounding of a hit point is about ``6e-8 * extent``, which
   the default clears over 100 times, while staying near 1 % of a fiber radius for one yarn period (cotton1:
   eps 9e-6 cm, fiber radius 8e-4 cm). The offset is along the ray, so a ray leaving a surface at a grazing angle
-  can still hit it again (measured: 5e-4 of uniformly random outward rays at the default, 6e-3 at ``1e-6 * extent``);
-  a path tracer should also move its spawn points off the surface along the normal.
+  can still hit it again (a small fraction of uniformly random outward rays, more for a smaller ``eps``:
+  BENCHMARKS.md, section "Tessellation, Embree build and ray throughput on one period"); a path tracer should also
+  move its spawn points off the surface along the normal.
 * Normals are the unit geometric normals of the hit triangles, outward for TubeMesh tubes (not flipped toward the
   ray). Barycentrics follow Embree: hit = (1 - u - v) v0 + u v1 + v v2.
 * The scene is committed (BVH built) in the constructor by one single-ray query, never lazily from two threads.

@@ -67,7 +67,8 @@ def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
         e = envs[0]
         image = environment_image(e)
         env = env_from_image(image, e.scale)
-    tracer = TracerScene(mesh, np.concatenate(types), np.stack([tinted(params_from_optics(e.spec.optics), e.color) for e in scene.yarns]),
+    params = np.stack([tinted(params_from_optics(e.spec.optics), e.color) for e in scene.yarns])
+    tracer = TracerScene(mesh, np.concatenate(types), params,
                          light_dirs=np.array([light.unit_direction for light in lights]).reshape(-1, 3),
                          light_irradiance=np.array([light.irradiance for light in lights]).reshape(-1, 3),
                          env=env, background=np.asarray(scene.background, float))

@@ -1,4 +1,4 @@
-"""The strip renderer (seed 000 §5.2): a scene file's yarn curves and asset packs → a linear HDR image.
+"""The strip renderer (Huang et al. 2025 §5.2): a scene file's yarn curves and asset packs → a linear HDR image.
 
 Passes, each timed (``RenderResult.timings``, seconds):
 

@@ -1,4 +1,4 @@
-"""Shading of the strip renderer's multisampled G-buffer (seed 000 §4.3–4.5, eqs. 8–11 and 17).
+"""Shading of the strip renderer's multisampled G-buffer (Huang et al. 2025 §4.3–4.5, eqs. 8–11 and 17).
 
 Shading points
 --------------
@@ -22,11 +22,12 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
     n           = n_occluded + (1 − V) n_cross                            fibers toward the light when not lit
     L_o        += E · ξ · DS(θ_i^f, θ_o^f, φ^f; n, D)                    ``dual_scattering.ds_kernel``, fiber frame
 
-with θ^f, φ^f against t_f. An empty (0, 1, 1, 3) full table selects the factors. An ablation passes (1, 1, 3) factor tables of ones for ξ or Ψ (and n_occluded = 0 without
-Ψ^Fiber: no fiber of the yarn is assumed between a visible fiber and the light). This is the bin average of what the bake divides by (ξ = ΣΨ_*/ΣΨ_DS over the hits of a
-(v, θ_d, φ) bin, each hit lit directly iff no fiber lies toward the light), with Ψ^Yarn_G = V from the yarn-level
-shadow map in place of the other yarns' fibers: seed 000 eq. 11. Per SRBF lobe j (centre ω_j, sharpness λ_j,
-weight W_j, visibility T̃_j from the lobe's shadow map), eq. 17:
+with θ^f, φ^f against t_f. An empty (0, 1, 1, 3) full table selects the factors. An ablation passes (1, 1, 3) factor
+tables of ones for ξ or Ψ (and n_occluded = 0 without Ψ^Fiber: no fiber of the yarn is assumed between a visible fiber
+and the light). This is the bin average of what the bake divides by (ξ = ΣΨ_*/ΣΨ_DS over the hits of a (v, θ_d, φ) bin,
+each hit lit directly iff no fiber lies toward the light), with Ψ^Yarn_G = V from the yarn-level shadow map in place of
+the other yarns' fibers: Huang et al. 2025 eq. 11. Per SRBF lobe j (centre ω_j, sharpness λ_j, weight W_j, visibility
+T̃_j from the lobe's shadow map), eq. 17:
 
     L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 

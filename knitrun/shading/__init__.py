@@ -1,1 +1,2 @@
-"""Shading model: the fiber BCSDF, dual scattering, the I_M lookup, table lookups, environment maps (equirectangular conventions, the built-in sky, the SRBF fit)."""
+"""Shading model: the fiber BCSDF and the angles about a fiber, dual scattering, table lookups, the I_M lookup,
+environment maps (equirectangular conventions, the built-in sky, the SRBF fit)."""

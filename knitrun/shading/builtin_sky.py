@@ -2,9 +2,9 @@
 radiance image of a scene's environment light (``environment_image``), built-in or from a file.
 
 A clear-sky gradient (zenith blue to a bright horizon), a darker ground below the horizon and a sun disk of
-angular radius ``SUN_RADIUS_DEG`` around ``SUN_DIRECTION`` (+y up, see ``knitrun.shading.equirect``). Linear RGB radiance,
-scaled so the sky alone gives an upward-facing white diffuser an irradiance of about π (radiance ≈ 1) and the sun
-adds about as much again. It is a fixed image, not a physical sky model: its job is a reproducible, varied light.
+angular radius ``SUN_RADIUS_DEG`` around ``SUN_DIRECTION`` (+y up, see ``knitrun.shading.equirect``). Linear RGB
+radiance, scaled so the sky alone gives an upward-facing white diffuser an irradiance of about π (radiance ≈ 1) and the
+sun adds about as much again. It is a fixed image, not a physical sky model: its job is a reproducible, varied light.
 """
 
 import numpy as np

@@ -1,7 +1,7 @@
 """Dual scattering (Zinke, Yuksel, Weber, Keyser 2008, "Dual scattering approximation for fast multiple scattering in
-hair", ACM TOG 27(3); seed 000 eq. 8: Ψ_DS = Ψ_G (1 + Ψ_L)) for the fiber BCSDF of ``knitrun.shading.fiber_bcsdf``: the one
-runtime definition that the baker (ξ = Ψ_*/Ψ_DS) and the renderer share. The tables come from
-``knitbake.stages.ds_precompute`` (or an asset pack's ``/dual_scattering/*``, ASSET_PACK.md §5).
+hair", ACM TOG 27(3); Huang et al. 2025 eq. 8: Ψ_DS = Ψ_G (1 + Ψ_L)) for the fiber BCSDF of
+``knitrun.shading.fiber_bcsdf``: the one runtime definition that the baker (ξ = Ψ_*/Ψ_DS) and the renderer share. The
+tables come from ``knitbake.stages.ds_precompute`` (or an asset pack's ``/dual_scattering/*``, ASSET_PACK.md §5).
 
 Conventions (ASSET_PACK.md §3, fiber frame): θ = asin(ω·t) against the fiber tangent, φ = φ_o − φ_i wrapped to
 [−π, π); φ = 0 is light from the camera's side (back-scattering), φ = ±π light from behind (forward scattering).
@@ -211,10 +211,11 @@ def fiber_counts(geometry, radius: float) -> tuple:
       spread fibers): the count for light passing through another yarn.
     * n_occluded = max(1, n_cross/2): the count assumed between a visible fiber and the light when that fiber is in
       its own yarn's shadow. The bake's ξ divides by the DS estimate with exactly this count for every shadowed hit
-      (``knitbake.stages.correction``), so ξ corrects the estimate the renderer evaluates. On the bake's straight yarn
-      (``benchmarks/check_n_occluded.py``) the bin-averaged DS with this count is off from the per-hit DS (each hit's
-      own count) by a mean |error| of 11 % (cotton1) / 14 % (rayon1), against 13–18 % / 11–30 % for n_cross/2.5 to
-      n_cross/3 and 15 % / 24 % for 0.6 n_cross: the choice matters where ξ is not applied."""
+      (``knitbake.stages.correction``), so ξ corrects the estimate the renderer evaluates. On the bake's straight
+      yarn, ``benchmarks/check_n_occluded.py`` compares the bin-averaged DS with this count, and with other fractions
+      of n_cross, against the per-hit DS (each hit's own count): n_cross/2 has the smallest worst error over cotton1
+      and rayon1 of the fractions measured in BENCHMARKS.md, section "The renderer's n_occluded". The choice matters
+      where ξ is not applied."""
     n_cross = 4.0 * geometry.plies * geometry.fibers_per_ply * geometry.fiber_radius / (math.pi * radius)
     return n_cross, max(1.0, 0.5 * n_cross)
 

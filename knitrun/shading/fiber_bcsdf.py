@@ -1,4 +1,5 @@
-"""The fiber BCSDF f = Σ_{p ∈ R, TT, D} A_p M_p N_p (seed 000 eq. 7): the one definition baker and renderer share.
+"""The fiber BCSDF f = Σ_{p ∈ R, TT, D} A_p M_p N_p (Huang et al. 2025 eq. 7): the one definition baker and renderer
+share.
 
 Angle conventions (the same as ``data_formats/ASSET_PACK.md`` §3)
 -----------------------------------------------------------------

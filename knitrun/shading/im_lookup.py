@@ -1,8 +1,8 @@
-"""Environment light: the spherical Gaussian (SRBF) and the runtime lookup of the I_M table (seed 000 §4.5).
+"""Environment light: the spherical Gaussian (SRBF) and the runtime lookup of the I_M table (Huang et al. 2025 §4.5).
 
 Definitions (angles as in ``knitrun.shading.fiber_bcsdf`` and ``data_formats/ASSET_PACK.md`` §3, radians)
 --------------------------------------------------------------------------------------------------
-* SRBF: G(ω; ω_j, λ) = exp(λ(ω·ω_j − 1)) (seed 000 eq. 14), unnormalised: G(ω_j) = 1 and
+* SRBF: G(ω; ω_j, λ) = exp(λ(ω·ω_j − 1)) (Huang et al. 2025 eq. 14), unnormalised: G(ω_j) = 1 and
   ∫ G dω = (2π/λ)(1 − e^{−2λ}).
 * I_M(ω_o; ω_j, λ_j) = ∫ G(ω_i; ω_j, λ_j) f(ω_i, ω_o) cos θ_i dω_i (eq. 16), linear RGB, dimensionless;
   f the fiber BCSDF of ``knitrun.shading.fiber_bcsdf``. I_M = I_M^R + I_M^{TT,D}, one term per group of lobes.
@@ -21,7 +21,7 @@ Two parts (``im_kernel`` adds them)
   ``R_NODES``-point Gauss–Legendre on the window m ± ``R_WINDOW``/√P clipped to [−π/2, π/2]. Why not a table:
   the presets' R lobe is 1° (σ_R = 2°) wide, and under a sharp SRBF (the sun: λ ≈ 6600, 0.7°) I^R is a 2°-wide
   ridge along θ_j = μ_R(θ_o) in a 3-D domain; resolving it to 2 % takes ~0.015 rad samples on two angle axes, and a
-  lobe-centred axis fails where the ridge meets the poles. The 12-node rule is within 0.2 % of direct quadrature
+  lobe-centred axis fails where the ridge meets the poles. The 12-node rule is within 0.25 % of direct quadrature
   for β_R from 0.001° to 25°, λ from 0.5 to 10⁴ and θ_o, θ_j up to ±π/2 (``tests/test_im_table.py``).
 
 Parameterisation of the I_M^{TT,D} table (the axes ``knitbake.stages.im_table`` writes)
@@ -56,28 +56,24 @@ Accuracy (random points with λ log-uniform in [0.5, 10⁴], plus λ = 0.5, λ =
 1e-3 rad of ±π/2)
 ---------------------------------------------------------------------------------------------------------------
 Multilinear interpolation reproduces a feature to ~2% when its standard deviation spans ≳ 2.5 sample spacings.
-The features of the TT and D table are: the TT lobe, √(4β_TT² + 1/λ) wide in θ_j and moving with θ_o (centre 2α − θ_o); N_TT in |Δφ|
-(logistic scale γ_TT√3/π, widened by the SG); in log λ, the fall-off exp(−λ(1 − cos γ)) of an SRBF at angle γ from
-the lobes, which needs ~0.07 decades for λ ≲ 20; and near θ_j = ±π/2 the cos θ_j factor, which levels off at
-~1/√λ, so the cell at the pole has large *relative* errors at large λ where I_M is a few % of its peak.
+The features of the TT and D table are: the TT lobe, √(4β_TT² + 1/λ) wide in θ_j and moving with θ_o (centre
+2α − θ_o); N_TT in |Δφ| (logistic scale γ_TT√3/π, widened by the SG); in log λ, the fall-off exp(−λ(1 − cos γ))
+of an SRBF at angle γ from the lobes, which needs ~0.07 decades for λ ≲ 20; and near θ_j = ±π/2 the cos θ_j factor,
+which levels off at ~1/√λ, so the cell at the pole has large *relative* errors at large λ where I_M is a few % of its
+peak.
 
 I_M as evaluated here (table + R rule) against direct quadrature, by ``knitbake.stages.im_table.lookup_accuracy`` (2000
 points; "rel" = max relative error where I_M > 1% of its maximum, "decade" = max error over each λ decade's largest
-I_M), for the bake's quality shapes (``knitbake.bake.QUALITY``; every bake stores these two figures with its table):
-
-==========  =======================  ===============  ===============  ===============
-quality     shape                    cotton1          silk1            polyester1
-==========  =======================  ===============  ===============  ===============
-draft       (12, 24, 12, 32)         9.9% / 0.8%      23% / 9.9%       19% / 6.8%
-standard    (24, 48, 24, 96)         1.2% / 0.24%     5.3% / 4.1%      3.6% / 1.7%
-final       (32, 64, 32, 128)        0.7% / 0.13%     3.0% / 2.0%      2.9% / 1.2%
-==========  =======================  ===============  ===============  ===============
+I_M). Every bake stores these two figures with its table; their values for the bake's quality shapes
+(``knitbake.bake.QUALITY``) and several presets are measured in BENCHMARKS.md, section "The bake: speed and error per
+quality" (schema 2.0 re-bake).
 
 cotton1's TT lobe is wide (β_TT 27°); silk1, the rayons and polyester1 have β_TT = 10° (σ_TT = 20°) and γ_TT ≈ 20°,
-which the standard grid samples at ~2.6 and ~1.7 spacings per standard deviation: their worst relative errors lie in
-the lobes' tails at 1–3% of the maximum. A rough fiber (β_R 25°, β_TT 35°, γ_TT 80°) at (16, 40, 12, 64) is within
-1.2% / 0.6% (``tests/test_im_table.py``). Before the R lobe left the table (schema 1.x), cotton1 erred by up to 75% of
-the decade maximum at λ > 2000.
+which the standard grid samples at ~2.6 and ~1.7 spacings per standard deviation, so they err more than cotton1 at
+the same shape, mostly in the lobes' tails (BENCHMARKS.md). ``tests/test_im_table.py`` holds the issue's target
+(rel < 2%, decade < 1%) for a rough fiber (β_R 25°, β_TT 35°, γ_TT 80°) at (16, 40, 12, 64) and for cotton1 at the
+standard shape. Schema 1.x tabulated the R lobe too, which no grid of practical size resolves (above; ASSET_PACK.md
+§1 history and §9).
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
-"""Fit J spherical Gaussians (SRBFs) to an equirectangular HDR environment (seed 000 §4.5, eq. 14).
+"""Fit J spherical Gaussians (SRBFs) to an equirectangular HDR environment (Huang et al. 2025 §4.5, eq. 14).
 
-Model: L(ω) ≈ Σ_j W_j G(ω; ω_j, λ_j), G the SRBF of ``knitrun.shading.im_lookup.sg`` (G(ω_j) = 1, unnormalised), ω_j unit
-directions in the world frame of ``knitrun.shading.equirect`` (+y up), λ_j ∈ [0.5, λ_max], W_j linear RGB radiance (same
-units as the image), W_j ≥ 0. λ_max = min(1e4, 4/Δ²), Δ = π/H the texel's angular height: a lobe's angular standard
-deviation 1/√λ stays ≥ Δ/2, so the texel samples integrate it to < 1 % (a narrower lobe could match a sun texel's
-radiance at its centre while carrying a fraction of its energy; 1e4 is the top of the I_M table's λ range).
+Model: L(ω) ≈ Σ_j W_j G(ω; ω_j, λ_j), G the SRBF of ``knitrun.shading.im_lookup.sg`` (G(ω_j) = 1, unnormalised), ω_j
+unit directions in the world frame of ``knitrun.shading.equirect`` (+y up), λ_j ∈ [0.5, λ_max], W_j linear RGB radiance
+(same units as the image), W_j ≥ 0. λ_max = min(1e4, 4/Δ²), Δ = π/H the texel's angular height: a lobe's angular
+standard deviation 1/√λ stays ≥ Δ/2, so the texel samples integrate it to < 1 % (a narrower lobe could match a sun
+texel's radiance at its centre while carrying a fraction of its energy; 1e4 is the top of the I_M table's λ range).
 
 Fitted error measure: Σ_t Ω_t ‖L_t − M(ω_t)‖², ω_t a texel centre and Ω_t its exact solid angle — a quadrature of
 ∫_S² ‖L − M‖² dω, the square of the reported relative L2 error's numerator (see ``SRBFFit``). A small bright sun
@@ -16,10 +16,11 @@ Method (deterministic):
    solid-angle-weighted within-cell variance are then split back into their full-resolution texels until ``max_samples``
    samples are used (the sun disk and the horizon come back at full resolution; a small image is used whole).
 1. Greedy matching pursuit: candidate centres are the 8 samples of largest weighted positive residual luminance plus 64
-   fixed Fibonacci directions, candidate λ are the 13 log-spaced values in [0.5, 1e4] below λ_max, and λ_max; the (centre, λ) whose best
-   non-negative single-lobe fit removes the most squared residual is added, then all weights are re-solved by
-   non-negative least squares (NNLS, per channel). Lobes stop being added once nothing positive is left; the rest
-   get zero weight, λ = 0.5 and Fibonacci directions under a random rotation drawn from ``seed`` (its only use).
+   fixed Fibonacci directions, candidate λ are the 13 log-spaced values in [0.5, 1e4] below λ_max, and λ_max; the
+   (centre, λ) whose best non-negative single-lobe fit removes the most squared residual is added, then all weights are
+   re-solved by non-negative least squares (NNLS, per channel). Lobes stop being added once nothing positive is left;
+   the rest get zero weight, λ = 0.5 and Fibonacci directions under a random rotation drawn from ``seed`` (its only
+   use).
 2. Joint refinement of (ω_j, log λ_j, W_j) of the active lobes by ``scipy.optimize.least_squares`` (trust-region
    reflective, analytic Jacobian, bounds W ≥ 0 and λ in range) on the samples. Each ω_j moves in its tangent
    plane: ω_j = normalise(ω_j⁰ + u e₁ + v e₂).

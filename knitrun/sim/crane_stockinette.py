@@ -13,14 +13,15 @@ them and scale the curve by s = radius / (4/5), so the patch is in the unit of `
 that the technical face looks toward +z, the stitch-mesh convention (x along the course, y up the wales, z out of
 the front); the curve is mirror-symmetric in x, so this is the same fabric turned about y, not its mirror image.
 
-Assumptions and facts (measured by ``tests/test_fiber_sweep.py``): the model is geometric, not physical (no energy
-minimum); all rows are identical (no cast-on or bind-off). At the default constants the closest approach between
-different rows' smooth centre curves is 1.92 × radius and between non-neighbouring parts of one row 1.93 × radius,
-i.e. tubes of the given radius overlap by ≤ 4 % of a diameter (real yarns are compressible and hairy); the default
-polyline of 48 points per stitch cuts corners slightly: 1.90 × radius between rows, 1.94 × radius within a row.
-One stitch is 2π·s ≈ 7.85 radii wide and the rows are 5.63 radii apart; one stitch uses ≈ 30.8 radii of yarn. Each
-row runs t ∈ [−π/2, 2π·cols − π/2], from the middle of a leg to the middle of a leg; the V-shaped legs lie at
-z = +d·s (the technical face), the heads and sinkers at z = −d·s (the back).
+Assumptions and facts: the model is geometric, not physical (no energy minimum); all rows are identical (no cast-on
+or bind-off). At the default constants tubes of the given radius come slightly closer than a diameter, between rows
+and between non-neighbouring parts of one row, i.e. they overlap a little (real yarns are compressible and hairy);
+``tests/test_fiber_sweep.py::test_stockinette_rows_interloop_without_interpenetration`` holds the closest approach of
+the default polyline (48 points per stitch) between rows within (1.85, 2.1) × radius and within a row above
+1.85 × radius, and prints both; the measured approaches are in BENCHMARKS.md, section "Stockinette patch: closest
+approach". One stitch is 2π·s ≈ 7.85 radii wide and the rows are 5.63 radii apart; one stitch uses ≈ 30.8 radii of
+yarn. Each row runs t ∈ [−π/2, 2π·cols − π/2], from the middle of a leg to the middle of a leg; the V-shaped legs lie
+at z = +d·s (the technical face), the heads and sinkers at z = −d·s (the back).
 """
 
 from __future__ import annotations

@@ -1,11 +1,12 @@
-"""Knot simulation of a stitch mesh: rest mesh + per-frame vertex positions → ``YarnCurves`` (seed 000 §3, §5.2).
+"""Knot simulation of a stitch mesh: rest mesh + per-frame vertex positions → ``YarnCurves`` (Huang et al. 2025 §3,
+§5.2).
 
 ``prepare`` computes once what is fixed over an animation (rest frames and knots of every face, rest lengths and
 angles of the templates, the yarn order, the up-sampling plan, the rest arc length). ``solve_frame`` runs the per-face
 knot solver (``knot_solver``) on one frame's vertices; ``yarn_points`` joins and up-samples the result;
 ``simulate`` does both for every frame and reports timings and energies. ``face_problem``, ``knot_centres``,
 ``control_segment_lengths`` and ``course_knot_spacing`` expose the per-face problem and the measurements that tests
-and benchmarks compare (dense reference solves, seed 000 Fig. 9).
+and benchmarks compare (dense reference solves, Huang et al. 2025 Fig. 9).
 
 Conventions
 -----------

@@ -1,4 +1,5 @@
-"""Stitch templates: the rest yarn of every stitch type in face coordinates, with its knots (seed 000 §3.1, Figs. 2-3).
+"""Stitch templates: the rest yarn of every stitch type in face coordinates, with its knots (Huang et al. 2025 §3.1,
+Figs. 2-3).
 
 Face coordinates
 ----------------
