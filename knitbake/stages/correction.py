@@ -9,8 +9,8 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
 
 * **Shadowing** Ψ^Fiber_G(v; θ_i, φ): the camera looks along −n (θ_o = 0, φ_o = 0); the light comes from θ_i,
   φ_i = −φ. For every camera sample that hits a fiber, visibility of the light from the far side of that fiber
-  (``path_tracer._leave_point``) through the other fibers: 1 or 0. Ψ^Fiber_G of a v-bin = mean visibility of the
-  hits in it.
+  (``path_tracer.leave_points``, the tracer's own rule) through the other fibers: 1 or 0. Ψ^Fiber_G of a v-bin = mean
+  visibility of the hits in it.
 * **Correction** ξ(v; θ_d, φ) = Ψ_*/Ψ_DS: the camera looks from θ_o = θ_d, the light comes from θ_i = −θ_d,
   φ_i = −φ (so (θ_o − θ_i)/2 = θ_d). Ψ_* is the path-traced radiance of the hits in the bin (multiple scattering
   inside the yarn, ``yarn_only_radius``), Ψ_DS the dual-scattering estimate of the same hits
