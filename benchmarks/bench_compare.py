@@ -1,21 +1,28 @@
 """Strip renderer vs the reference path tracer on the four example scenes (a straight yarn and a 6 × 6 knit patch,
-each under a directional light and under the built-in sky): FLIP, RMSE, relMSE and time per ablation, and the
-speed ratio to the reference. One `knitrun compare` report folder per scene under ``--out``.
+each under a directional light and under the built-in sky), next to the reference's own floors: per model the mean
+radiance ratio, the yarn-scale rel L1 and its ratio to the fiber-instance floor, pixel FLIP and time, and the speed
+ratio to the reference. One `knitrun compare` report folder per scene under ``--out``.
 
     .venv/bin/python benchmarks/bench_compare.py --pack cotton1.h5 [--spp 64] [--out out/compare]
                                                  [--reference-dir DIR]
 
-``--reference-dir`` reuses references rendered earlier (``DIR/<scene stem>.exr`` with the JSON summary
-`knitbake reference` writes beside it); otherwise each reference is path traced at ``--spp``.
+``--reference-dir`` reuses references rendered earlier: ``DIR/<scene>.exr`` and its floors ``<scene>_instance.exr``,
+``<scene>_mc.exr`` (``benchmarks/bench_floors.py --out DIR`` writes all three, with the JSON summaries that give
+the reference's cost); otherwise the reference and its floors are path traced at ``--spp``.
 """
 
 import argparse
 from pathlib import Path
 
-from knitbake.compare.report import compare_scene
+from knitbake.compare.report import FLOOR_LABELS, compare_scene
 from knitrun.render.ablations import ABLATION_LABELS
 
 SCENES = ("straight_yarn_directional", "straight_yarn_sky", "knit_patch_directional", "knit_patch_sky")
+FLOOR_FILES = {"instance": "_instance", "monte_carlo": "_mc"}
+
+
+def _fmt(x, spec):
+    return "—" if x is None else format(x, spec)
 
 
 def main():
@@ -26,22 +33,29 @@ def main():
     parser.add_argument("--reference-dir", default=None)
     args = parser.parse_args()
     root = Path(__file__).resolve().parent.parent / "examples" / "scenes"
-    print("| scene | model | FLIP | RMSE | relMSE | strip ms | reference s | speed-up |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| scene | model | mean ratio | yarn-scale rel L1 (d) | (2d) | ratio to instance floor (d) | yarn FLIP | "
+          "pixel FLIP | strip ms | speed-up |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in SCENES:
-        ref = None
+        ref, floors = None, {}
         if args.reference_dir:
-            candidate = Path(args.reference_dir) / f"{name}.exr"
-            ref = candidate if candidate.is_file() else None
+            folder = Path(args.reference_dir)
+            if (folder / f"{name}.exr").is_file():
+                ref = folder / f"{name}.exr"
+                floors = {k: folder / f"{name}{s}.exr" for k, s in FLOOR_FILES.items()
+                          if (folder / f"{name}{s}.exr").is_file()}
         summary = compare_scene(root / f"{name}.toml", Path(args.out) / name, reference=ref,
-                                spp=None if ref else args.spp, packs={"cotton1": args.pack})
-        ref_s = summary["reference_seconds"]
-        for model, row in summary["ablations"].items():
-            speed = f"{row['speedup']:.0f}×" if row["speedup"] else "—"
-            print(f"| {name} | {ABLATION_LABELS[model]} | {row['flip']:.4f} | {row['rmse']:.4f} | "
-                  f"{row['rel_mse']:.4f} | {row['ms']:.0f} | {ref_s:.0f} | {speed} |" if ref_s else
-                  f"| {name} | {ABLATION_LABELS[model]} | {row['flip']:.4f} | {row['rmse']:.4f} | "
-                  f"{row['rel_mse']:.4f} | {row['ms']:.0f} | — | — |", flush=True)
+                                spp=None if ref else args.spp, packs={"cotton1": args.pack}, floor_references=floors)
+        inst = summary["floors"].get("instance")
+        rows = [(FLOOR_LABELS[k], r, None) for k, r in summary["floors"].items()] + \
+            [(ABLATION_LABELS[k], r, r["to_instance_floor"]) for k, r in summary["ablations"].items()]
+        for label, row, to_floor in rows:
+            y = row["yarn"]
+            ratio = to_floor["rel_l1"] if to_floor else (y["rel_l1"] / inst["yarn"]["rel_l1"] if inst else None)
+            speed = f"{row['speedup']:.0f}×" if row.get("speedup") else "—"
+            ms = f"{row['ms']:.0f}" if "ms" in row else "—"
+            print(f"| {name} | {label} | {y['mean_ratio']:.3f} | {y['rel_l1']:.3f} | {y['rel_l1_2x']:.3f} | "
+                  f"{_fmt(ratio, '.2f')} | {y['flip']:.4f} | {row['flip']:.4f} | {ms} | {speed} |", flush=True)
 
 
 if __name__ == "__main__":

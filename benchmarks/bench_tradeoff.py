@@ -1,5 +1,5 @@
 """The speed/accuracy trade of the strip renderer: bake quality × runtime knobs → (time, error against the
-reference), with the Pareto front marked, as a Markdown table and a scatter plot (PNG).
+reference at the yarn scale), with the Pareto front marked, as a Markdown table and a scatter plot (PNG).
 
 Three sweeps, each against path-traced references (``--reference-dir``: ``<scene>.exr`` as `knitbake reference`
 writes them; missing ones are rendered there at ``--spp``):
@@ -12,8 +12,12 @@ writes them; missing ones are rendered there at ``--spp``):
   the reference is the path-traced patch of the k = 16 curves (converged: the points move < 1e-6 cm from k = 8).
   Time = the simulated frame's solve + assembly (median of three runs) + the render.
 
-Time: the whole ``render`` call, median of two after a warm-up call. A configuration is on the Pareto front when
-no other configuration of the same scene is at least as fast with at most its FLIP (and better in one).
+Error: the yarn-scale rel L1 (``knitbake.compare.image_metrics.yarn_scale_metrics``, images box-filtered to the
+projected yarn diameter) and its ratio to the reference's fiber-instance floor (``<scene>_instance.exr`` beside the
+reference, traced with seed and fiber seed + 1 when missing); pixel FLIP and the mean radiance ratio are printed
+too. Time: the whole ``render`` call, median of two after a warm-up call. A configuration is on the Pareto front
+when no other configuration of the same scene is at least as fast with at most its yarn-scale error (and better in
+one).
 
     .venv/bin/python benchmarks/bench_tradeoff.py --packs draft=d.h5,standard=s.h5,final=f.h5 --reference-dir DIR
                                                   [--sweeps quality,srbf,gn] [--spp 64] [--plot docs/tradeoff.png]
@@ -32,7 +36,8 @@ from PIL import Image, ImageDraw
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import write_yarn_curves
-from knitbake.compare.image_metrics import compare_images
+from knitbake.compare.image_metrics import compare_images, yarn_scale_metrics
+from knitbake.compare.report import yarn_diameter_px
 from knitrun.render.pipeline import render
 from knitrun.sim.deformations import deformation_frames, parse_deformation
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
@@ -90,13 +95,20 @@ def timed_render(scene, packs):
 
 
 def reference_for(name, scene_path, reference_dir: Path, spp: int):
-    """The reference image of a scene, path traced with `knitbake reference` into ``reference_dir`` if missing."""
-    path = reference_dir / f"{name}.exr"
-    if not path.is_file():
-        reference_dir.mkdir(parents=True, exist_ok=True)
-        subprocess.run([str(Path(sys.executable).parent / "knitbake"), "reference", str(scene_path), "-o", str(path),
-                        "--spp", str(spp)], check=True)
-    return read_exr(path)
+    """(reference image, yarn diameter in px, the instance floor's yarn-scale rel L1) of a scene; the reference and
+    its instance floor are path traced with `knitbake reference` into ``reference_dir`` where missing."""
+    scene = load_scene(scene_path)
+    images = {}
+    for suffix, extra in (("", []), ("_instance", ["--seed", str(scene.render.seed + 1),
+                                                   "--fiber-seed", str(scene.render.seed + 1)])):
+        path = reference_dir / f"{name}{suffix}.exr"
+        if not path.is_file():
+            reference_dir.mkdir(parents=True, exist_ok=True)
+            subprocess.run([str(Path(sys.executable).parent / "knitbake"), "reference", str(scene_path), "-o",
+                            str(path), "--spp", str(spp), *extra], check=True)
+        images[suffix] = read_exr(path)
+    diameter = yarn_diameter_px(scene)
+    return images[""], diameter, yarn_scale_metrics(images["_instance"], images[""], diameter)["rel_l1"]
 
 
 def sweep_quality(packs, reference_dir, spp):
@@ -104,6 +116,7 @@ def sweep_quality(packs, reference_dir, spp):
     for name in QUALITY_SCENES:
         path = ROOT / "examples" / "scenes" / f"{name}.toml"
         base, reference = load_scene(path), reference_for(name, path, reference_dir, spp)
+        rows.append(floor_row(name, reference))
         for quality, pack in packs.items():
             for msaa in MSAA:
                 for shadow in SHADOW:
@@ -111,7 +124,7 @@ def sweep_quality(packs, reference_dir, spp):
                                                                                  shadow_map_size=shadow))
                     seconds, image = timed_render(scene, {"cotton1": pack})
                     rows.append({"scene": name, "quality": quality, "knob": f"MSAA {msaa}, shadow {shadow}²",
-                                 "msaa": msaa, "ms": 1e3 * seconds, **metrics(image, reference)})
+                                 "msaa": msaa, "ms": 1e3 * seconds, **metrics(image, *reference)})
     return rows
 
 
@@ -120,11 +133,12 @@ def sweep_srbf(pack, reference_dir, spp):
     for name in SKY_SCENES:
         path = ROOT / "examples" / "scenes" / f"{name}.toml"
         base, reference = load_scene(path), reference_for(name, path, reference_dir, spp)
+        rows.append(floor_row(name, reference))
         for j in SRBF:
             scene = dataclasses.replace(base, render=dataclasses.replace(base.render, srbf_count=j))
             seconds, image = timed_render(scene, {"cotton1": pack})
             rows.append({"scene": name, "quality": "standard", "knob": f"J = {j}", "label": str(j),
-                         "ms": 1e3 * seconds, **metrics(image, reference)})
+                         "ms": 1e3 * seconds, **metrics(image, *reference)})
     return rows
 
 
@@ -146,28 +160,36 @@ def sweep_gn(pack, reference_dir, spp, work: Path):
         scenes[k] = work / f"gn{k}.toml"
         scenes[k].write_text(GN_SCENE_TOML.format(iterations=k, curves=f"gn{k}.h5", cx=centre[0], cy=centre[1]))
     reference = reference_for(GN_SCENE, scenes[GN_CONVERGED], reference_dir, spp)
-    rows = []
+    rows = [floor_row(GN_SCENE, reference)]
     for k in GN:
         seconds, image = timed_render(load_scene(scenes[k]), {"cotton1": pack})
         rows.append({"scene": GN_SCENE, "quality": "standard", "knob": f"{k} GN iterations (energy {energy[k]:.6g})",
-                     "label": str(k), "ms": 1e3 * seconds + sim_ms[k], **metrics(image, reference)})
+                     "label": str(k), "ms": 1e3 * seconds + sim_ms[k], **metrics(image, *reference)})
     return rows
 
 
-def metrics(image, reference):
-    m = compare_images(image, reference)
-    return {"flip": m["flip"], "rmse": m["rmse"]}
+def metrics(image, reference, diameter, floor):
+    """Yarn-scale rel L1 (``err``), its ratio to the instance floor, pixel FLIP and the mean radiance ratio."""
+    yarn = yarn_scale_metrics(image, reference, diameter)
+    return {"err": yarn["rel_l1"], "to_floor": yarn["rel_l1"] / floor, "flip": compare_images(image, reference)["flip"],
+            "mean_ratio": yarn["mean_ratio"]}
+
+
+def floor_row(name, reference):
+    """The instance floor as a row of the table (not a configuration: no time, never on the front)."""
+    return {"scene": name, "floor": True, "err": reference[2], "to_floor": 1.0}
 
 
 def pareto(rows):
-    """Mark rows (dicts with 'ms', 'flip') that no other row dominates (no worse in both, better in one)."""
+    """Mark rows (dicts with 'ms', 'err') that no other row dominates (no worse in both, better in one)."""
     for r in rows:
-        r["pareto"] = not any(o["ms"] <= r["ms"] and o["flip"] <= r["flip"] and (o["ms"], o["flip"]) != (r["ms"], r["flip"])
+        r["pareto"] = not any(o["ms"] <= r["ms"] and o["err"] <= r["err"] and (o["ms"], o["err"]) != (r["ms"], r["err"])
                               for o in rows)
 
 
-def plot(path, by_scene):
-    """Scatter of FLIP against ms per scene (one panel each, two rows), Pareto front joined; PIL only."""
+def plot(path, by_scene, floors):
+    """Scatter of the yarn-scale error against ms per scene (one panel each, two rows), Pareto front joined, the
+    instance floor as a dashed line; PIL only."""
     w, h, pad = 480, 320, 48
     cols = (len(by_scene) + 1) // 2
     canvas = Image.new("RGB", (w * cols, h * 2), "white")
@@ -176,25 +198,31 @@ def plot(path, by_scene):
     for k, (name, rows) in enumerate(by_scene.items()):
         x0, y0 = (k % cols) * w, (k // cols) * h
         ms = np.array([r["ms"] for r in rows])
-        fl = np.array([r["flip"] for r in rows])
+        floor = next((r["err"] for r in floors.get(name, [])), None)
+        fl = np.array([r["err"] for r in rows] + ([floor] if floor is not None else []))
         lo_x, hi_x = ms.min() * 0.9, ms.max() * 1.1
-        lo_y, hi_y = fl.min() * 0.97, fl.max() * 1.03
+        lo_y, hi_y = min(0.0, fl.min()), fl.max() * 1.05
 
         def xy(m, f):
             return (x0 + pad + (m - lo_x) / (hi_x - lo_x) * (w - 2 * pad),
                     y0 + h - pad - (f - lo_y) / (hi_y - lo_y) * (h - 2 * pad))
 
         draw.rectangle([x0 + pad, y0 + pad, x0 + w - pad, y0 + h - pad], outline="black")
-        draw.text((x0 + pad, y0 + 8), f"{name}: FLIP vs ms", fill="black")
+        draw.text((x0 + pad, y0 + 8), f"{name}: yarn-scale rel L1 vs ms", fill="black")
+        if floor is not None:
+            fy = xy(lo_x, floor)[1]
+            for x in range(x0 + pad, x0 + w - pad, 12):
+                draw.line([(x, fy), (x + 6, fy)], fill=(150, 150, 150))
+            draw.text((x0 + w - pad - 90, fy - 12), "instance floor", fill=(120, 120, 120))
         draw.text((x0 + pad, y0 + h - pad + 6), f"{lo_x:.0f} ms", fill="black")
         draw.text((x0 + w - pad - 60, y0 + h - pad + 6), f"{hi_x:.0f} ms", fill="black")
         draw.text((x0 + 2, y0 + pad), f"{hi_y:.3f}", fill="black")
         draw.text((x0 + 2, y0 + h - pad - 10), f"{lo_y:.3f}", fill="black")
         front = sorted((r for r in rows if r["pareto"]), key=lambda r: r["ms"])
         if len(front) > 1:
-            draw.line([xy(r["ms"], r["flip"]) for r in front], fill=(120, 120, 120), width=2)
+            draw.line([xy(r["ms"], r["err"]) for r in front], fill=(120, 120, 120), width=2)
         for r in rows:
-            cx, cy = xy(r["ms"], r["flip"])
+            cx, cy = xy(r["ms"], r["err"])
             size = 2 + r.get("msaa", 2)
             draw.ellipse([cx - size, cy - size, cx + size, cy + size], outline=colours.get(r["quality"], "black"),
                          width=2 if "2048" in r["knob"] or "label" in r else 1)
@@ -227,18 +255,21 @@ def main():
         rows += sweep_srbf(packs["standard"], reference_dir, args.spp)
     if "gn" in sweeps:
         rows += sweep_gn(packs["standard"], reference_dir, args.spp, Path(args.work_dir))
-    by_scene = {}
+    by_scene, floors = {}, {}
     for r in rows:
-        by_scene.setdefault(r["scene"], []).append(r)
+        (floors if r.get("floor") else by_scene).setdefault(r["scene"], []).append(r)
     for scene_rows in by_scene.values():
         pareto(scene_rows)
-    print("| scene | bake | knob | ms | FLIP | RMSE | Pareto |")
-    print("|---|---|---|---|---|---|---|")
+    print("| scene | bake | knob | ms | yarn-scale rel L1 | ratio to instance floor | mean ratio | pixel FLIP | "
+          "Pareto |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, scene_rows in by_scene.items():
+        floor = floors[name][0]["err"]
+        print(f"| {name} | — | *instance floor* | — | {floor:.3f} | 1.00 | — | — | |")
         for r in sorted(scene_rows, key=lambda r: r["ms"]):
-            print(f"| {name} | {r['quality']} | {r['knob']} | {r['ms']:.0f} | {r['flip']:.4f} | {r['rmse']:.4f} | "
-                  f"{'**yes**' if r['pareto'] else ''} |")
-    plot(args.plot, by_scene)
+            print(f"| {name} | {r['quality']} | {r['knob']} | {r['ms']:.0f} | {r['err']:.3f} | {r['to_floor']:.2f} | "
+                  f"{r['mean_ratio']:.3f} | {r['flip']:.4f} | {'**yes**' if r['pareto'] else ''} |")
+    plot(args.plot, by_scene, floors)
     print(f"\nplot: {args.plot}")
 
 

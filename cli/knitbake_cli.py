@@ -197,12 +197,15 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
 @click.option("-o", "--output", type=SuffixPath(".exr"), required=True,
               help="Linear float32 EXR; a tone-mapped PNG preview and a JSON summary are written next to it.")
 @click.option("--spp", type=click.IntRange(min=1), default=None, help="Samples per pixel (default: the scene's).")
-@click.option("--seed", type=int, default=None, help="Random seed (default: the scene's).")
+@click.option("--seed", type=int, default=None, help="Random seed of the path sampling (default: the scene's).")
+@click.option("--fiber-seed", type=int, default=None,
+              help="Random seed of the fibers (default: --seed). Another fiber seed draws another instance of the "
+                   "same yarns: the fiber-instance floor of knitrun compare.")
 @click.option("--max-depth", type=click.IntRange(min=1), default=None,
               help="Maximum scattering events per path (default: the scene's).")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="PNG preview exposure in stops.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
-def reference(scene_path, output, spp, seed, max_depth, exposure, as_json):
+def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, as_json):
     """Path-trace a scene with explicit fibers: the ground truth every fast image is compared with.
 
     Example: knitbake reference examples/scenes/straight_yarn_directional.toml -o ref.exr --spp 64
@@ -228,7 +231,8 @@ def reference(scene_path, output, spp, seed, max_depth, exposure, as_json):
             bar.update(done - last[0])
             last[0] = done
 
-        image, facts = trace_reference(scene, spp, seed, max_depth, progress=progress, on_built=built)
+        image, facts = trace_reference(scene, spp, seed, max_depth, progress=progress, on_built=built,
+                                       fiber_seed=fiber_seed)
     summary = write_reference(output, image, {"scene": scene_path, **facts}, exposure)
     if as_json:
         echo_json(summary)

@@ -221,9 +221,18 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
               help="Asset pack for a yarn; overrides the scene's `pack`. Repeatable.")
 @click.option("--exposure", type=float, default=0.0, show_default=True,
               help="Exposure in stops of the PNGs and of the tone mapping FLIP sees.")
+@click.option("--instance-floor", type=SuffixPath(".exr"), default=None,
+              help="With --reference: the reference of another fiber instance and sampling seed (knitbake reference "
+                   "--seed S+1 --fiber-seed S+1).")
+@click.option("--mc-floor", type=SuffixPath(".exr"), default=None,
+              help="With --reference: the same fibers with another sampling seed (knitbake reference --seed S+1 "
+                   "--fiber-seed S).")
+@click.option("--no-floors", is_flag=True, help="Do not path trace the two floor references (a third of the time).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def compare(scene_path, out_dir, reference, spp, pack_values, exposure, as_json):
-    """Compare the strip renderer (full model and its ablations) with the reference path tracer.
+def compare(scene_path, out_dir, reference, spp, pack_values, exposure, instance_floor, mc_floor, no_floors,
+            as_json):
+    """Compare the strip renderer (full model and its ablations) with the reference path tracer, next to the
+    reference's own floors (another fiber instance; another sampling seed), per pixel and at the yarn scale.
 
     Example: knitrun compare examples/scenes/straight_yarn_directional.toml --pack cotton1=cotton1.h5 --spp 64 -o
     report/
@@ -232,13 +241,21 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, as_json)
 
     if reference is not None and spp is not None:
         raise FormatError("--reference and --spp exclude each other (--spp sets the reference's samples)")
+    if reference is None and (instance_floor or mc_floor):
+        raise FormatError("--instance-floor and --mc-floor go with --reference (without it the floors are traced)")
+    floor_files = {k: v for k, v in (("instance", instance_floor), ("monte_carlo", mc_floor)) if v}
     summary = compare_scene(scene_path, out_dir, reference=reference, spp=spp, packs=_pack_overrides(pack_values),
-                            exposure=exposure, progress=lambda message: click.echo(message, err=True))
+                            exposure=exposure, floors=not no_floors, floor_references=floor_files,
+                            progress=lambda message: click.echo(message, err=True))
     if as_json:
         echo_json(summary)
         return
+    for name, row in summary["floors"].items():
+        click.echo(f"{name + ' floor':30s} yarn-scale rel L1 {row['yarn']['rel_l1']:.3f}  mean ratio "
+                   f"{row['yarn']['mean_ratio']:.3f}  FLIP {row['flip']:.4f}")
     for name, row in summary["ablations"].items():
         speed = f", {row['speedup']:.0f}x faster than the reference" if row["speedup"] else ""
-        click.echo(f"{ABLATION_LABELS[name]:30s} FLIP {row['flip']:.4f}  RMSE {row['rmse']:.4f}  "
-                   f"relMSE {row['rel_mse']:.4f}  {row['ms']:.0f} ms{speed}")
+        floor = f" ({row['to_instance_floor']['rel_l1']:.2f}x the floor)" if row["to_instance_floor"] else ""
+        click.echo(f"{ABLATION_LABELS[name]:30s} yarn-scale rel L1 {row['yarn']['rel_l1']:.3f}{floor}  mean ratio "
+                   f"{row['yarn']['mean_ratio']:.3f}  FLIP {row['flip']:.4f}  {row['ms']:.0f} ms{speed}")
     click.echo(f"report: {Path(out_dir) / 'report.md'}")

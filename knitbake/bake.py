@@ -37,7 +37,7 @@ from knitbake.stages.ds_precompute import bake_dual_scattering_stage
 from knitbake.stages.im_table import bake_environment_stage
 from knitbake.stages.stage_result import StageResult
 from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage
-from knitrun.render.camera import scene_camera, tan_half_fov
+from knitrun.render.camera import pixel_size, scene_camera
 
 STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment")
 
@@ -133,17 +133,8 @@ def scene_needs(scene, spec: YarnSpec) -> dict:
     largest on-screen yarn width (power of two, 8–512), width from the period/diameter aspect."""
     from data_formats.scene import EnvironmentLight
 
-    cam = scene_camera(scene)
-    widths = []
-    for entry in scene.yarns:
-        if entry.spec.name != spec.name:
-            continue
-        if cam.ortho_height:
-            pixel = cam.ortho_height / cam.height
-        else:  # nearest plausible distance: the camera's distance to its look-at point
-            dist = float(np.linalg.norm(np.subtract(cam.look_at, cam.position)))
-            pixel = 2 * dist * tan_half_fov(cam) / cam.height
-        widths.append(2 * entry.radius / pixel)
+    pixel = pixel_size(scene_camera(scene))  # at the look-at point: the nearest plausible distance
+    widths = [2 * entry.radius / pixel for entry in scene.yarns if entry.spec.name == spec.name]
     height = int(min(512, max(8, 2 ** math.ceil(math.log2(max(widths or [8.0]))))))
     width = int(min(4096, 2 ** math.ceil(math.log2(height * spec.geometry.ply_pitch / (2 * spec.radius)))))
     return {"environment": any(isinstance(light, EnvironmentLight) for light in scene.lights),

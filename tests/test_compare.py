@@ -1,13 +1,15 @@
 """Image metrics and `knitrun compare`: FLIP/RMSE/relMSE behave as metrics; the report folder is complete."""
 
 import json
+import math
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from cli.knitrun_cli import main as knitrun
-from knitbake.compare.image_metrics import compare_images, flip_error
+from data_formats.yarn_spec import load_preset
+from knitbake.compare.image_metrics import compare_images, flip_error, radiance_ratio, yarn_filter, yarn_scale_metrics
 from tests.helpers import FRONT, SUN, straight, write_scene
 
 
@@ -34,6 +36,39 @@ def test_metrics_refuse_mismatched_or_non_finite_images():
         compare_images(b, a)
 
 
+def test_yarn_filter_is_a_box_mean_that_keeps_the_mean():
+    img = np.zeros((30, 40, 3))
+    img[10:20, 10:20] = 1.0
+    f = yarn_filter(img, 5)
+    assert f[15, 15, 0] == pytest.approx(1.0) and f[10, 15, 0] == pytest.approx(0.6)  # 3 of 5 rows inside
+    assert f.sum() == pytest.approx(img.sum())  # the square is far from the edges
+    np.testing.assert_array_equal(yarn_filter(img, 0.4), img)  # below one pixel: unchanged
+
+
+def test_yarn_scale_metrics_forgive_a_shift_below_the_yarn_scale_but_not_a_brightness_error():
+    """Two 'yarns' of the same brightness one pixel apart differ completely per pixel, little at the yarn scale; a
+    10 % darker yarn in place differs by 10 % at every scale."""
+    ref = np.zeros((64, 64, 3), np.float32)
+    ref[28:36:2] = 1.0  # thin bright lines: fibers
+    shifted = np.roll(ref, 1, axis=0)
+    darker = 0.9 * ref
+    pixel_l1 = np.abs(shifted - ref).sum() / ref.sum()
+    shift, dark = yarn_scale_metrics(shifted, ref, 8), yarn_scale_metrics(darker, ref, 8)
+    assert pixel_l1 == pytest.approx(2.0) and shift["rel_l1"] < 0.15 * pixel_l1 and shift["rel_l1_2x"] < shift["rel_l1"]
+    assert dark["rel_l1"] == pytest.approx(0.1, rel=1e-6) and dark["mean_ratio"] == pytest.approx(0.9, rel=1e-6)
+    assert shift["mean_ratio"] == pytest.approx(1.0)
+
+
+def test_radiance_ratio_skips_dark_tiles_and_finds_the_worst():
+    ref = np.zeros((40, 40, 3))
+    ref[:20] = 1.0  # the lower half is background
+    test = ref.copy()
+    test[:10, 20:] *= 0.5  # two lit tiles at half brightness
+    r = radiance_ratio(test, ref, tile=10)
+    assert r["tiles"] == 8 and r["worst_tile"] == [0, 2] and r["worst_tile_ratio"] == pytest.approx(0.5)
+    assert r["mean_ratio"] == pytest.approx(1 - 0.5 * 200 / 800)
+
+
 def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     scene = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     out = tmp_path / "report"
@@ -42,15 +77,30 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)
     assert set(summary["ablations"]) >= {"plain_ds", "xi", "xi_shadowing", "full"}
+    # the FRONT camera: 30° vertical field of view, 48 rows, 1 cm from the yarn
+    pixel = 2 * math.tan(math.radians(15)) / 48
+    assert summary["yarn_px"] == pytest.approx(2 * load_preset("cotton1").radius / pixel)
     for row in summary["ablations"].values():
         assert 0 <= row["flip"] <= 1 and row["rmse"] >= 0 and row["speedup"] > 0
+        assert row["yarn"]["rel_l1"] >= 0 and row["yarn"]["mean_ratio"] > 0
+        assert row["to_instance_floor"]["rel_l1"] == pytest.approx(
+            row["yarn"]["rel_l1"] / summary["floors"]["instance"]["yarn"]["rel_l1"])
+    floors = summary["floors"]
+    assert floors["instance"]["image"]["fiber_seed"] == 1 and floors["monte_carlo"]["image"]["fiber_seed"] == 0
+    assert floors["instance"]["image"]["seed"] == floors["monte_carlo"]["image"]["seed"] == 1
     for name in ("reference.exr", "reference.png", "report.md", "report.json", "side_by_side.png",
-                 "strip_full.png", "flip_full.png", "diff_full.png"):
+                 "strip_full.png", "flip_full.png", "diff_full.png", "floor_instance.exr", "floor_monte_carlo.png"):
         assert (out / name).is_file(), name
-    assert "FLIP" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
     again = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"),
-                                         "--pack", f"cotton1={pack}", "-o", str(tmp_path / "r2")])
+                                         "--instance-floor", str(out / "floor_instance.exr"),
+                                         "--pack", f"cotton1={pack}", "-o", str(tmp_path / "r2"), "--json"])
     assert again.exit_code == 0, again.output
+    given = json.loads(again.stdout)
+    assert set(given["floors"]) == {"instance"}
+    for key in ("rel_l1", "rel_l1_2x", "flip", "mean_ratio"):  # the same floor, read instead of traced
+        assert given["floors"]["instance"]["yarn"][key] == pytest.approx(floors["instance"]["yarn"][key])
     bad = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"), "--spp", "4",
                                        "-o", str(tmp_path / "r3")])
     assert bad.exit_code != 0 and "exclude" in bad.output

@@ -6,15 +6,33 @@
 * RMSE: root mean square of the linear RGB difference (radiance units).
 * relMSE: mean of (test − ref)² / (ref² + 0.01) over pixels and channels (the 0.01 keeps dark pixels from
   dominating), the usual relative MSE of rendering papers.
+
+At the yarn scale (``yarn_scale_metrics``): a strip image cannot match one path-traced fiber instance pixel for
+pixel (two references with different fiber seeds differ by as much as a model), so both images are first box-filtered
+to the yarn's projected diameter d in pixels (``yarn_filter``: the mean over a d × d window centred on each pixel,
+edges extended), and at 2d:
+
+* rel L1 = Σ |F(test) − F(ref)| / Σ |F(ref)| over pixels and channels;
+* relMSE as above, of the filtered images;
+* FLIP of the filtered images (as shown at full resolution);
+* mean radiance ratio: mean luminance of test over ref (``data_formats.conventions.LUMINANCE``), over the image and
+  per tile of ``TILE_DIAMETERS`` · d pixels; tiles where the reference's mean luminance is below ``SIGNAL`` of its
+  brightest tile's are skipped; the worst tile is the one whose ratio is farthest from 1 (in log).
 """
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
+import numpy as np
+from scipy.ndimage import uniform_filter
+
+from data_formats.conventions import LUMINANCE
 from data_formats.images import tonemap
 
 REL_MSE_EPSILON = 0.01
+TILE_DIAMETERS = 2  # tile side of the radiance ratio, in yarn diameters
+SIGNAL = 0.1  # tiles darker than this fraction of the brightest reference tile are not compared
 
 
 def _ldr(img, exposure_stops):
@@ -52,3 +70,52 @@ def _checked(test, reference):
     if not (np.all(np.isfinite(test)) and np.all(np.isfinite(reference))):
         raise ValueError("images to compare must be finite")
     return test, reference
+
+
+def yarn_filter(img, size: float) -> np.ndarray:
+    """(H, W, 3) float64: the mean of ``img`` over a size × size pixel window around each pixel (size rounded, ≥ 1;
+    the image's edge pixels extend beyond it)."""
+    k = max(1, int(round(size)))
+    return uniform_filter(np.asarray(img, np.float64), size=(k, k, 1), mode="nearest")
+
+
+def _rel_l1(test, ref):
+    den = np.abs(ref).sum()
+    return float(np.abs(test - ref).sum() / den) if den > 0 else (0.0 if np.all(test == ref) else math.inf)
+
+
+def radiance_ratio(test, reference, tile: int) -> dict:
+    """Mean luminance of ``test`` over ``reference``: over the whole image (``mean_ratio``) and per tile × tile block
+    where the reference has signal (module docstring): the worst tile's ratio, its (row, column) in tiles and how
+    many tiles were compared."""
+    lt, lr = np.asarray(test, np.float64) @ LUMINANCE, np.asarray(reference, np.float64) @ LUMINANCE
+    total = lr.mean()
+    out = {"mean_ratio": float(lt.mean() / total) if total > 0 else math.nan}
+    rows, cols = max(1, lr.shape[0] // tile), max(1, lr.shape[1] // tile)
+    h, w = rows * tile, cols * tile
+    if lr.shape[0] < tile or lr.shape[1] < tile:  # an image smaller than one tile is one tile
+        h, w = lr.shape
+    mt = lt[:h, :w].reshape(rows, h // rows, cols, w // cols).mean(axis=(1, 3))
+    mr = lr[:h, :w].reshape(rows, h // rows, cols, w // cols).mean(axis=(1, 3))
+    lit = mr > SIGNAL * mr.max() if mr.max() > 0 else np.zeros_like(mr, bool)
+    if not lit.any():
+        return {**out, "worst_tile_ratio": math.nan, "worst_tile": None, "tiles": 0}
+    ratio = np.where(lit, mt / np.where(lit, mr, 1.0), 1.0)
+    log_error = np.where(lit, np.abs(np.log(np.maximum(ratio, 1e-12))), -1.0)
+    r, c = np.unravel_index(np.argmax(log_error), ratio.shape)
+    return {**out, "worst_tile_ratio": float(ratio[r, c]), "worst_tile": [int(r), int(c)], "tiles": int(lit.sum())}
+
+
+def yarn_scale_metrics(test, reference, diameter_px: float, exposure_stops: float = 0.0) -> dict:
+    """The yarn-scale errors of ``test`` against ``reference`` (module docstring) for a yarn ``diameter_px`` pixels
+    wide on screen: rel L1 and relMSE at the diameter and at twice it, FLIP at the diameter, the mean and worst-tile
+    radiance ratios."""
+    test, reference = _checked(test, reference)
+    out = {"yarn_px": float(diameter_px)}
+    for suffix, size in (("", diameter_px), ("_2x", 2 * diameter_px)):
+        ft, fr = yarn_filter(test, size), yarn_filter(reference, size)
+        out["rel_l1" + suffix] = _rel_l1(ft, fr)
+        out["rel_mse" + suffix] = float(np.mean((ft - fr) ** 2 / (fr ** 2 + REL_MSE_EPSILON)))
+        if not suffix:
+            out["flip"], _ = flip_error(ft.astype(np.float32), fr.astype(np.float32), exposure_stops)
+    return {**out, **radiance_ratio(test, reference, max(1, int(round(TILE_DIAMETERS * diameter_px))))}

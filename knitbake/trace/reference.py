@@ -43,7 +43,7 @@ class ReferenceScene:
 
 
 def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
-    """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``."""
+    """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``; ``seed`` draws the fibers."""
     t0 = time.perf_counter()
     parts, types = [], []
     for k, entry in enumerate(scene.yarns):
@@ -78,17 +78,22 @@ def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
     return ReferenceScene(tracer, camera, facts)
 
 
-def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None):
-    """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``on_built(facts)``
-    is called once the tracer scene exists (before rendering), ``progress(done, total)`` per pass of samples.
-    facts: width, height, spp, seed, max_depth, render_s, rays, rays_per_s, the build facts of ``build_reference``
-    (fibers, segments, triangles, sweep_s, tessellate_s, embree_build_s) and mean_rgb."""
-    built = build_reference(scene, seed=seed)
+def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None,
+                    fiber_seed: int | None = None):
+    """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``seed`` drives the
+    path sampling and, unless ``fiber_seed`` is given, the fibers too: another fiber seed draws another instance of
+    the same yarns (the fiber-instance floor of a comparison), another sampling seed another estimate of the same
+    image (its Monte Carlo floor). ``on_built(facts)`` is called once the tracer scene exists (before rendering),
+    ``progress(done, total)`` per pass of samples. facts: width, height, spp, seed, fiber_seed, max_depth, render_s,
+    rays, rays_per_s, the build facts of ``build_reference`` (fibers, segments, triangles, sweep_s, tessellate_s,
+    embree_build_s) and mean_rgb."""
+    fiber_seed = seed if fiber_seed is None else fiber_seed
+    built = build_reference(scene, seed=fiber_seed)
     if on_built is not None:
         on_built(built.facts)
     image, stats = render(built.tracer, built.camera, spp, seed=seed, max_depth=max_depth, progress=progress)
     facts = {"width": built.camera.width, "height": built.camera.height, "spp": spp, "seed": seed,
-             "max_depth": max_depth, "render_s": stats.seconds, "rays": stats.rays,
+             "fiber_seed": fiber_seed, "max_depth": max_depth, "render_s": stats.seconds, "rays": stats.rays,
              "rays_per_s": stats.rays_per_second, **built.facts, "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
     return image, facts
 

@@ -55,6 +55,16 @@ def tan_half_fov(camera: Camera):
     return math.tan(math.radians(camera.fov_deg) / 2)
 
 
+def pixel_size(camera: Camera, distance: float | None = None) -> float:
+    """Side of one pixel in scene units at view depth ``distance`` (default: the depth of ``look_at``); an
+    orthographic camera's pixels have one size at every depth."""
+    if camera.ortho_height > 0:
+        return camera.ortho_height / camera.height
+    if distance is None:
+        distance = float(np.linalg.norm(np.subtract(camera.look_at, camera.position)))
+    return 2.0 * distance * tan_half_fov(camera) / camera.height
+
+
 def project(camera: Camera, points):
     """Screen position of world ``points`` (..., 3): returns (X, Y, z) arrays of shape (...), X and Y in pixels
     (module docstring: X = column, Y = row, pixel centres at +0.5), z the view depth along fwd in scene units.
