@@ -1,16 +1,24 @@
-"""Image metrics and `knitrun compare`: FLIP/RMSE/relMSE behave as metrics; the report folder is complete."""
+"""Image metrics and `knitrun compare`: FLIP/RMSE/relMSE and the yarn-scale metrics behave as metrics; the report
+folder is complete, floors included; and (slow) the full model keeps the straight yarn's brightness."""
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from cli.knitrun_cli import main as knitrun
+from data_formats.scene import load_scene
 from data_formats.yarn_spec import load_preset
+from knitbake.bake import bake
 from knitbake.compare.image_metrics import compare_images, flip_error, radiance_ratio, yarn_filter, yarn_scale_metrics
+from knitbake.trace.reference import trace_reference
+from knitrun.render.pipeline import render
 from tests.helpers import FRONT, SUN, straight, write_scene
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
 
 
 def test_metrics_are_zero_for_identical_images_and_grow_with_the_difference():
@@ -104,3 +112,18 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     bad = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"), "--spp", "4",
                                        "-o", str(tmp_path / "r3")])
     assert bad.exit_code != 0 and "exclude" in bad.output
+
+
+
+@pytest.mark.slow
+def test_the_full_model_keeps_the_straight_yarns_brightness(tmp_path):
+    """Brightness is the first thing a user sees: on the example straight yarn under the directional light, the full
+    model's mean radiance stays within ±10 % of the path-traced reference's (cotton1 at standard quality, the
+    reference at the scene's spp; about a minute)."""
+    scene = load_scene(EXAMPLES / "straight_yarn_directional.toml")
+    pack = tmp_path / "cotton1.h5"
+    bake(load_preset("cotton1"), pack, quality="standard")
+    reference, _ = trace_reference(scene, scene.render.spp, scene.render.seed, scene.render.max_depth)
+    image = render(scene, {"cotton1": str(pack)}).image
+    ratio = radiance_ratio(image, reference, tile=64)["mean_ratio"]
+    assert 0.9 <= ratio <= 1.1, f"full model at {ratio:.3f} of the reference's mean radiance"
