@@ -228,10 +228,10 @@ def plot(path, by_scene, floors):
                          width=2 if "2048" in r["knob"] or "label" in r else 1)
             if "label" in r:
                 draw.text((cx + 6, cy - 6), r["label"], fill="black")
-        legend = ("orange draft, blue standard, green final; size: MSAA; thick: 2048² shadow map"
+        legend = ("orange draft, blue standard, green final; size: MSAA; thick: 2048 x 2048 shadow map"
                   if name in QUALITY_SCENES else "labels: SRBF count J" if name in SKY_SCENES
                   else "labels: Gauss-Newton iterations (time includes the solve)")
-        draw.text((x0 + pad + 4, y0 + pad + 4), legend, fill="black")
+        draw.text((x0 + pad, y0 + 24), legend, fill="black")
     canvas.save(path)
 
 
