@@ -164,9 +164,11 @@ type = "environment"
 builtin = "sky"
 ''')
     out = tmp_path / "r.exr"
-    result = run(knitbake, "reference", scene, "-o", out, "--spp", 2, "--json")
+    result = run(knitbake, "reference", scene, "-o", out, "--spp", 2, "--fiber-seed", 3, "--json")
     assert result.exit_code == 0, result.output + result.stderr
     summary = json.loads(result.stdout)
+    assert (summary["seed"], summary["fiber_seed"]) == (0, 3)
+    assert json.loads(out.with_suffix(".json").read_text()) == summary  # the library wrote what the CLI printed
     image = read_exr(out)
     assert image.shape == (16, 48, 3) and np.all(np.isfinite(image)) and image.max() > 0
     assert (tmp_path / "r.png").stat().st_size > 100 and summary["rays_per_s"] > 0 and summary["triangles"] > 0

@@ -122,13 +122,14 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     instance = floor_rows.get("instance")
 
     render(scene, packs, ABLATIONS["full"])  # pays the kernels' compile or cache load once
-    rows, maps = {}, {}
+    rows, full = {}, None
     for name in ablations:
         say(f"strip renderer: {name}")
         result = render(scene, packs, ABLATIONS[name])
         seconds = sum(result.timings.values())
         metrics, error_map = _metrics(result.image, ref, diameter, exposure, magma=True)
-        maps[name] = result.image
+        if name == "full":
+            full = result.image
         write_exr(out / f"strip_{name}.exr", result.image)
         write_png(out / f"strip_{name}.png", result.image, exposure)
         write_png(out / f"flip_{name}.png", _srgb_to_linear(error_map))
@@ -136,9 +137,9 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         rows[name] = {**metrics, "to_instance_floor": _to_floor(metrics, instance), "ms": seconds * 1e3,
                       "ms_per_pass": {k: v * 1e3 for k, v in result.timings.items()},
                       "speedup": None if ref_seconds is None else ref_seconds / seconds}
-    if "full" in rows:
-        full, filtered_ref = maps["full"], yarn_filter(ref, diameter).astype(np.float32)
-        _, yarn_map = flip_error(yarn_filter(full, diameter).astype(np.float32), filtered_ref, exposure, magma=True)
+    if full is not None:
+        _, yarn_map = flip_error(yarn_filter(full, diameter).astype(np.float32),
+                                 yarn_filter(ref, diameter).astype(np.float32), exposure, magma=True)
         scale = 2.0 ** exposure
         wide = ref.shape[1] > ref.shape[0]  # stack wide images vertically
         write_png(out / "side_by_side.png", np.concatenate([np.clip(ref * scale, 0, 1), np.clip(full * scale, 0, 1),
