@@ -10,6 +10,7 @@ Stages (each a function ``(spec, settings, seed, progress) -> StageResult``; ``p
 | textures | ``textures/{normal,tangent,ao,coverage}/mip*`` | always |
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
+| interreflection | ``interreflection/albedo`` (the yarn's hull albedo ρ_Y) | always |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
 stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
@@ -37,9 +38,10 @@ from knitbake.stages.ds_precompute import bake_dual_scattering_stage
 from knitbake.stages.im_table import bake_environment_stage
 from knitbake.stages.stage_result import StageResult
 from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage
+from knitbake.stages.yarn_albedo import bake_yarn_albedo_stage
 from knitrun.render.camera import pixel_size, scene_camera
 
-STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment")
+STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment", "interreflection")
 
 QUALITY = {
     "draft": {
@@ -50,6 +52,7 @@ QUALITY = {
         "textures": {"width": 128, "height": 32, "samples": 2, "ao_rays": 8},
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (12, 24, 12, 32)},
+        "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2},
     },
     "standard": {
         "dual_scattering": {"n_theta": 64},
@@ -59,6 +62,7 @@ QUALITY = {
         "textures": {"width": 256, "height": 64, "samples": 4, "ao_rays": 16},
         "flyaway": {"width": 256, "height": 64, "samples": 4},
         "environment": {"shape": (24, 48, 24, 96)},
+        "interreflection": {"n_views": 6, "rows": 16, "spp": 4, "batches": 3},
     },
     "final": {
         "dual_scattering": {"n_theta": 128},
@@ -68,6 +72,7 @@ QUALITY = {
         "textures": {"width": 512, "height": 128, "samples": 6, "ao_rays": 32},
         "flyaway": {"width": 512, "height": 128, "samples": 6},
         "environment": {"shape": (32, 64, 32, 128)},
+        "interreflection": {"n_views": 8, "rows": 32, "spp": 8, "batches": 4},
     },
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.
@@ -111,7 +116,7 @@ def _load_stage(path: Path) -> StageResult | None:
 
 STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
           "shadowing": bake_shadowing_stage, "textures": bake_regular_stage, "flyaway": bake_flyaway_stage,
-          "environment": bake_environment_stage}
+          "environment": bake_environment_stage, "interreflection": bake_yarn_albedo_stage}
 
 
 def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None = None) -> list[str]:

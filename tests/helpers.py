@@ -24,6 +24,7 @@ TINY = {
     "textures": {"width": 32, "height": 8, "samples": 1, "ao_rays": 2},
     "flyaway": {"width": 32, "height": 8, "samples": 1},
     "environment": {"shape": (3, 3, 4, 3)},
+    "interreflection": {"n_views": 2, "rows": 4, "spp": 1, "batches": 2},
 }
 
 # --- asset packs --------------------------------------------------------------------------------------------------

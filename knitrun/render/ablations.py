@@ -4,8 +4,9 @@ Plain Python, no kernels: the command line imports it for its ``--ablation`` cho
 
 ``Features`` switch the baked terms off: without ``xi`` the correction is 1, without ``fiber_shadowing``
 Ψ^Fiber_G = 1 (and no fiber lies between a visible fiber and the light), without ``flyaways`` no flyaway layer;
-``full_tables`` False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N} (the paper's) instead of the
-pack's unfactorized tables. ``ABLATIONS`` names the combinations, in the order of the paper's figure
+without ``interreflection`` no yarn-level inter-reflection (``knitrun.render.interreflection``); ``full_tables``
+False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N} (the paper's) instead of the pack's unfactorized
+tables. ``ABLATIONS`` names the combinations, in the order of the paper's figure
 (``ABLATION_ORDER``) with a label each (``ABLATION_LABELS``).
 """
 
@@ -21,6 +22,7 @@ class Features:
     xi: bool = True
     fiber_shadowing: bool = True
     flyaways: bool = True
+    interreflection: bool = True
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
 
 
@@ -31,8 +33,9 @@ ABLATIONS = {
     "full": Features(),
     "no_tables": Features(xi=False, fiber_shadowing=False),  # the full renderer without ξ and Ψ^Fiber
     "factored": Features(full_tables=False),
+    "no_interreflection": Features(interreflection=False),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
                    "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
-                   "factored": "full, rank-1 factored ξ, Ψ"}
+                   "factored": "full, rank-1 factored ξ, Ψ", "no_interreflection": "full without inter-reflection"}

@@ -15,6 +15,8 @@ Passes, each timed (``RenderResult.timings``, seconds):
    (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
    angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by 1.5 yarn
    radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job).
+   With ``Features.interreflection`` each T̃_j becomes T̃_j / (1 − ρ (1 − T̃_j)), ρ the receiver's yarn hull albedo
+   (``knitrun.render.interreflection``): the light the neighbours block and send on.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
    (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
    frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
@@ -42,6 +44,7 @@ from data_formats.curve_eval import yarn_frame
 from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitrun.render.ablations import Features
 from knitrun.render.camera import scene_camera
+from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
 from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
@@ -267,6 +270,13 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
         for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
                                                   receivers)):
             out[j] = vis
+    albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
+        np.zeros(len(looks))
+    if len(lobe_dir) and albedo.any():
+        lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :]) for v, s in zip(lobe_vis, sets)]
+    if environment:
+        facts["interreflection"] = {look.name: round(float(a), 4) if look.yarn_albedo is not None else
+                                    "absent from the pack (schema < 2.1)" for look, a in zip(looks, albedo)}
     ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
     facts["ms_lights"] = int(len(ms_dir))
     lap("shadow")

@@ -10,6 +10,9 @@ flyaways, environment) and converts everything to the scene:
   f is linear in those colours, so I_M and the dual-scattering averages ā_f, ā_b scale with the colour while the
   shifts and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
   correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked.
+* Hull albedo ρ_Y (``/interreflection/albedo``, read with an environment light): tinted by the colour and reduced
+  to its luminance, the ρ of ``knitrun.render.interreflection``; 0 (no inter-reflection) for a pack baked before
+  schema 2.1, which ``RenderResult.facts["interreflection"]`` then reports.
 * Fiber counts for the dual-scattering estimate at run time: ``dual_scattering.fiber_counts`` (n_cross, n_occluded)
   from the yarn spec stored in the pack's provenance.
 """
@@ -21,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from data_formats.asset_pack import read_pack
-from data_formats.conventions import CM_PER_UNIT
+from data_formats.conventions import CM_PER_UNIT, LUMINANCE
 from data_formats.yarn_spec import loads_spec
 from knitrun.render.texture_sampling import MipStack, mip_stack
 from knitrun.shading.dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables
@@ -30,6 +33,7 @@ from knitrun.shading.im_lookup import kernel_axes
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
+ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 
 
 @dataclass
@@ -54,6 +58,7 @@ class YarnLook:
     n_cross: float
     n_occluded: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
+    yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
     im: tuple | None  # (I_M^{TT,D} table (…, 3) float64, lo, hi, repeat, codes) for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
 
@@ -98,6 +103,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     if environment:
         names.append("environment/I_M_TT_D")
     stored = header.info
+    if environment and ALBEDO_TABLE in stored:
+        names.append(ALBEDO_TABLE)
     missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
     if corrections and full_tables:
         names += [n for n in FULL_TABLES if n in stored]
@@ -117,6 +124,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     if environment:
         lo, hi, repeat, codes = kernel_axes(pack.info["environment/I_M_TT_D"].axes)
         im = (np.ascontiguousarray(pack.tables["environment/I_M_TT_D"] * colour, np.float64), lo, hi, repeat, codes)
+    yarn_albedo = float(np.asarray(pack.tables[ALBEDO_TABLE], np.float64) * colour @ LUMINANCE) \
+        if ALBEDO_TABLE in names else None
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
                  if corrections}
     return YarnLook(
@@ -130,7 +139,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
         n_cross=n_cross, n_occluded=n_occluded, twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
-        im=im, residuals=residuals)
+        yarn_albedo=yarn_albedo, im=im, residuals=residuals)
 
 
 def _half_width(pack, base):

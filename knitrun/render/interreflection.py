@@ -1,0 +1,35 @@
+"""Yarn-level inter-reflection: light that a neighbouring yarn blocks comes back from it (beyond Huang et al. 2025).
+
+The yarn-level shadow maps (``knitrun.render.shadow_map``) give the fraction V of a light that reaches a receiver
+past the other yarns, treating them as opaque tubes. A cotton fiber scatters 95 % of what it meets, so a blocking
+yarn sends most of that light on: between its fibers, and scattered, in every direction, toward the receiver too.
+The pack's hull albedo ρ_Y (``/interreflection/albedo``, ``knitbake.stages.yarn_albedo``: the mean radiance leaving
+a yarn tube in a uniform environment of radiance 1) says how much.
+
+Model (a self-similar, infinite-bounce approximation, derived here): every
+yarn around the receiver is in the receiver's situation, seeing the light L over a fraction V and neighbours of
+radiance L_n over 1 − V; a neighbour returns ρ_Y of what reaches it, L_n = ρ_Y (V L + (1 − V) L_n), so the
+receiver's incoming radiance is V L + (1 − V) L_n = L · V / (1 − ρ_Y (1 − V)) — the visibility V is replaced by
+
+    V' = V / (1 − ρ_Y (1 − V))             (V' = V for ρ_Y = 0; V' = 1 for ρ_Y = 1: the white furnace)
+
+It is applied per SRBF lobe of an environment (the light the neighbours pass on is counted as coming from the lobe's
+direction, which forward-scattering fibers make plausible) and, through the lobes, to the environment's
+multiple-scattering lights. It is not applied to directional lights: there V is 0 or 1 but for the penumbra, and the
+blocked light reaches the receiver from the lit side of the blocker, a different light path this term does not
+model. The scene colour c tints ρ_Y (ρ_Y·c, a first-order approximation: ρ_Y is not linear in the fiber albedo),
+and one ρ per receiver, the luminance of ρ_Y·c, scales every channel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def interreflected_visibility(visibility, albedo):
+    """V' = V / (1 − ρ (1 − V)) (module docstring) for visibility V ∈ [0, 1] and hull albedo ρ ∈ [0, 1]
+    (broadcasting); V' ∈ [V, 1]."""
+    v = np.clip(np.asarray(visibility, np.float64), 0.0, 1.0)
+    rho = np.clip(np.asarray(albedo, np.float64), 0.0, 1.0)
+    denominator = 1.0 - rho * (1.0 - v)
+    return np.where(denominator > 0.0, v / np.maximum(denominator, 1e-300), 1.0)
