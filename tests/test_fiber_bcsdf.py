@@ -174,3 +174,27 @@ def test_lobe_normaliser_matches_dense_quadrature_in_both_branches():
             dense = 0.5 * (hi - lo) * np.sum(w * np.exp(-0.5 * ((t - mu) / sigma) ** 2) * np.cos(t) ** 2)
             worst = max(worst, abs(fb.cos2_normaliser(mu, sigma) / dense - 1.0))
     assert branches == {True, False} and worst < 1e-8
+
+
+def test_spread_params_widens_reflection_keeps_transmission_and_energy():
+    """``spread_params``: β_p² grows by spread²·cos²(φ/2) (fully at φ = 0, not at φ = π), and the widened BCSDF still
+    returns all the energy (white furnace) since its lobes are renormalised."""
+    p = lossless(1 * DEG, 27 * DEG, 38 * DEG)
+    wide = np.empty_like(p)
+    spread2 = (6 * DEG) ** 2
+    fb.spread_params(p, spread2, 0.0, wide)
+    assert math.isclose(wide[fb.P_BETA_R], math.hypot(1 * DEG, 6 * DEG), rel_tol=1e-12)
+    assert math.isclose(wide[fb.P_BETA_TT], math.hypot(27 * DEG, 6 * DEG), rel_tol=1e-12)
+    widths = [fb.P_BETA_R, fb.P_BETA_TT]
+    np.testing.assert_array_equal(np.delete(wide, widths), np.delete(p, widths))
+    fb.spread_params(p, spread2, math.pi, wide)
+    np.testing.assert_allclose(wide, p, rtol=1e-12, atol=1e-15)
+    fb.spread_params(p, 0.0, 0.3, wide)
+    np.testing.assert_array_equal(wide, p)
+    fb.spread_params(p, 0.25, 0.0, wide)  # the renderer's cap, 0.5 rad
+    rng = np.random.default_rng(4)
+    wi = stratified_sphere(1024, rng)
+    for theta_o in (0.0, 60 * DEG):
+        wo = np.tile(fb.direction(theta_o, 0.7), (wi.shape[0], 1))
+        furnace = (fb.eval_batch(wide, wo, wi) * np.sqrt(1 - wi[:, :1] ** 2) * 4 * np.pi).mean(axis=0)
+        assert np.all(np.abs(furnace - 1) < 0.05), (theta_o, furnace)

@@ -17,7 +17,7 @@ from data_formats.scene import load_scene
 from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
 from knitbake.stages import im_table as im
-from knitrun.render.ablations import ABLATIONS
+from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import render
 from knitrun.render.strip_shading import resolve, shade_regular, variant_of
 from knitrun.render.texture_sampling import mip_stack, sample_mip
@@ -63,19 +63,28 @@ def test_identical_for_one_and_two_threads(tmp_path, pack):
 
 
 def test_a_yarn_in_front_shadows_the_one_behind(tmp_path, pack):
-    overhead = SUN.replace("[0.3, 0.6, 1.0]", "[0.0, 0.0, 1.0]")
+    """A yarn crossing 0.2 above another, lit at 37° from the normal along the lower yarn: its shadow falls on the
+    lower yarn 0.15 beside the crossing (image columns 15–21 of the front camera), where the lower yarn is darker
+    than drawn alone; away from the shadow, and wherever the upper yarn does not cover it, it is unchanged."""
+    slanted = SUN.replace("[0.3, 0.6, 1.0]", "[0.6, 0.0, 0.8]")
     lower = straight(z=0.0)
     upper = straight(z=0.2)[:, [1, 0, 2]]  # crosses the lower yarn at right angles, between it and the light
-    lit = _render(write_scene(tmp_path, [lower], camera=FRONT, lights=overhead, name="a"), pack).image
-    shadowed = _render(write_scene(tmp_path, [lower, upper], camera=FRONT.replace("0.0, 0.0, 1.0]", "0.0, -0.6, 0.9]"),
-                                   lights=overhead, name="b"), pack, features=ABLATIONS["plain_ds"]).image
-    assert np.all(np.isfinite(shadowed))
-    # the lower yarn's centre, seen from the front, lies in the upper yarn's shadow: darker than the unshadowed yarn
-    lone = _render(write_scene(tmp_path, [lower], camera=FRONT.replace("0.0, 0.0, 1.0]", "0.0, -0.6, 0.9]"),
-                               lights=overhead, name="c"), pack, features=ABLATIONS["plain_ds"]).image
-    centre = (slice(20, 28), slice(28, 36))
-    assert shadowed[centre].mean() < 0.8 * lone[centre].mean()
-    assert lit.mean() > 0
+    images = [_render(write_scene(tmp_path, yarns, camera=FRONT, lights=slanted, name=name), pack,
+                      features=ABLATIONS["plain_ds"]).image
+              for yarns, name in (([lower], "lone"), ([lower, upper], "both"), ([upper], "upper"))]
+    lone, both, alone_upper = images
+    assert np.all(np.isfinite(both))
+    background = lone[0, 0]
+    drawn = np.abs(lone - background).sum(axis=-1) > 1e-3
+    uncovered = drawn & (np.abs(alone_upper - background).sum(axis=-1) < 1e-6)
+    shadow = np.zeros_like(uncovered)
+    shadow[:, 15:22] = True
+    assert (uncovered & shadow).sum() > 10
+    assert both[uncovered & shadow].mean() < 0.85 * lone[uncovered & shadow].mean()
+    far = uncovered.copy()
+    far[:, 10:42] = False
+    assert far.sum() > 10
+    np.testing.assert_allclose(both[far], lone[far], rtol=1e-6)
 
 
 @pytest.mark.parametrize("case", ["inside", "grazing", "along", "zero_length", "empty_view", "one_point"])
@@ -263,7 +272,9 @@ def test_resolve_weights_coverage_over_the_background():
 def test_yarn_colour_acts_per_channel(tmp_path, pack):
     """The entry colour multiplies the lobe colours channel by channel and every table lookup and DS term is per
     channel: a colour of 1 in red leaves the red channel exactly as the white yarn's, the dimmed channels are darker
-    (single scattering scales by the colour, multiple scattering by about its powers) but not black."""
+    (single scattering scales by the colour, multiple scattering by about its powers) but not black. Without the
+    yarn-level inter-reflection, whose one hull albedo per yarn is the luminance of ρ_Y·colour
+    (``knitrun.render.interreflection``), so that it couples the channels."""
     white = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY + "\n" + SUN, name="white")
     tinted = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY + "\n" + SUN, name="tinted")
     for path in (white, tinted):
@@ -271,7 +282,8 @@ def test_yarn_colour_acts_per_channel(tmp_path, pack):
         if path == tinted:
             text = text.replace('yarn = "cotton1"', 'yarn = "cotton1"\ncolor = [1.0, 0.5, 0.25]')
         path.write_text(text)
-    a, b = _render(white, pack).image, _render(tinted, pack).image
+    no_bounce = Features(interreflection=False)
+    a, b = _render(white, pack, features=no_bounce).image, _render(tinted, pack, features=no_bounce).image
     lit = a[..., 1] > 1e-3
     assert lit.sum() > 100
     np.testing.assert_allclose(b[..., 0], a[..., 0], rtol=1e-5, atol=1e-7)

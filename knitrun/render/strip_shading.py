@@ -22,12 +22,16 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
     n           = n_occluded + (1 − V) n_cross                            fibers toward the light when not lit
     L_o        += E · ξ · DS(θ_i^f, θ_o^f, φ^f; n, D)                    ``dual_scattering.ds_kernel``, fiber frame
 
-with θ^f, φ^f against t_f. An empty (0, 1, 1, 3) full table selects the factors. An ablation passes (1, 1, 3) factor
-tables of ones for ξ or Ψ (and n_occluded = 0 without Ψ^Fiber: no fiber of the yarn is assumed between a visible fiber
-and the light). This is the bin average of what the bake divides by (ξ = ΣΨ_*/ΣΨ_DS over the hits of a (v, θ_d, φ) bin,
-each hit lit directly iff no fiber lies toward the light), with Ψ^Yarn_G = V from the yarn-level shadow map in place of
-the other yarns' fibers: Huang et al. 2025 eq. 11. Per SRBF lobe j (centre ω_j, sharpness λ_j, weight W_j, visibility
-T̃_j from the lobe's shadow map), eq. 17:
+with θ^f, φ^f against t_f. Tangent spread: a texel averages fibers whose tangents scatter; the length of its
+premultiplied tangent gives their variance (``tangent_spread``, Toksvig 2005; ASSET_PACK.md §8), and every BCSDF
+evaluation of the point (DS, I_M's R lobe, the multiple-scattering lights) uses the lobes widened by it for that
+light's φ^f (``fiber_bcsdf.spread_params``). An empty (0, 1, 1, 3) full table selects the factors. An ablation
+passes (1, 1, 3) factor tables of ones for ξ or Ψ (and n_occluded = 0 without Ψ^Fiber: no fiber of the yarn is assumed
+between a visible fiber and the light). This is the bin average of what the bake divides by (ξ = ΣΨ_*/ΣΨ_DS over
+the hits of a (v, θ_d, φ) bin, each hit lit directly iff no fiber lies toward the light), with Ψ^Yarn_G = V from the
+yarn-level shadow map in place of the other yarns' fibers: Huang et al. 2025 eq. 11. Per SRBF lobe j (centre ω_j,
+sharpness λ_j, weight W_j, visibility T̃_j from the lobe's shadow map, raised by the yarn-level inter-reflection of
+``knitrun.render.interreflection`` when the pack has a hull albedo), eq. 17:
 
     L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 
@@ -63,12 +67,13 @@ from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
 from knitrun.render.texture_sampling import mip_level, sample_mip
 from knitrun.shading.dual_scattering import D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel
-from knitrun.shading.fiber_bcsdf import context, evaluate, view_context
+from knitrun.shading.fiber_bcsdf import context, evaluate, spread_params, view_context
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
 from knitrun.shading.im_lookup import im_kernel
 from knitrun.shading.table_lookup import axis_cell
 
 DEGENERATE = 1e-6  # |ω_o × t| below this: the strip is edge-on (ASSET_PACK.md §3); the point is not drawn
+MAX_TANGENT_SPREAD = 0.5  # rad: cap on the tangent spread of a texel (a texel of opposed tangents, r → 0)
 
 
 # --- shading points -------------------------------------------------------------------------------------------------
@@ -259,6 +264,19 @@ def _texture_tangent(tex, t, n, b, tf):
 
 
 @njit(cache=True)
+def tangent_spread(tex, coverage):
+    """Variance (rad², per axis normal to the mean) of the fiber tangents a texel averages, from the length of its
+    coverage-premultiplied mean tangent (Toksvig 2005): r = |T|/coverage ∈ [0, 1], spread² = (1 − r)/r (for small
+    tilts r ≈ 1 − spread²), at most ``MAX_TANGENT_SPREAD``². 0 where nothing is covered."""
+    if coverage <= 1e-6:
+        return 0.0
+    r = min(math.sqrt(dot(tex, tex)) / coverage, 1.0)
+    if r <= 0.0:
+        return MAX_TANGENT_SPREAD * MAX_TANGENT_SPREAD
+    return min((1.0 - r) / r, MAX_TANGENT_SPREAD * MAX_TANGENT_SPREAD)
+
+
+@njit(cache=True)
 def _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha):
     """Clear point q's output and set up its strip frame (n, b); returns (drawn, u, v), drawn False when edge-on."""
     rgb[q, :] = 0.0
@@ -295,29 +313,32 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
         sample_mip(tan_data, tan_off, tan_rows, tan_cols, 0, level, u, v, tex)
         alpha[q] = min(max(cov[0], 0.0), 1.0)
         _texture_tangent(tex, t, n, b, tf)
+        spread2 = tangent_spread(tex, cov[0])
         theta_o = longitudinal_angle(t, wo)
         theta_o_f = longitudinal_angle(tf, wo)
         xi, psi, scratch, comp = np.ones(3), np.ones(3), np.empty(3), np.empty((7, 3))
+        wide = np.empty(params.shape[0])
         for light in range(light_dir.shape[0]):
             wi = light_dir[light]
             _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wi, xi, psi, scratch)
             fiber_lit = _fiber_lit(psi)
             vis = light_vis[light, q]
             n_front = n_occluded + (1.0 - vis) * n_cross
-            ds_kernel(params, ds, longitudinal_angle(tf, wi), theta_o_f, azimuth_difference(tf, wo, wi), n_front, D_F,
-                      D_B, vis * fiber_lit, comp)
+            phi_f = azimuth_difference(tf, wo, wi)
+            spread_params(params, spread2, phi_f, wide)
+            ds_kernel(wide, ds, longitudinal_angle(tf, wi), theta_o_f, phi_f, n_front, D_F, D_B, vis * fiber_lit, comp)
             for ch in range(3):
                 rgb[q, ch] += light_e[light, ch] * xi[ch] * comp[K_TOTAL, ch]
         im = np.empty(3)
-        # the BCSDF context of the fiber-frame view, for I_M's R lobe
-        c_f = view_context(params, theta_o_f) if lobe_dir.shape[0] else np.empty(0)
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
             _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wj, xi, psi, scratch)
             theta_j_f = longitudinal_angle(tf, wj)
             phi_f = azimuth_difference(tf, wo, wj)
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c_f, theta_o_f, theta_j_f, -phi_f,
-                      lobe_lambda[j], im)
+            spread_params(params, spread2, phi_f, wide)
+            # the BCSDF context of the fiber-frame view, for I_M's R lobe
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, wide, view_context(wide, theta_o_f), theta_o_f,
+                      theta_j_f, -phi_f, lobe_lambda[j], im)
             vis = lobe_vis[j, q]
             for ch in range(3):
                 rgb[q, ch] += lobe_w[j, ch] * vis * xi[ch] * psi[ch] * im[ch]
@@ -327,8 +348,9 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
             vis = ms_vis[c, q]
             lit = vis * _fiber_lit(psi)
             theta_c_f = longitudinal_angle(tf, wc)
-            ds_kernel(params, ds, theta_c_f, theta_o_f, azimuth_difference(tf, wo, wc),
-                      n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit, comp)
+            phi_f = azimuth_difference(tf, wo, wc)
+            spread_params(params, spread2, phi_f, wide)
+            ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit, comp)
             cos_c = math.cos(theta_c_f)
             for ch in range(3):
                 multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
@@ -373,8 +395,10 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
         ny = np.empty(3)
         if not _strip_frame(tf, wo, ny, b):
             continue
-        c = context(params, np.array([dot(wo, tf), dot(wo, ny), 0.0]))
         f, wl, psi, scratch = np.empty(3), np.empty(3), np.ones(3), np.empty(3)
+        wo_l = np.array([dot(wo, tf), dot(wo, ny), 0.0])
+        spread2 = tangent_spread(texel[:3], texel[3])
+        wide = np.empty(params.shape[0])
         # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
         # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
         v_strip = v * half_width / radius
@@ -382,7 +406,8 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
         for light in range(light_dir.shape[0]):
             wi = light_dir[light]
             wl[0], wl[1], wl[2] = dot(wi, tf), dot(wi, ny), -dot(wi, b)
-            evaluate(params, c, wl, f)
+            spread_params(params, spread2, azimuth_difference(tf, wo, wi), wide)
+            evaluate(wide, context(wide, wo_l), wl, f)
             cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
             lit = light_vis[light, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wi, psi,
                                                      scratch)
@@ -391,8 +416,10 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
         theta_o_f = longitudinal_angle(tf, wo)
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, params, c, theta_o_f, longitudinal_angle(tf, wj),
-                      -azimuth_difference(tf, wo, wj), lobe_lambda[j], f)
+            phi_f = azimuth_difference(tf, wo, wj)
+            spread_params(params, spread2, phi_f, wide)
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, wide, context(wide, wo_l), theta_o_f,
+                      longitudinal_angle(tf, wj), -phi_f, lobe_lambda[j], f)
             lit = lobe_vis[j, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wj, psi, scratch)
             for ch in range(3):
                 rgb[q, ch] += lobe_w[j, ch] * lit * f[ch]

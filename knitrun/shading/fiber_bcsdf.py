@@ -81,6 +81,23 @@ def tinted(params, colour) -> np.ndarray:
     return p
 
 
+@njit(cache=True)
+def spread_params(p, spread2, phi, out):
+    """``out`` = ``p`` with the longitudinal widths widened for a bundle of fibers whose tangents scatter about the
+    shading tangent with variance ``spread2`` (rad², per axis normal to it), seen at azimuth difference φ.
+
+    A tangent tilted by a small δ normal to it moves θ_i by (ω̂_i·δ) and θ_o by (ω̂_o·δ), ω̂ the unit projection of ω
+    on the normal plane; a lobe is a Gaussian in θ_i − (2α − θ_o), which moves by (ω̂_i + ω̂_o)·δ, of variance
+    spread2·|ω̂_i + ω̂_o|² = 4 spread2 cos²(φ/2). With σ_p = 2β_p that is β_p² → β_p² + spread2 cos²(φ/2): a tilt
+    spreads reflection (φ near 0) fully and forward transmission (φ near ±π) not at all. The lobe stays normalised
+    (Z_p is computed from the widened σ_p), so the widening moves energy in θ and never adds any (Toksvig 2005 and
+    Olano and Baker 2010 filter normal-mapped highlights by the same variance sum)."""
+    out[:] = p
+    grow = spread2 * math.cos(0.5 * phi) ** 2
+    out[P_BETA_R] = math.sqrt(p[P_BETA_R] ** 2 + grow)
+    out[P_BETA_TT] = math.sqrt(p[P_BETA_TT] ** 2 + grow)
+
+
 def params_from_values(a_r, a_tt, a_d, beta_r, beta_tt, gamma_tt, alpha_r=0.0, alpha_tt=0.0) -> np.ndarray:
     p = np.zeros(N_PARAMS)
     p[P_A_R:P_A_R + 3], p[P_A_TT:P_A_TT + 3], p[P_A_D:P_A_D + 3] = a_r, a_tt, a_d
