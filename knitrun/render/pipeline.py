@@ -275,8 +275,10 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     if len(lobe_dir) and albedo.any():
         lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :]) for v, s in zip(lobe_vis, sets)]
     if environment:
-        facts["interreflection"] = {look.name: round(float(a), 4) if look.yarn_albedo is not None else
-                                    "absent from the pack (schema < 2.1)" for look, a in zip(looks, albedo)}
+        facts["interreflection"] = {
+            look.name: "off (Features.interreflection)" if not features.interreflection else
+            round(float(a), 4) if look.yarn_albedo is not None else "absent from the pack (schema < 2.1)"
+            for look, a in zip(looks, albedo)}
     ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
     facts["ms_lights"] = int(len(ms_dir))
     lap("shadow")
