@@ -1,10 +1,11 @@
-"""Strip renderer vs the reference path tracer on the four example scenes (a straight yarn and a 6 × 6 knit patch,
-each under a directional light and under the built-in sky), next to the reference's own floors: per model the mean
+"""Strip renderer vs the reference path tracer on the seven example scenes (a straight yarn under a directional light,
+under the built-in sky and back-lit; a 6 × 6 knit patch under a directional light, under the sky and under a grazing
+light; the simulated, stretched patch of the trade-off sweep), next to the reference's own floors: per model the mean
 radiance ratio, the yarn-scale rel L1 and its ratio to the fiber-instance floor, pixel FLIP and time, and the speed
 ratio to the reference. One `knitrun compare` report folder per scene under ``--out``.
 
     .venv/bin/python benchmarks/bench_compare.py --pack cotton1.h5 [--spp 64] [--out out/compare]
-                                                 [--reference-dir DIR]
+                                                 [--reference-dir DIR] [--scenes a,b]
 
 ``--reference-dir`` reuses references rendered earlier: ``DIR/<scene>.exr`` and its floors ``<scene>_instance.exr``,
 ``<scene>_mc.exr`` (``benchmarks/bench_floors.py --out DIR`` writes all three, with the JSON summaries that give
@@ -17,7 +18,8 @@ from pathlib import Path
 from knitbake.compare.report import FLOOR_LABELS, compare_scene
 from knitrun.render.ablations import ABLATION_LABELS
 
-SCENES = ("straight_yarn_directional", "straight_yarn_sky", "knit_patch_directional", "knit_patch_sky")
+SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
+          "knit_patch_sky", "knit_patch_grazing", "simulated_patch_directional")
 FLOOR_FILES = {"instance": "_instance", "monte_carlo": "_mc"}
 
 
@@ -31,12 +33,13 @@ def main():
     parser.add_argument("--spp", type=int, default=64)
     parser.add_argument("--out", default="out/compare")
     parser.add_argument("--reference-dir", default=None)
+    parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
     args = parser.parse_args()
     root = Path(__file__).resolve().parent.parent / "examples" / "scenes"
     print("| scene | model | mean ratio | yarn-scale rel L1 (d) | (2d) | ratio to instance floor (d) | yarn FLIP | "
           "pixel FLIP | strip ms | speed-up |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    for name in SCENES:
+    for name in args.scenes.split(","):
         ref, floors = None, {}
         if args.reference_dir:
             folder = Path(args.reference_dir)

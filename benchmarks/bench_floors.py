@@ -23,7 +23,8 @@ from knitbake.compare.report import FLOORS, yarn_diameter_px
 from knitbake.trace.reference import trace_reference, write_reference
 
 ROOT = Path(__file__).resolve().parent.parent
-SCENES = ("straight_yarn_directional", "straight_yarn_sky", "knit_patch_directional", "knit_patch_sky")
+SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
+          "knit_patch_sky", "knit_patch_grazing", "simulated_patch_directional")
 FILE_SUFFIX = {"instance": "_instance", "monte_carlo": "_mc"}
 
 

@@ -9,7 +9,8 @@ writes them; missing ones are rendered there at ``--spp``):
 * ``srbf``: the SRBF count J fitted to the built-in sky, on the same two scenes under the sky (standard pack).
 * ``gn``: the knot simulator's Gauss–Newton iterations per frame. A 6 × 6 stockinette stitch mesh is stretched
   1.4× in x in one frame (the hardest step: no warm start from a nearby frame) and simulated with k iterations;
-  the reference is the path-traced patch of the k = 16 curves (converged: the points move < 1e-6 cm from k = 8).
+  the reference is the example scene ``simulated_patch_directional`` (the path-traced patch of the k = 16 curves,
+  converged: the points move < 1e-6 cm from k = 8).
   Time = the simulated frame's solve + assembly (median of three runs) + the render.
 
 Error: the yarn-scale rel L1 (``knitbake.compare.image_metrics.yarn_scale_metrics``, images box-filtered to the
@@ -35,7 +36,7 @@ from PIL import Image, ImageDraw
 
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
-from data_formats.yarn_curves import write_yarn_curves
+from data_formats.yarn_curves import read_yarn_curves, write_yarn_curves
 from knitbake.compare.image_metrics import compare_images, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitrun.render.pipeline import render
@@ -52,35 +53,7 @@ SRBF = (1, 4, 16, 64)
 GN = (0, 1, 2, 4, 8)
 GN_CONVERGED = 16
 GN_SCENE = "simulated_patch_directional"
-GN_SCENE_TOML = """format = "knit-scene"
-version = "1.0"
-name = "6 x 6 stockinette stitch mesh stretched 1.4x in one frame, {iterations} Gauss-Newton iterations"
-units = "cm"
-background = [0.05, 0.05, 0.05]
-
-[[yarns]]
-curves = "{curves}"
-yarn = "cotton1"
-color = [0.9, 0.25, 0.2]
-
-[camera]
-position = [{cx:.4f}, {cy:.4f}, 5.0]
-look_at = [{cx:.4f}, {cy:.4f}, 0.0]
-up = [0.0, 1.0, 0.0]
-fov_deg = 24.0
-width = 512
-height = 384
-
-[[lights]]
-type = "directional"
-direction = [0.4, 0.6, 1.0]
-irradiance = [3.0, 3.0, 3.0]
-
-[render]
-spp = 64
-seed = 0
-msaa = 4
-"""
+GN_SCENE_TOML = ROOT / "examples" / "scenes" / f"{GN_SCENE}.toml"  # the converged (k = 16) curves
 
 
 def timed_render(scene, packs):
@@ -143,26 +116,30 @@ def sweep_srbf(pack, reference_dir, spp):
 
 
 def sweep_gn(pack, reference_dir, spp, work: Path):
-    """Simulate, write one scene per iteration count into ``work``, render each against the converged reference."""
+    """Simulate with k iterations, write one scene per k into ``work`` (the example scene with the k-iteration
+    curves), render each against the reference of the example scene, whose curves are the converged k = 16 ones."""
     work.mkdir(parents=True, exist_ok=True)
+    base = load_scene(GN_SCENE_TOML)
+    converged = read_yarn_curves(base.yarns[0].curves)
     mesh = chart_to_mesh(pattern_chart("stockinette", 6, 6), where="pattern stockinette")
     frames = deformation_frames(mesh.vertices, [parse_deformation("stretch-x=1.4")], 1)
-    scenes, sim_ms, energy, centre = {}, {}, {}, None
-    for k in (GN_CONVERGED, *GN):  # the converged curves first: they set the one camera every k shares
+    scenes, sim_ms, energy = {}, {}, {}
+    for k in (GN_CONVERGED, *GN):
         times = []
         for _ in range(3):
             curves, report = simulate(mesh, frames, iterations=k)
             times.append(report["ms_per_frame_median"])
         sim_ms[k], energy[k] = float(np.median(times)), report["final_energy"]
+        if k == GN_CONVERGED and not np.allclose(curves.points, converged.points, rtol=0, atol=1e-5):
+            raise SystemExit(f"{base.yarns[0].curves} is not the {GN_CONVERGED}-iteration simulation of this "
+                             "simulator: regenerate it with the commands in its scene file")
         write_yarn_curves(work / f"gn{k}.h5", curves)
-        if centre is None:
-            centre = 0.5 * (curves.points[-1].min(axis=0) + curves.points[-1].max(axis=0))
-        scenes[k] = work / f"gn{k}.toml"
-        scenes[k].write_text(GN_SCENE_TOML.format(iterations=k, curves=f"gn{k}.h5", cx=centre[0], cy=centre[1]))
-    reference = reference_for(GN_SCENE, scenes[GN_CONVERGED], reference_dir, spp)
+        yarn = dataclasses.replace(base.yarns[0], curves=work / f"gn{k}.h5")
+        scenes[k] = dataclasses.replace(base, yarns=(yarn,))
+    reference = reference_for(GN_SCENE, GN_SCENE_TOML, reference_dir, spp)
     rows = [floor_row(GN_SCENE, reference)]
     for k in GN:
-        seconds, image = timed_render(load_scene(scenes[k]), {"cotton1": pack})
+        seconds, image = timed_render(scenes[k], {"cotton1": pack})
         rows.append({"scene": GN_SCENE, "quality": "standard", "knob": f"{k} GN iterations (energy {energy[k]:.6g})",
                      "label": str(k), "ms": 1e3 * seconds + sim_ms[k], **metrics(image, *reference)})
     return rows

@@ -14,7 +14,7 @@ from data_formats.curve_eval import dense_curve, evaluate, rest_length
 from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves
 from data_formats.yarn_spec import load_preset
 from knitbake.fibers.fiber_set import KIND_REGULAR
-from knitbake.fibers.fiber_sweep import curve_seed, sweep_fibers
+from knitbake.fibers.fiber_sweep import clip_axially, curve_seed, sweep_fibers
 from knitbake.fibers.procedural_yarn import generate_fibers
 from knitrun.sim.crane_stockinette import stockinette_curves, write_example_patch
 
@@ -38,16 +38,57 @@ def sweep(yc, spec=COTTON, radius=None, frame=0, seed=5, **kw):
 def test_straight_curve_along_z_reproduces_generate_fibers(curve_type):
     fs = sweep(line([0, 0, 1], curve_type=curve_type, n=10 if curve_type == "BZ" else 11))
     ref = generate_fibers(COTTON, length=1.0, seed=curve_seed(5, 0))
-    assert ref.info["hairs"] > 0 and ref.info["loops"] > 0  # flyaways reach past the ends too
+    assert ref.info["hairs"] > 0 and ref.info["loops"] > 0
+    assert ref.points[:, 2].min() < 0 and ref.points[:, 2].max() > 1  # flyaways reach past the ends ...
+    ref = clip_axially(ref, 0.0, 1.0)  # ... and the sweep cuts them there
     np.testing.assert_array_equal(fs.offsets, ref.offsets)
     np.testing.assert_allclose(fs.points, ref.points, rtol=0, atol=1e-14)
     np.testing.assert_array_equal(fs.radius, ref.radius)
     np.testing.assert_array_equal(fs.kind, ref.kind)
 
 
+def test_open_ends_cut_every_fiber_at_the_end_planes():
+    """A yarn is cut at its ends (module docstring, "Open curves"): no fiber of an open curve reaches past the end
+    cross-sections, the cut points lie on them, and the flyaway length inside the yarn is kept."""
+    yc = line([0, 0, 1], length=0.6)
+    fs = sweep(yc)
+    z = fs.points[:, 2]
+    assert z.min() >= -1e-12 and z.max() <= 0.6 + 1e-12
+    raw = generate_fibers(COTTON, length=0.6, seed=curve_seed(5, 0))
+    assert ((raw.points[:, 2] < 0) | (raw.points[:, 2] > 0.6)).sum() > 10  # there was something to cut
+
+    def inside_length(f):
+        """Summed length of every fiber's segments, each clipped to the slab by its z-fraction inside."""
+        total = 0.0
+        for i in range(f.n_fibers):
+            p = f.fiber(i)
+            a, b = p[:-1], p[1:]
+            lo, hi = np.minimum(a[:, 2], b[:, 2]), np.maximum(a[:, 2], b[:, 2])
+            frac = np.where(hi > lo, (np.clip(hi, 0, 0.6) - np.clip(lo, 0, 0.6)) / np.where(hi > lo, hi - lo, 1), 1.0)
+            total += (np.linalg.norm(b - a, axis=1) * frac).sum()
+        return total
+
+    np.testing.assert_allclose(inside_length(fs), inside_length(raw), rtol=1e-9)
+    regular = raw.kind == KIND_REGULAR
+    assert (fs.kind == KIND_REGULAR).sum() == regular.sum()
+
+
+def test_clip_axially_splits_a_hair_that_leaves_and_comes_back():
+    from knitbake.fibers.fiber_set import KIND_HAIR, FiberSet
+
+    p = np.array([[0, 0, 0.5], [0, 0, 1.5], [0.1, 0, 0.5], [0.2, 0, -1.0], [0.3, 0, 2.0]], float)
+    fs = FiberSet(p, np.array([0, 5]), np.array([0.01]), np.array([KIND_HAIR], np.int8), np.array([0], np.int16))
+    out = clip_axially(fs, 0.0, 1.0)
+    assert out.n_fibers == 3 and np.all(out.kind == KIND_HAIR) and np.all(out.radius == 0.01)
+    np.testing.assert_allclose(out.fiber(0), [[0, 0, 0.5], [0, 0, 1.0]])
+    np.testing.assert_allclose(out.fiber(1), [[0.05, 0, 1.0], [0.1, 0, 0.5], [0.1 + 0.1 / 3, 0, 0.0]])
+    np.testing.assert_allclose(out.fiber(2), [[0.2 + 0.1 / 3, 0, 0.0], [0.2 + 0.2 / 3, 0, 1.0]])
+
+
 def test_radius_scales_the_yarn_uniformly():
     fs = sweep(line([0, 0, 1]), radius=2 * COTTON.radius)
     ref = generate_fibers(COTTON, length=0.5, seed=curve_seed(5, 0))  # half as many (twice as long) periods
+    ref = clip_axially(ref, 0.0, 0.5)
     np.testing.assert_allclose(fs.points, 2 * ref.points, rtol=0, atol=1e-14)
     np.testing.assert_allclose(fs.radius, 2 * ref.radius)
     assert fs.info["curves"][0]["scale"] == pytest.approx(2.0)
@@ -58,7 +99,7 @@ def test_rotated_translated_line_gives_rigidly_moved_fibers():
     fs = sweep(line(u, o, length=0.8))
     n0 = initial_normal(u)
     frame = np.stack([n0, np.cross(u, n0), u], axis=1)  # yarn x, y, z -> N, B, T
-    ref = generate_fibers(COTTON, length=0.8, seed=curve_seed(5, 0))
+    ref = clip_axially(generate_fibers(COTTON, length=0.8, seed=curve_seed(5, 0)), 0.0, 0.8)
     np.testing.assert_allclose(fs.points, o + ref.points @ frame.T, rtol=0, atol=1e-13)
 
 

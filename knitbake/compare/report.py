@@ -2,9 +2,10 @@
 and a self-contained report.
 
 ``compare_scene`` renders the scene's reference (``knitbake.trace.reference`` + ``path_tracer``, or reads one), then the
-strip renderer (``knitrun.render.pipeline``) with each ablation of Huang et al. 2025 Fig. 7 — plain DS, + ξ, +
-fiber-level shadowing, + flyaways (= full) — plus the full renderer without the ξ and Ψ^Fiber tables and with the
-paper's rank-1 factors in place of the full tables, and measures each against the reference with
+strip renderer (``knitrun.render.pipeline``) with each ablation of ``knitrun.render.ablations`` — the ladder of
+Huang et al. 2025 Fig. 7, plain DS, + ξ, + fiber-level shadowing, + yarn-level inter-reflection (= full), then + the
+flyaway layer (off by default) — plus the full renderer without the ξ and Ψ^Fiber tables and with the paper's
+rank-1 factors in place of the full tables, and measures each against the reference with
 ``knitbake.compare.image_metrics`` (LDR-FLIP after our tone mapping, RMSE, relMSE). Strip times are the second of two
 renders (the first pays Numba's cache load); the reference time is its fiber build plus path tracing. The report
 folder holds ``reference.exr/.png``, per ablation ``strip_<name>.exr/.png``, ``flip_<name>.png`` (magma error map)

@@ -27,7 +27,10 @@ Conventions
   regular fibers close up: the last point of regular fiber f is, to float precision, the first point of regular
   fiber ``seam_successor[f]`` (the generator's successor map applied n times). Fibers stay open polylines that meet
   at the seam (σ = 0): a tube tessellation caps both ends there. Flyaways crossing the seam wrap around.
-* **Open curves.** Flyaways reaching past an end continue along the end chord with the end frame.
+* **Open curves.** A yarn is cut at its ends: every fiber stops at the end cross-sections σ = 0 and σ = L, as the
+  strip renderer's yarn does. Regular fibers end there already; a flyaway that crosses an end plane is cut there
+  (``clip_axially``: the parts of its polyline with 0 ≤ z ≤ L/k, the cut points interpolated on the plane; a hair that
+  leaves and comes back becomes two fibers).
 * **Seeds.** Curve c uses ``curve_seed(seed, c)``; the output is deterministic for a seed.
 * Output: one ``FiberSet`` in curve coordinates, curve by curve; ``z_start = z_end = 0`` (there is no yarn axis);
   ``info["curves"][c]`` gives the fiber range ``fibers = (first, stop)``, ``seed``, ``scale`` k, ``rest_length``,
@@ -43,7 +46,7 @@ import numpy as np
 from data_formats.curve_eval import curve_frames, dense_curve, start_normal, tangents
 from data_formats.yarn_curves import YarnCurves
 from data_formats.yarn_spec import YarnSpec
-from knitbake.fibers.fiber_set import FiberSet
+from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
 from knitbake.fibers.procedural_yarn import generate_fibers
 
 
@@ -68,6 +71,62 @@ def place(yarn_pts: np.ndarray, xyz: np.ndarray, sigma: np.ndarray, t: np.ndarra
     nn -= np.sum(nn * tt, axis=1, keepdims=True) * tt
     nn /= np.linalg.norm(nn, axis=1, keepdims=True)
     return centre + yarn_pts[:, :1] * nn + yarn_pts[:, 1:2] * np.cross(tt, nn)
+
+
+def _plane_point(p, q, z):
+    """The point of segment p → q at height z (p and q on either side of it)."""
+    return p + (z - p[2]) / (q[2] - p[2]) * (q - p)
+
+
+def _inside_runs(p, z_lo, z_hi):
+    """The runs of polyline p (n, 3) inside the slab z_lo ≤ z ≤ z_hi, each an (m ≥ 2, 3) array with its ends cut on
+    the slab's planes."""
+    z = p[:, 2]
+    inside = (z >= z_lo) & (z <= z_hi)
+    runs, cur = [], []
+    for j in range(len(p)):
+        if inside[j]:
+            if not cur and j > 0:  # entering: the cut on the plane the previous point lies beyond
+                cut = _plane_point(p[j - 1], p[j], z_lo if z[j - 1] < z_lo else z_hi)
+                if not np.array_equal(cut, p[j]):
+                    cur.append(cut)
+            cur.append(p[j])
+            continue
+        if cur:  # leaving
+            cut = _plane_point(p[j - 1], p[j], z_lo if z[j] < z_lo else z_hi)
+            if not np.array_equal(cut, cur[-1]):
+                cur.append(cut)
+            runs.append(cur)
+            cur = []
+        elif j > 0 and (z[j - 1] < z_lo) != (z[j] < z_lo):  # both outside, on either side: across the slab
+            a, b = sorted((z_lo, z_hi), key=lambda zz: abs(zz - z[j - 1]))
+            runs.append([_plane_point(p[j - 1], p[j], a), _plane_point(p[j - 1], p[j], b)])
+    if cur:
+        runs.append(cur)
+    return [np.array(r) for r in runs if len(r) >= 2]
+
+
+def clip_axially(fs: FiberSet, z_lo: float, z_hi: float) -> FiberSet:
+    """``fs`` with every flyaway cut to the slab z_lo ≤ z ≤ z_hi of yarn space (regular fibers unchanged): the cut
+    ends of a yarn (module docstring, "Open curves"). Fiber order is kept; a flyaway that leaves the slab and comes
+    back becomes one fiber per run inside, one outside it disappears."""
+    pts, counts, radius, kind, ply = [], [], [], [], []
+    for i in range(fs.n_fibers):
+        p = fs.fiber(i)
+        if fs.kind[i] == KIND_REGULAR or np.all((p[:, 2] >= z_lo) & (p[:, 2] <= z_hi)):
+            runs = [p]
+        else:
+            runs = _inside_runs(p, z_lo, z_hi)
+        for r in runs:
+            pts.append(r)
+            counts.append(len(r))
+            radius.append(fs.radius[i])
+            kind.append(fs.kind[i])
+            ply.append(fs.ply[i])
+    offsets = np.zeros(len(counts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    return FiberSet(np.concatenate(pts) if pts else np.zeros((0, 3)), offsets, np.array(radius, np.float64),
+                    np.array(kind, fs.kind.dtype), np.array(ply, fs.ply.dtype), fs.z_start, fs.z_end, dict(fs.info))
 
 
 def sweep_curve(curves: YarnCurves, c: int, frame: int, spec: YarnSpec, radius: float, seed: int = 0,
@@ -96,6 +155,8 @@ def sweep_curve(curves: YarnCurves, c: int, frame: int, spec: YarnSpec, radius: 
         facts.update(axial_stretch=1.0)
     fs = generate_fibers(spec, length=gen_length, z_start=0.0, seed=cseed, segments_per_period=segments_per_period,
                          flyaways=flyaways)
+    if not closed:
+        fs = clip_axially(fs, 0.0, gen_length)
     yarn_pts = fs.points * np.array([k, k, k * stretch])
     n0 = start_normal(curves, c, frame, tangents(xyz, closed)[0], samples_per_segment)
     t, n, holonomy = curve_frames(xyz, sigma, closed, n0)
