@@ -3,14 +3,17 @@
 1. The tangent spread a pack's texture holds, per mip level: the Toksvig variance (1 − r)/r from r = |T|/coverage
    (``knitrun.render.strip_shading.tangent_spread``, without its cap), as an angle in degrees: median and
    coverage-weighted RMS over texels with coverage > 0.05.
-2. The mean radiance ratio and yarn-scale rel L1 (ratio to the fiber-instance floor) of the + ξ + Ψ^Fiber model,
-   as rendered, with inter-reflection switched off, and with every yarn-level visibility forced to 1 (no
-   shadow maps: the probe that bounds what yarn-level shadowing takes away).
+2. The mean radiance ratio and yarn-scale rel L1 (ratio to the fiber-instance floor) of the full model (ξ, Ψ^Fiber,
+   inter-reflection; no flyaways), as rendered, with inter-reflection switched off, and with every yarn-level
+   visibility forced to 1 (no shadow maps: the probe that bounds what yarn-level shadowing takes away).
 3. Coverage: the fraction of pixels brighter than 0.02 (luminance) in the reference and in the strip image, and the
    share of the reference's energy in pixels the strips leave at the background.
+4. The flyaways' share of the reference (``--flyaway-spp`` > 0): the scene path traced without flyaways at that spp,
+   its mean over the reference's, and the full model's mean ratio against it (the part of the gap that the regular
+   fibers' model owns).
 
     .venv/bin/python benchmarks/check_brightness_gap.py --pack out/bench/cotton1_standard.h5 \\
-        [--scene knit_patch_sky] [--reference-dir out/bench/refs]
+        [--scene knit_patch_sky] [--reference-dir out/bench/refs] [--flyaway-spp 16]
 
 The reference and its instance floor are ``DIR/<scene>.exr`` and ``DIR/<scene>_instance.exr``
 (``benchmarks/bench_floors.py``).
@@ -28,7 +31,7 @@ from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitrun.render import pipeline
-from knitrun.render.ablations import ABLATIONS, Features
+from knitrun.render.ablations import ABLATIONS
 
 LIT = 0.02  # luminance above which a pixel counts as covered
 
@@ -52,17 +55,17 @@ def main():
     parser.add_argument("--pack", required=True, help="cotton1 asset pack")
     parser.add_argument("--scene", default="knit_patch_sky")
     parser.add_argument("--reference-dir", default="out/bench/refs")
+    parser.add_argument("--flyaway-spp", type=int, default=16, help="spp of the flyaway-free reference; 0: skip")
     args = parser.parse_args()
     tangent_spread_by_level(args.pack)
     scene = load_scene(Path(__file__).resolve().parent.parent / "examples" / "scenes" / f"{args.scene}.toml")
     reference = read_exr(Path(args.reference_dir) / f"{args.scene}.exr")
     floor = yarn_scale_metrics(read_exr(Path(args.reference_dir) / f"{args.scene}_instance.exr"), reference,
                                yarn_diameter_px(scene))["rel_l1"]
-    base = ABLATIONS["xi_shadowing"]
+    base = ABLATIONS["full"]
     shadowed = pipeline._visibility
-    probes = [("+ ξ + Ψ^Fiber", base, shadowed), ("  without inter-reflection", Features(
-        xi=True, fiber_shadowing=True, flyaways=False, interreflection=False), shadowed),
-        ("  without yarn-level shadows (probe)", base,
+    probes = [("full", base, shadowed), ("  without inter-reflection", ABLATIONS["xi_shadowing"], shadowed),
+              ("  without yarn-level shadows (probe)", base,
          lambda lines, radius, direction, size, angular, receivers: [np.ones(len(p)) for p, _ in receivers])]
     reference_lum = reference @ LUMINANCE
     for label, features, visibility in probes:
@@ -78,6 +81,27 @@ def main():
               f"({m['rel_l1'] / floor:.2f}× the instance floor); covered {np.mean(lum > LIT):.3f} "
               f"(reference {np.mean(reference_lum > LIT):.3f}); reference energy where the strips draw nothing "
               f"{reference_lum[empty].sum() / reference_lum.sum():.3f}", flush=True)
+        if label == "full":
+            full_mean = float(lum.mean())
+    if args.flyaway_spp > 0:
+        bare = _trace_without_flyaways(scene, args.flyaway_spp) @ LUMINANCE
+        print(f"reference without flyaways ({args.flyaway_spp} spp): mean {bare.mean() / reference_lum.mean():.3f} of "
+              f"the reference's; full model / flyaway-free reference {full_mean / bare.mean():.3f}")
+
+
+def _trace_without_flyaways(scene, spp):
+    """The scene's reference image, traced with the fiber sweep's flyaways switched off."""
+    from knitbake.fibers.fiber_sweep import sweep_fibers
+    from knitbake.trace import reference
+
+    def bare(*args, **kw):
+        return sweep_fibers(*args, **{**kw, "flyaways": False})
+
+    reference.sweep_fibers = bare
+    try:
+        return reference.trace_reference(scene, spp, seed=scene.render.seed, max_depth=scene.render.max_depth)[0]
+    finally:
+        reference.sweep_fibers = sweep_fibers
 
 
 if __name__ == "__main__":
