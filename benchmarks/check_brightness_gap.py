@@ -8,7 +8,10 @@
    visibility forced to 1 (no shadow maps: the probe that bounds what yarn-level shadowing takes away).
 3. Coverage: the fraction of pixels brighter than 0.02 (luminance) in the reference and in the strip image, and the
    share of the reference's energy in pixels the strips leave at the background.
-4. The flyaways' share of the reference (``--flyaway-spp`` > 0): the scene path traced without flyaways at that spp,
+4. The flyaway layer against the reference's hairs: pixels the full model's regular strips cover (luminance > 0.02)
+   are the body, the rest is beside it; the summed radiance beside the body with the layer over the reference's,
+   and the body's radiance with the layer over without it.
+5. The flyaways' share of the reference (``--flyaway-spp`` > 0): the scene path traced without flyaways at that spp,
    its mean over the reference's, and the full model's mean ratio against it (the part of the gap that the regular
    fibers' model owns).
 
@@ -82,7 +85,13 @@ def main():
               f"(reference {np.mean(reference_lum > LIT):.3f}); reference energy where the strips draw nothing "
               f"{reference_lum[empty].sum() / reference_lum.sum():.3f}", flush=True)
         if label == "full":
-            full_mean = float(lum.mean())
+            full_mean, full_lum = float(lum.mean()), lum
+    fly = pipeline.render(scene, {"cotton1": args.pack}, ABLATIONS["flyaways"]).image @ LUMINANCE
+    body = full_lum > LIT
+    print(f"flyaway layer: radiance beside the body {fly[~body].sum() / reference_lum[~body].sum():.2f}× the "
+          f"reference's; the body's radiance with the layer {fly[body].sum() / full_lum[body].sum():.3f}× without it "
+          f"(the reference's over the full model's there: {reference_lum[body].sum() / full_lum[body].sum():.3f})",
+          flush=True)
     if args.flyaway_spp > 0:
         bare = _trace_without_flyaways(scene, args.flyaway_spp) @ LUMINANCE
         print(f"reference without flyaways ({args.flyaway_spp} spp): mean {bare.mean() / reference_lum.mean():.3f} of "

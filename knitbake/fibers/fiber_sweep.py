@@ -62,7 +62,7 @@ def place(yarn_pts: np.ndarray, xyz: np.ndarray, sigma: np.ndarray, t: np.ndarra
     i = np.clip(np.searchsorted(sigma, s, side="right") - 1, 0, len(sigma) - 2)
     ds = sigma[i + 1] - sigma[i]
     f = np.where(ds > 0, (s - sigma[i]) / np.where(ds > 0, ds, 1.0), 0.0)[:, None]
-    centre = xyz[i] + f * (xyz[i + 1] - xyz[i])  # f outside [0, 1] only past an open end: along the end chord
+    centre = xyz[i] + f * (xyz[i + 1] - xyz[i])  # f leaves [0, 1] only by rounding at an open end (fibers cut there)
     fc = np.clip(f, 0.0, 1.0)
     tt = t[i] + fc * (t[i + 1] - t[i])
     tn = np.linalg.norm(tt, axis=1, keepdims=True)
