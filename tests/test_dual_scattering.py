@@ -225,3 +225,19 @@ def test_runtime_reads_the_tables_by_the_lookup_rule():
         beta_f = lookup_theta(tables["dual_scattering/beta_f"][0], theta_i)
         np.testing.assert_allclose(comp["T_f"], ds.D_F * a_f ** 2.5, rtol=1e-12)
         np.testing.assert_allclose(comp["sigma_f2"], 2.5 * beta_f ** 2, rtol=1e-12)
+
+
+def test_forward_fraction_is_the_interpolated_a_f_and_matches_the_brute_force_integral():
+    """``forward_fraction`` (the flyaway layer's transmittance) reads ā_f by the lookup rule, in [0, 1]; at a cell
+    centre it is the forward half's integral of f cos θ' (``brute_force``) to quadrature accuracy."""
+    p = params(COLOURS, *ROUGHNESS[1])
+    tables = precompute_dual_scattering(p, n_theta=N_THETA)
+    tab = ds.pack_tables(tables)
+    out = np.empty(3)
+    for theta in np.linspace(-1.6, 1.6, 11):
+        ds.forward_fraction(tab, theta, out)
+        np.testing.assert_allclose(out, lookup_theta(tables["dual_scattering/a_f"][0], theta), rtol=1e-12)
+        assert np.all((out >= 0) & (out <= 1))
+    centre = cell_centres(-0.5 * math.pi, 0.5 * math.pi, N_THETA)[11]
+    ds.forward_fraction(tab, centre, out)
+    np.testing.assert_allclose(out, brute_force(p, centre)["a_f"], rtol=2e-3)

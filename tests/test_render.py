@@ -267,10 +267,17 @@ def test_resolve_weights_coverage_over_the_background():
     alpha = np.array([1.0, 0.5])
     under = np.array([[0, 0, 1.0], [0.2, 0.2, 0.2]])
     out = np.empty((2, 3))
-    resolve(start, weight, rgb, alpha, under, out)
+    resolve(start, weight, rgb, alpha, np.zeros((2, 3)), under, out)
     assert np.allclose(out[0], [0.5, 0.25, 0.25])  # 0.5 red + 0.25 green + (1 − 0.75) blue
     assert np.allclose(out[1], [0.2, 0.2, 0.2])
     assert math.isclose(out.sum(), 0.5 + 0.25 + 0.25 + 0.6)
+    # points that pass on τ of what lies behind them: blue keeps 1 − (0.5·(1 − 0.5) + 0.25·(1 − 0.2)) = 0.55
+    transmit = np.array([[0.5, 0.5, 0.5], [1.0, 0.0, 0.2]])
+    resolve(start, weight, rgb, alpha, transmit, under, out)
+    assert np.allclose(out[0], [0.5, 0.25, 0.55])
+    # τ = 1 everywhere: the layer only adds light
+    resolve(start, weight, rgb, alpha, np.ones((2, 3)), under, out)
+    assert np.allclose(out[0], [0.5, 0.25, 1.0]) and np.allclose(out[1], under[1])
 
 
 def test_yarn_colour_acts_per_channel(tmp_path, pack):

@@ -298,25 +298,26 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
                       light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_vis[0], ms_dir, ms_e,
                       ms_vis[0], *im, rgb, alpha)
     if fly_points is not None:
-        fly_rgb, fly_alpha = np.zeros((len(fly_points["weight"]), 3)), np.zeros(len(fly_points["weight"]))
+        n_fly = len(fly_points["weight"])
+        fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
         for k in drawn_fly:
             look = looks[k]
             idx = np.flatnonzero(fly_points["yarn"] == k)
             im = look.im if look.im is not None else _NO_IM
             shade_flyaway(idx, fly_points["view_dir"], fly_points["tangent"],
                           view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
-                          fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params,
+                          fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params, look.ds,
                           look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,
                           look.period, look.flyaway_half_width, look.radius, look.psi_full, look.psi_gm,
                           look.psi_gn, light_dir, light_e, light_vis[1], lobe_dir,
-                          lobe_lambda, lobe_w, lobe_vis[1], *im, fly_rgb, fly_alpha)
+                          lobe_lambda, lobe_w, lobe_vis[1], *im, fly_rgb, fly_alpha, fly_transmit)
     lap("shade")
 
     image = np.empty((h * w, 3))
-    resolve(points["start"], points["weight"], rgb, alpha,
+    resolve(points["start"], points["weight"], rgb, alpha, np.zeros_like(rgb),
             np.ascontiguousarray(np.broadcast_to(np.asarray(scene.background, np.float64), (h * w, 3))), image)
     if fly_points is not None:
-        resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, image.copy(), image)
+        resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image.copy(), image)
     if not np.all(np.isfinite(image)):
         raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
     lap("resolve")

@@ -51,9 +51,14 @@ integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the
 tangent from its RGB; single scattering, L_o = Σ E V S f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j S_j I_M (thin hairs: no
 multiple-scattering terms), S = Ψ^Fiber_G(v_strip, ω_i) (mean RGB) where the hair lies over the yarn body
 (|v_strip| ≤ 1, v_strip = v·h_fly/r) — a hair on the surface is shadowed like the surface fibers — and 1 beyond.
+A hair is not an opaque film: of the radiance behind it (the yarn body, or the background) it passes on its forward
+fraction τ = ā_f(θ_o^f) (``dual_scattering.forward_fraction``; cotton ≈ 0.7), which a broad bright backdrop such as
+the body sends on toward the camera as it receives it. Without τ a hair over the body replaces the body's multiply
+scattered radiance by its own single scattering and darkens it, where in the path-traced reference hairs over the
+body add light.
 
 Resolve (``resolve``): C = Σ w α L + (1 − Σ w α)·background for the regular layer, then the flyaway layer over it:
-C ← Σ w A L_fly + (1 − Σ w A)·C. All radiances linear RGB in the units of E and W.
+C ← Σ w A L_fly + (1 − Σ w A (1 − τ))·C. All radiances linear RGB in the units of E and W.
 """
 
 from __future__ import annotations
@@ -66,7 +71,8 @@ from numba import njit, prange
 from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
 from knitrun.render.texture_sampling import mip_level, sample_mip
-from knitrun.shading.dual_scattering import D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel
+from knitrun.shading.dual_scattering import (D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel,
+                                             forward_fraction)
 from knitrun.shading.fiber_bcsdf import context, evaluate, spread_params, view_context
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
 from knitrun.shading.im_lookup import im_kernel
@@ -371,11 +377,12 @@ def variant_of(curve, period_index):
 
 
 @njit(parallel=True, cache=True)
-def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, params,
+def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, params, ds,
                   fly_data, fly_off, fly_rows, fly_cols, period, half_width, radius, psi_full, psi_gm, psi_gn,
                   light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis,
-                  im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):
-    """Shade the flyaway-layer points ``idx`` of one yarn; writes rgb[idx], alpha[idx]."""
+                  im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha, transmit):
+    """Shade the flyaway-layer points ``idx`` of one yarn; writes rgb[idx], alpha[idx] and transmit[idx] (RGB,
+    the hair's forward fraction ā_f(θ_o): what it passes on of the radiance behind it)."""
     texel_u = period / fly_cols[0, 0]
     texel_v = 2.0 * half_width / fly_rows[0, 0]
     for m in prange(idx.shape[0]):
@@ -391,6 +398,8 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
         if not _texture_tangent(texel, t, n, b, tf):
             continue
         alpha[q] = min(max(texel[3], 0.0), 1.0)
+        theta_o_f = longitudinal_angle(tf, wo)
+        forward_fraction(ds, theta_o_f, transmit[q])
         # local fiber frame: x along tf, y toward the camera in the normal plane, z = x × y
         ny = np.empty(3)
         if not _strip_frame(tf, wo, ny, b):
@@ -413,7 +422,6 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
                                                      scratch)
             for ch in range(3):
                 rgb[q, ch] += light_e[light, ch] * lit * f[ch] * cos_i
-        theta_o_f = longitudinal_angle(tf, wo)
         for j in range(lobe_dir.shape[0]):
             wj = lobe_dir[j]
             phi_f = azimuth_difference(tf, wo, wj)
@@ -438,16 +446,16 @@ def _body_shadow(on_body, psi_full, psi_gm, psi_gn, v, t, n, b, wi, psi, scratch
 # --- resolve ---------------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
-def resolve(start, weight, rgb, alpha, under, out):
-    """out[p] = Σ_points w α L + (1 − Σ w α)·under[p] over the points of pixel p (flattened H·W, RGB)."""
+def resolve(start, weight, rgb, alpha, transmit, under, out):
+    """out[p] = Σ_points w α L + (1 − min(1, Σ w α (1 − τ)))·under[p] over the points of pixel p (flattened H·W,
+    RGB); τ = ``transmit`` (N, 3), the fraction of the radiance behind a point that it passes on (0: opaque)."""
     for p in prange(out.shape[0]):
-        cov = 0.0
+        cov = np.zeros(3)
         acc = np.zeros(3)
         for q in range(start[p], start[p + 1]):
             a = weight[q] * alpha[q]
-            cov += a
             for ch in range(3):
                 acc[ch] += a * rgb[q, ch]
-        cov = min(cov, 1.0)
+                cov[ch] += a * (1.0 - transmit[q, ch])
         for ch in range(3):
-            out[p, ch] = acc[ch] + (1.0 - cov) * under[p, ch]
+            out[p, ch] = acc[ch] + (1.0 - min(cov[ch], 1.0)) * under[p, ch]

@@ -155,6 +155,16 @@ def _lobe(theta_i, sin_o, alpha, width):
 
 
 @njit(cache=True)
+def forward_fraction(tab, theta, out):
+    """ā_f(θ) per channel, clamped to [0, 1]: the fraction of the light that meets a fiber at θ (against its tangent)
+    and leaves it on the far side (Zinke et al. 2008 §4.1), from ``pack_tables``' a_f row. A thin hair in front of a
+    bright body passes this fraction of the body's radiance on toward the camera (``strip_shading.shade_flyaway``)."""
+    i0, i1, fr = axis_cell(theta, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
+    for ch in range(3):
+        out[ch] = min(max((1.0 - fr) * tab[R_A_F, i0, ch] + fr * tab[R_A_F, i1, ch], 0.0), 1.0)
+
+
+@njit(cache=True)
 def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out):
     """One DS evaluation. ``p``: BCSDF parameters; ``tab``: ``pack_tables`` output (5, N_theta, 3); ``direct``: D in
     [0, 1]; ``out`` (7, 3) receives the rows of ``COMPONENTS`` (the last is L_o/E)."""
