@@ -95,14 +95,23 @@ def yarn_show(yarn_name, as_json, as_toml):
 @main.command()
 @click.argument("path", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-def inspect(path, as_json):
+@click.option("--radius", type=click.FloatRange(min=0.0, min_open=True),
+              help="Yarn radius (file units) for the contact statistic of yarn curves; default: the file's own "
+                   "radius (written by knitrun simulate).")
+def inspect(path, as_json, radius):
     """Describe any file the toolchain reads, recognised by content: asset pack, yarn spec, yarn curves (HDF5 or
-    BCC) — kind, counts, bounds, provenance, and for packs every table's error estimate.
+    BCC) — kind, counts, bounds, provenance, and for packs every table's error estimate. For yarn curves, the
+    contact statistic (distance to the nearest other yarn over 2r, percentiles; 1 = touching, below 1 the yarns
+    interpenetrate) on the first and the last frame, when the radius is known.
 
     Example: knitbake inspect cotton1.h5 --json
     """
     kind, module = file_kind(path)
     info = module.describe(path)
+    if kind in ("yarn-curves", "bcc"):
+        info["contact"] = _contact(path, kind, radius if radius is not None else info.get("radius"))
+    elif radius is not None:
+        raise FormatError(f"--radius applies to yarn curves, and {path} is a {kind} file")
     if as_json:
         echo_json(info)
         return
@@ -117,6 +126,18 @@ def inspect(path, as_json):
             click.echo(f"  {name:<36}{str(tuple(t['shape'])):<22}error {err_text}")
             for key, value in t.get("notes", {}).items():
                 click.echo(f"  {'':<36}{key} {value:.3g}" if isinstance(value, float) else f"  {'':<36}{key} {value}")
+
+
+def _contact(path, kind, radius):
+    """The contact statistic of yarn curves on their first and last frame, or why it is missing."""
+    if radius is None:
+        return "unknown yarn radius: pass --radius"
+    from data_formats.bcc import read_bcc
+    from data_formats.yarn_curves import read_yarn_curves
+    from knitrun.sim.contact import contact_over_frames
+
+    curves = read_yarn_curves(path) if kind == "yarn-curves" else read_bcc(path)
+    return contact_over_frames(curves, radius, max_frames=2)
 
 
 @main.command()

@@ -116,7 +116,8 @@ def pattern(source, rows, cols, output, as_json):
 def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, beta, as_json):
     """Knot simulation: yarn curves of a stitch mesh (.h5, or .obj + .labels) driven by deformations or OBJ frames.
 
-    Reports milliseconds per frame (median; Numba compile or cache load excluded) and the final energy.
+    Reports milliseconds per frame (median; Numba compile or cache load excluded), the final energy and the contact
+    statistic (knitrun/sim/contact.py: how far each yarn stays from the others, over 2r; below 1 they interpenetrate).
 
     \b
     Examples:
@@ -127,6 +128,7 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     from data_formats import stitch_mesh
     from data_formats.bcc import write_bcc
     from data_formats.yarn_curves import write_yarn_curves
+    from knitrun.sim.contact import contact_over_frames
     from knitrun.sim.deformations import deformation_frames, parse_deformation, read_obj_frames
     from knitrun.sim.simulate import simulate as run_simulation
 
@@ -138,6 +140,7 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     vertex_frames = read_obj_frames(obj_dir, mesh) if obj_dir is not None else \
         deformation_frames(mesh.vertices, specs, frames or 1)
     curves, report = run_simulation(mesh, vertex_frames, iterations=iterations, w_length=w_length, beta=beta)
+    report["contact"] = contact_over_frames(curves, report["yarn_radius"])
     if suffix == ".bcc":
         write_bcc(output, curves, frame=curves.points.shape[0] - 1)
     else:
@@ -150,6 +153,10 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
                    f"{report['render_points']} points in {report['curves']} curves; "
                    f"{report['ms_per_frame_median']:.2f} ms/frame (median, {report['threads']} threads); "
                    f"final energy {report['final_energy']:.6g}")
+        worst = report["contact"]["worst"]
+        click.echo(f"contact (distance to the nearest other yarn / 2r, r = {report['yarn_radius']:.4g}; 1 = touching), "
+                   f"worst of {len(report['contact']['frames_evaluated'])} frame(s) (frame {worst['frame']}): "
+                   f"5th percentile {worst['p5']:.3f}, median {worst['p50']:.3f}")
 
 
 def _pack_overrides(values):

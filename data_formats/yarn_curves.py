@@ -9,6 +9,8 @@ Conventions (the full spec is ``YARN_CURVES.md``):
   ``"BS"`` uniform cubic B-spline, ``"BZ"`` cubic Bézier (open: 3k+1 points, closed: 3k points).
 * ``rest_arclength`` is the cumulative length of each curve's control polygon at frame 0 (0 at the first point of
   every curve, non-decreasing), fixed over frames.
+* ``radius`` (optional): the yarn radius the curves were built for (the knot simulator's r), in ``units``; None
+  when unknown. Tools that judge or draw the curves (the contact statistic, a renderer) read it.
 * On disk, points are float32 (the precision the GPU and BCC use; half the size of float64 for long animations);
   the reader also accepts float64. In memory they are always float64.
 """
@@ -23,7 +25,7 @@ from .errors import FormatError
 from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
 
 FORMAT_NAME = "knit-yarn-curves"
-FORMAT_VERSION = "1.0"
+FORMAT_VERSION = "1.1"  # 1.1 adds the optional ``radius`` attribute
 CURVE_TYPES = ("PL", "C0", "BS", "BZ")
 
 
@@ -41,10 +43,11 @@ class YarnCurves:
     curve_type: str  # one of CURVE_TYPES
     units: str
     frame_time: float | None  # seconds per frame
+    radius: float | None = None  # yarn radius the curves were built for, in units
 
 
 def make_yarn_curves(points, offsets, closed=None, yarn_type=None, yarn_types=None, rest_arclength=None,
-                     curve_type="C0", units="cm", frame_time=None, where="yarn curves"):
+                     curve_type="C0", units="cm", frame_time=None, where="yarn curves", radius=None):
     """Build and validate a ``YarnCurves``, converting dtypes; ``points`` may be (P, 3) for a single frame.
 
     Defaults: all curves open, all of yarn type 0 named ``"unknown"``, ``rest_arclength`` from frame 0.
@@ -61,7 +64,8 @@ def make_yarn_curves(points, offsets, closed=None, yarn_type=None, yarn_types=No
         _check_points(points, offsets, where)
         rest_arclength = control_polygon_arclength(points[0], offsets)
     yc = YarnCurves(points, offsets, closed, yarn_type, yarn_types, np.asarray(rest_arclength, dtype=np.float64),
-                    curve_type, units, None if frame_time is None else float(frame_time))
+                    curve_type, units, None if frame_time is None else float(frame_time),
+                    None if radius is None else float(radius))
     validate_curves(yc, where)
     return yc
 
@@ -104,6 +108,8 @@ def validate_curves(yc, where="yarn curves"):
     if yc.frame_time is not None and not (isinstance(yc.frame_time, float) and np.isfinite(yc.frame_time)
                                           and yc.frame_time > 0):
         raise FormatError(f"{where}: frame_time: got {yc.frame_time!r}, expected None or a positive finite float")
+    if yc.radius is not None and not (isinstance(yc.radius, float) and np.isfinite(yc.radius) and yc.radius > 0):
+        raise FormatError(f"{where}: radius: got {yc.radius!r}, expected None or a positive finite float")
 
 
 def _shape_dtype(arr):
@@ -179,6 +185,7 @@ def summary(yc):
         "curve_type": yc.curve_type,
         "units": yc.units,
         "frame_time": yc.frame_time,
+        "radius": yc.radius,
         "bounds": [yc.points.min(axis=(0, 1)).tolist(), yc.points.max(axis=(0, 1)).tolist()],
         "yarn_types": list(yc.yarn_types),
         "curves_per_yarn_type": np.bincount(yc.yarn_type, minlength=len(yc.yarn_types)).tolist(),
@@ -197,6 +204,8 @@ def write_yarn_curves(path, yc):
         f.attrs["curve_type"] = yc.curve_type
         if yc.frame_time is not None:
             f.attrs["frame_time"] = yc.frame_time
+        if yc.radius is not None:
+            f.attrs["radius"] = yc.radius
         f.create_dataset("points", data=points32)
         f.create_dataset("offsets", data=yc.offsets)
         f.create_dataset("closed", data=yc.closed.astype(np.uint8))
@@ -227,6 +236,9 @@ def read_yarn_curves(path):
         frame_time = f.attrs.get("frame_time")
         if frame_time is not None and not (np.ndim(frame_time) == 0 and np.issubdtype(type(frame_time), np.number)):
             raise FormatError(f"{where}: attribute frame_time: got {frame_time!r:.40}, expected a number of seconds")
+        radius = f.attrs.get("radius")
+        if radius is not None and not (np.ndim(radius) == 0 and np.issubdtype(type(radius), np.number)):
+            raise FormatError(f"{where}: attribute radius: got {radius!r:.40}, expected a yarn radius in units")
         yc = YarnCurves(
             points=points.astype(np.float64),
             offsets=dataset(f, "offsets", "iu", where).astype(np.int64),
@@ -237,6 +249,7 @@ def read_yarn_curves(path):
             curve_type=str_attr(f, "curve_type", where),
             units=str_attr(f, "units", where),
             frame_time=None if frame_time is None else float(frame_time),
+            radius=None if radius is None else float(radius),
         )
     validate_curves(yc, where)
     return yc

@@ -117,6 +117,19 @@ def test_inspect_spec_and_unknown_files(tmp_path):
     assert_one_line_error(run(knitbake, "validate", tmp_path / "absent.h5"), "absent.h5", "no such file")
 
 
+def test_inspect_reports_contact_only_with_a_known_radius(tmp_path):
+    """Yarn curves without a radius say how to get the contact statistic; ``--radius`` gives it, on the first and
+    the last frame; ``--radius`` on another kind of file is a one-line error."""
+    bcc = tmp_path / "a.bcc"
+    assert run(knitbake, "fibers", "rayon2", "-o", bcc, "--no-flyaways").exit_code == 0
+    assert "pass --radius" in json.loads(run(knitbake, "inspect", bcc, "--json").stdout)["contact"]
+    contact = json.loads(run(knitbake, "inspect", bcc, "--radius", "0.0004", "--json").stdout)["contact"]
+    assert contact["frames_evaluated"] == [0] and contact["worst"]["radius"] == 0.0004
+    assert 0 < contact["worst"]["p5"] <= contact["worst"]["p50"]
+    assert_one_line_error(run(knitbake, "inspect", "data_formats/presets/silk2.toml", "--radius", "1"), "--radius")
+    assert run(knitbake, "inspect", bcc, "--radius", "0").exit_code == 2
+
+
 def test_inspect_and_validate_an_obj_stitch_mesh(tmp_path):
     obj = tmp_path / "m.obj"
     write_obj_stitch_mesh(obj, sample())

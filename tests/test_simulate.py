@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from cli.knitbake_cli import main as knitbake
 from cli.knitrun_cli import main as knitrun
 from data_formats.bcc import read_bcc
 from data_formats.errors import FormatError
 from data_formats.stitch_mesh import read_obj_stitch_mesh, read_stitch_mesh, write_obj_stitch_mesh
 from data_formats.yarn_curves import control_polygon_arclength, read_yarn_curves
+from knitrun.sim.contact import contact_statistic
 from knitrun.sim.deformations import deform, deformation_frames, frame_amounts, parse_deformation, read_obj_frames
 from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
 from knitrun.sim.simulate import (control_segment_lengths, course_knot_spacing, prepare, simulate, solve_frame,
@@ -224,6 +226,13 @@ def test_cli_pattern_and_simulate(tmp_path):
     assert result.exit_code == 0 and report["frames"] == 3 and len(report["energy_history"]) == 3
     curves = read_yarn_curves(yarns)
     assert curves.points.shape == (3, report["render_points"], 3) and curves.units == "cm"
+    assert curves.radius == report["yarn_radius"]  # the file keeps the radius the yarns were built for
+    contact = report["contact"]
+    assert contact["frames_evaluated"] == [0, 1, 2] and contact["worst"]["radius"] == report["yarn_radius"]
+    assert 0 < contact["worst"]["p5"] <= contact["worst"]["p50"] <= contact["worst"]["p95"]
+    assert contact["worst"]["p5"] == min(contact_statistic(curves, curves.radius, t)["p5"] for t in range(3))
+    inspected = CliRunner().invoke(knitbake, ["inspect", str(yarns), "--json"], catch_exceptions=False)
+    assert json.loads(inspected.stdout)["contact"]["last"] == contact["last"]
     bcc = tmp_path / "bent.bcc"
     result = run("simulate", obj, "--deform", "cylinder=1.0", "-o", bcc)
     assert result.exit_code == 0 and "ms/frame" in result.output and "final energy" in result.output

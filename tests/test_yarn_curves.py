@@ -53,7 +53,31 @@ def test_round_trip_multi_frame_mixed_closed(tmp_path):
                                                                                 1 / 24)
     with h5py.File(path) as f:
         assert f["points"].dtype == np.float32
-        assert (f.attrs["format"], f.attrs["version"]) == ("knit-yarn-curves", "1.0")
+        assert (f.attrs["format"], f.attrs["version"]) == ("knit-yarn-curves", "1.1")
+        assert "radius" not in f.attrs  # unknown radius: no attribute
+    assert back.radius is None
+
+
+def test_radius_round_trips_and_a_1_0_file_reads_without_it(tmp_path):
+    yc = make_yarn_curves(np.arange(12.0).reshape(4, 3), [0, 4], radius=0.03125)
+    write_yarn_curves(tmp_path / "r.h5", yc)
+    assert read_yarn_curves(tmp_path / "r.h5").radius == 0.03125
+    plain = tmp_path / "plain.h5"
+    write_yarn_curves(plain, make_yarn_curves(np.arange(12.0).reshape(4, 3), [0, 4]))
+    with h5py.File(plain, "a") as f:
+        f.attrs["version"] = "1.0"
+    assert read_yarn_curves(plain).radius is None
+
+
+@pytest.mark.parametrize("value", [-0.1, 0.0, float("nan"), float("inf")])
+def test_bad_radius_rejected(tmp_path, value):
+    with pytest.raises(FormatError, match="radius"):
+        make_yarn_curves(np.arange(12.0).reshape(4, 3), [0, 4], radius=value)
+    path = tmp_path / "r.h5"
+    write_yarn_curves(path, make_yarn_curves(np.arange(12.0).reshape(4, 3), [0, 4], radius=0.5))
+    with h5py.File(path, "a") as f:
+        f.attrs["radius"] = value
+    assert_rejected(path, "radius")
 
 
 def test_frame_time_none_and_curve_type_round_trip(tmp_path):

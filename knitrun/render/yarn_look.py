@@ -109,7 +109,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     if corrections and full_tables:
         names += [n for n in FULL_TABLES if n in stored]
     if missing:
-        raise ValueError(f"{pack_path}: pack lacks {', '.join(missing)} (bake the yarn again without --only or --scene)")
+        raise ValueError(f"{pack_path}: pack lacks {', '.join(missing)} "
+                         f"(bake the yarn again without --only or --scene)")
     pack = read_pack(pack_path, tables=[k for k in stored if any(k == n or k.startswith(n + "/mip") for n in names)])
     colour = np.asarray(entry.color, np.float64)
     params = tinted(params_from_pack(pack.fiber_bcsdf), colour)

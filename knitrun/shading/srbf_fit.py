@@ -183,9 +183,9 @@ def _greedy(dirs, weight, radiance, n_lobes, lam_max):
         g = sg(dirs[:, None, None, :], cand[None, :, None, :], candidates[None, None, :])  # (N, C, L)
         proj = np.clip(np.einsum("ncl,n,nk->clk", g, weight, residual), 0, None)
         gain = (proj ** 2).sum(axis=2) / np.einsum("ncl,n->cl", g * g, weight)
-        c, l = np.unravel_index(np.argmax(gain), gain.shape)
+        c, k = np.unravel_index(np.argmax(gain), gain.shape)
         centres = np.vstack([centres, cand[c]])
-        lam = np.append(lam, candidates[l])
+        lam = np.append(lam, candidates[k])
         basis = sg(dirs[:, None, :], centres[None], lam[None])
         residual = radiance - basis @ _nnls_weights(basis, weight, radiance)
     return centres, lam

@@ -188,7 +188,7 @@ def simulate(mesh, frames, radius=None, frame_time=None, **options):
     curves = make_yarn_curves(out, model.plan.offsets, yarn_type=model.layout.yarn_type,
                               yarn_types=mesh.yarn_types, rest_arclength=model.rest_arclength,
                               curve_type="PL" if model.plan.samples > 1 else "C0", units=mesh.units,
-                              frame_time=frame_time)
+                              frame_time=frame_time, radius=model.radius)
     history = solution.energy.sum(axis=0)
     report = {"faces": len(mesh.stitch_type), "frames": len(out), "curves": len(model.plan.offsets) - 1,
               "control_points": len(model.layout.index), "render_points": int(model.plan.offsets[-1]),
