@@ -200,6 +200,8 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
         scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, msaa=int(msaa)))
     result = render_scene(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
                           progress=lambda name, s: click.echo(f"  {name}: {s * 1e3:.0f} ms", err=True))
+    for warning in result.facts["warnings"]:
+        click.echo(f"warning: {warning}", err=True)
     write_png(output, result.image, exposure)
     if exr_path is not None:
         write_exr(exr_path, result.image)

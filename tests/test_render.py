@@ -14,11 +14,12 @@ from click.testing import CliRunner
 from cli.knitrun_cli import main as knitrun
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
+from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
-from knitrun.render.pipeline import render
+from knitrun.render.pipeline import radius_mismatch, render
 from knitrun.render.strip_shading import resolve, shade_regular, variant_of
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_full_table, ones_factor
@@ -366,3 +367,20 @@ def test_a_yarn_without_flyaways_renders_without_a_flyaway_layer(tmp_path):
     path.write_text(path.read_text().replace('yarn = "cotton1"', 'yarn = "yarn.toml"'))
     result = render(load_scene(path), {"cotton1": str(bare)})
     assert result.facts["flyaway_points"] == 0 and np.all(np.isfinite(result.image))
+
+
+def test_curves_drawn_off_the_radius_they_were_built_for_give_a_warning(tmp_path, pack):
+    """Curves that carry their build radius and are drawn more than 5 % thicker or thinner are named in a one-line
+    warning (overlap or gaps); within 5 %, or without a stored radius, there is none."""
+    curves = make_yarn_curves(straight()[None], [0, 9], yarn_types=["cotton1"], units="cm")
+    drawn = 0.0297328  # cotton1's radius: the scene entry's default
+    assert radius_mismatch(curves, drawn, "yarns[0]") is None  # radius unknown
+    for built, expected in ((drawn * 1.04, None), (drawn / 1.5, "overlap"), (drawn * 1.5, "leave gaps")):
+        message = radius_mismatch(dataclasses.replace(curves, radius=built), drawn, "yarns[0]")
+        assert (message is None) if expected is None else (expected in message and "yarns[0]" in message
+                                                           and "\n" not in message)
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    assert _render(path, pack).facts["warnings"] == []
+    write_yarn_curves(tmp_path / "s.h5", dataclasses.replace(curves, radius=drawn / 1.5))
+    warnings = _render(path, pack).facts["warnings"]
+    assert len(warnings) == 1 and "overlap" in warnings[0]

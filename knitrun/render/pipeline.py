@@ -2,7 +2,9 @@
 
 Passes, each timed (``RenderResult.timings``, seconds):
 
-1. ``load``: the scene's curves at ``render.frame`` (a stitch mesh is simulated at rest by ``knitrun.sim.simulate``),
+1. ``load``: the scene's curves at ``render.frame`` (a stitch mesh is simulated at rest by ``knitrun.sim.simulate``
+   with the entry's radius; curves that carry the radius they were built for and are drawn more than 5 % thicker or
+   thinner give a warning in ``RenderResult.facts["warnings"]``),
    evaluated by their curve type (``data_formats.curve_eval``: PL as drawn, C0 as uniform Catmull-Rom, BS, BZ) into
    polylines of ``samples_per_segment`` samples per smooth segment, each sample with its rest arc length; each
    yarn entry's pack (``knitrun.render.yarn_look``), reading only the tables the scene needs.
@@ -57,6 +59,7 @@ SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
 MS_MERGE_DEG = 30.0  # lobes this close share one multiple-scattering evaluation
+RADIUS_TOLERANCE = 0.05  # drawn radius / the radius the curves were built for: beyond 1 ± this, a warning
 
 
 @dataclass
@@ -87,10 +90,24 @@ def _scene_curves(entry, units, frame):
     return curves, frame
 
 
-def _polylines(scene: Scene, samples_per_segment: int) -> _Polylines:
+def radius_mismatch(curves, drawn: float, where: str) -> str | None:
+    """A one-line warning when curves built for a yarn radius (``YarnCurves.radius``, e.g. the knot simulator's r)
+    are drawn more than ``RADIUS_TOLERANCE`` thicker or thinner: the yarns then overlap or gap where the simulation
+    kept them apart. None when the radius is unknown or close enough."""
+    if curves.radius is None or abs(drawn / curves.radius - 1.0) <= RADIUS_TOLERANCE:
+        return None
+    return (f"{where}: drawn with radius {drawn:.4g} but the curves were built for {curves.radius:.4g} "
+            f"({drawn / curves.radius:.2f}×): the yarns will {'overlap' if drawn > curves.radius else 'leave gaps'}; "
+            f"simulate with the drawn radius or set the entry's radius")
+
+
+def _polylines(scene: Scene, samples_per_segment: int, warnings: list) -> _Polylines:
     pts, rest, normals, entry_of, sizes = [], [], [], [], [0]
     for k, entry in enumerate(scene.yarns):
         curves, frame = _scene_curves(entry, scene.units, scene.render.frame)
+        message = radius_mismatch(curves, entry.radius, f"yarns[{k}]")
+        if message is not None:
+            warnings.append(message)
         wanted = entry.yarn_type_indices or tuple(range(len(curves.yarn_types)))
         for c in range(len(curves.offsets) - 1):
             control = curves.points[frame, curves.offsets[c]:curves.offsets[c + 1]]
@@ -219,7 +236,9 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
         if not features.fiber_shadowing:
             look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
             look.n_occluded = 0.0
-    lines = _polylines(scene, samples_per_segment)
+    warnings = []
+    lines = _polylines(scene, samples_per_segment, warnings)
+    facts["warnings"] = warnings
     facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
     lap("load")
 
