@@ -1,17 +1,25 @@
 """The contact statistic (``knitrun.sim.contact``) of every named pattern, simulated at rest and under the issue-14
 deformations: the 5th percentile and the median of d / 2r (1 = touching, below 1 the yarns interpenetrate), with
 the fraction of samples below 0.8. Target (issue 14): 5th percentile ≥ 0.80 and median in [0.95, 1.10] in every
-cell.
+cell. ``--hand-drawn`` measures the templates before the relaxation (``stitch_templates.pack_templates(False)``);
+``--images DIR --pack PACK`` renders a 6 × 6 stockinette and 1×1 rib patch at rest with both templates side by side
+(DIR/templates_<pattern>.png: hand-drawn | relaxed; strip renderer, one directional light).
 
-    .venv/bin/python benchmarks/bench_contact.py [--rows 12 --cols 12]
+    .venv/bin/python benchmarks/bench_contact.py [--rows 12 --cols 12] [--hand-drawn]
+    .venv/bin/python benchmarks/bench_contact.py --images docs --pack out/bench/cotton1_standard.h5
 
 Each cell simulates the pattern's chart (``knitrun pattern P --rows R --cols C``) with one frame of the full
 deformation (the default 3 Gauss-Newton iterations) and measures that frame with the simulator's radius.
 """
 
 import argparse
+import tempfile
 import time
+from pathlib import Path
 
+import numpy as np
+
+from knitrun.sim import stitch_templates
 from knitrun.sim.contact import DEEP, contact_statistic
 from knitrun.sim.deformations import deformation_frames
 from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
@@ -19,20 +27,45 @@ from knitrun.sim.simulate import simulate
 
 DEFORMATIONS = {"at rest": [], "stretch-x 1.5": ["stretch-x=1.5"], "stretch-y 1.5": ["stretch-y=1.5"],
                 "shear 0.3": ["shear=0.3"]}
+SCENE = """format = "knit-scene"
+version = "1.0"
+units = "cm"
+background = [0.05, 0.05, 0.05]
+[[yarns]]
+stitch_mesh = "{mesh}"
+yarn = "cotton1"
+pack = "{pack}"
+radius = 0.03125
+color = [0.9, 0.25, 0.2]
+[camera]
+position = [0.75, 0.6, 3.0]
+look_at = [0.75, 0.6, 0.0]
+fov_deg = 25.0
+width = 512
+height = 448
+[[lights]]
+type = "directional"
+direction = [0.4, 0.6, 1.0]
+irradiance = [3.0, 3.0, 3.0]
+[render]
+msaa = 4
+"""
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rows", type=int, default=12)
-    parser.add_argument("--cols", type=int, default=12)
-    args = parser.parse_args()
-    t0 = time.perf_counter()
+def use_templates(relaxed):
+    """Swap the simulator's packed templates in place (the kernels receive these arrays at every call)."""
+    ints, floats = stitch_templates.pack_templates(relaxed)
+    stitch_templates.TEMPLATE_INT[...] = ints
+    stitch_templates.TEMPLATE_FLOAT[...] = floats
+
+
+def table(rows, cols):
     header = " | ".join(f"{name}: p5 / median / < {DEEP}" for name in DEFORMATIONS)
     print(f"| pattern | {header} |")
     print("|---" * (len(DEFORMATIONS) + 1) + "|")
     radius = None
     for pattern in PATTERNS:
-        mesh = chart_to_mesh(pattern_chart(pattern, args.rows, args.cols))
+        mesh = chart_to_mesh(pattern_chart(pattern, rows, cols))
         cells = []
         for specs in DEFORMATIONS.values():
             curves, report = simulate(mesh, deformation_frames(mesh.vertices, specs, 1))
@@ -40,7 +73,59 @@ def main():
             s = contact_statistic(curves, radius, 0)
             cells.append(f"{s['p5']:.3f} / {s['p50']:.3f} / {s[f'fraction_below_{DEEP}']:.2f}")
         print(f"| {pattern} | " + " | ".join(cells) + " |")
-    print(f"\n{args.rows}×{args.cols} stitches, r = {radius} (the simulator's), {time.perf_counter() - t0:.1f} s")
+    return radius
+
+
+def images(folder, pack):
+    from PIL import Image
+
+    from data_formats.images import write_png
+    from data_formats.scene import load_scene
+    from data_formats.stitch_mesh import write_stitch_mesh
+    from knitrun.render.pipeline import render
+
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for pattern in ("stockinette", "rib1x1"):
+            mesh_path = tmp / f"{pattern}.h5"
+            write_stitch_mesh(mesh_path, chart_to_mesh(pattern_chart(pattern, 6, 6)))
+            scene_path = tmp / f"{pattern}.toml"
+            scene_path.write_text(SCENE.format(mesh=mesh_path, pack=Path(pack).resolve()))
+            halves = []
+            for relaxed in (False, True):
+                use_templates(relaxed)
+                png = tmp / f"{pattern}_{relaxed}.png"
+                write_png(png, render(load_scene(scene_path)).image)
+                halves.append(Image.open(png).convert("RGB"))
+            out = Image.new("RGB", (halves[0].width * 2, halves[0].height))
+            out.paste(halves[0], (0, 0))
+            out.paste(halves[1], (halves[0].width, 0))
+            out.save(folder / f"templates_{pattern}.png")
+            print(f"wrote {folder / f'templates_{pattern}.png'} (hand-drawn | relaxed)")
+    use_templates(True)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rows", type=int, default=12)
+    parser.add_argument("--cols", type=int, default=12)
+    parser.add_argument("--hand-drawn", action="store_true", help="the templates before the relaxation")
+    parser.add_argument("--images", type=Path, help="folder for the before/after renders (needs --pack)")
+    parser.add_argument("--pack", help="cotton1 asset pack for --images")
+    args = parser.parse_args()
+    t0 = time.perf_counter()
+    if args.images is not None:
+        if args.pack is None:
+            parser.error("--images needs --pack")
+        images(args.images, args.pack)
+        return
+    use_templates(not args.hand_drawn)
+    radius = table(args.rows, args.cols)
+    which = "hand-drawn" if args.hand_drawn else "relaxed"
+    print(f"\n{args.rows}×{args.cols} stitches, {which} templates, r = {radius} (the simulator's), "
+          f"{time.perf_counter() - t0:.1f} s")
+    assert np.isfinite(radius)
 
 
 if __name__ == "__main__":

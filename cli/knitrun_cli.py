@@ -159,6 +159,43 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
                    f"5th percentile {worst['p5']:.3f}, median {worst['p50']:.3f}")
 
 
+@main.group(cls=FriendlyGroup)
+def templates():
+    """The knot simulator's stitch templates."""
+
+
+@templates.command()
+@click.option("-o", "--output", type=SuffixPath(".json"),
+              help="Where to write the relaxed templates [default: the package's knitrun/sim/relaxed_templates.json, "
+                   "which the simulator reads].")
+@click.option("--json", "as_json", is_flag=True, help="Print the result (figures per stitch type) as JSON.")
+def relax(output, as_json):
+    """Relax the knit (and so purl) stitch template on a periodic tile: yarns as elastic rods with bending,
+    stretching and contact at 2r (knitrun/sim/template_relax.py). Prints each round and the tile's contact before
+    and after. The simulator reads the package's file at import, so a new file takes effect in a new process.
+
+    Example: knitrun templates relax -o my_templates.json --json
+    """
+    from knitrun.sim.stitch_templates import RELAXED_PATH
+    from knitrun.sim.template_relax import relax_templates, write_relaxed
+
+    def progress(rounds, cost, pairs):
+        click.echo(f"  round {rounds}: energy {cost:.4g}, {pairs} contact pairs", err=True)
+
+    document = relax_templates(progress)
+    path = output or str(RELAXED_PATH)
+    write_relaxed(path, document)
+    if as_json:
+        echo_json({"output": path, **document})
+        return
+    for name, result in document["stitch_types"].items():
+        before, after = result["contact_before"], result["contact_after"]
+        click.echo(f"{name}: tile contact p5 {before['p5']:.3f} → {after['p5']:.3f}, median {before['p50']:.3f} → "
+                   f"{after['p50']:.3f}; energy {result['energy_before']:.4g} → {result['energy_after']:.4g}; "
+                   f"{result['rounds']} rounds, {result['seconds']:.1f} s")
+    click.echo(f"wrote {path}")
+
+
 def _pack_overrides(values):
     """--pack YARN=FILE (or INDEX=FILE) options as a dict."""
     out = {}

@@ -62,7 +62,21 @@ def test_purl_is_knit_mirrored_through_the_plane():
     rows = [r for r in range(TEMPLATE_FLOAT.shape[1]) if r != F_S]
     assert np.array_equal(TEMPLATE_FLOAT[PURL, rows], TEMPLATE_FLOAT[KNIT, rows])
     assert np.array_equal(TEMPLATE_FLOAT[PURL, F_S], -TEMPLATE_FLOAT[KNIT, F_S])
-    assert np.abs(TEMPLATE_FLOAT[KNIT, F_S]).max() == 1  # control points sit ±r off the plane (eq. 2)
+    for code in (YARN_OVER, K2TOG, SSK):  # hand-drawn: control points sit ±r off the plane (eq. 2)
+        assert np.abs(TEMPLATE_FLOAT[code, F_S]).max() == 1
+
+
+@pytest.mark.parametrize("code", range(len(STITCH_TYPES)))
+def test_every_crossing_is_at_least_a_yarn_diameter_thick(code):
+    """At c0 and c1 of every knot the two yarns pass one over the other at least 2r apart along the normal (eq. 2
+    puts them exactly ±r; the relaxed knit template lifts them, ``template_relax``)."""
+    for j in range(2):
+        for a in (1.0, -1.0):
+            rows = (TEMPLATE_INT[code, I_KNOT] == j) & (TEMPLATE_FLOAT[code, F_A] == a) \
+                & (TEMPLATE_FLOAT[code, F_C] == 0)
+            s = TEMPLATE_FLOAT[code, F_S, rows]
+            if len(s) == 2:
+                assert abs(s[0] - s[1]) >= 2 - 1e-12
 
 
 @pytest.mark.parametrize("code", range(len(STITCH_TYPES)))

@@ -20,7 +20,8 @@ Points of a template
 * **Knot points** belong to knot j with centre x_k, direction d = (cos θ, sin θ) in the face plane, half-length l
   and yarn radius r (eq. 1): x = x_k + a·l·d + c·r·b with b = d × n = (sin θ, −cos θ), so (a, c) = (±1, 0) are
   the crossing points c0/c1 and (0, ±1) the contact points p0/p1. A point is lifted to 3-D by s·r along the face
-  normal n (eq. 2: c0⁺ has s = +1, c0⁻ has s = −1; p0, p1 lie in the plane, s = 0).
+  normal n (eq. 2: c0⁺ has s = +1, c0⁻ has s = −1; p0, p1 lie in the plane, s = 0; the relaxed knit template moves
+  these lifts, keeping every crossing at least 2r thick).
 
 Whatever θ and l are, c0/c1 stay symmetric about x_k, |p0 − p1| = 2r and (x_k − p0)·(c0 − x_k) = 0: the
 constraints of eq. 4 hold by construction, and the solver's unknowns are Θ = (θ1, θ2, l1, l2).
@@ -50,14 +51,22 @@ Pieces and stitch types (drawn for a yarn travelling left → right; the solver 
 
 Sizes at rest: the knot centres and the c0 − x_k axis are given in face coordinates (``TEMPLATE_FLOAT[:, F_KNOTS]``)
 and mapped by M of the rest face, so templates lean with leaning faces; r is the yarn radius (a length, the same for
-the whole mesh). These are our choices: the paper relaxes its templates with a yarn-level simulation (§5.1), we draw
-them by hand, sized for the chart default 0.25 × 0.2 cm stitch and r = stitch width / 8.
+the whole mesh). The templates are drawn by hand (sized for the chart default 0.25 × 0.2 cm stitch and r = stitch
+width / 8); knit and purl then take the relaxed knots and lifts of ``RELAXED`` (``relaxed_templates.json``, written by
+``knitrun templates relax``, ``template_relax``: a periodic stockinette tile relaxed with yarn contact, as the paper
+relaxes its templates, §5.1), which keep every (a, c) below, so eq. 4 holds, but lift the knot points off ±r where
+the yarns need room. Yarn-over, k2tog and ssk stay hand-drawn. ``template_pieces(code, relaxed=False)`` and
+``knots_of(code, relaxed=False)`` give the hand-drawn seed.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+import json
+from pathlib import Path
+
+from data_formats.errors import FormatError
 from data_formats.stitch_mesh import LOOPS_CONSUMED, STITCH_TYPES
 
 KNIT, PURL, YARN_OVER, K2TOG, SSK = (STITCH_TYPES.index(n) for n in ("knit", "purl", "yarn_over", "k2tog", "ssk"))
@@ -66,8 +75,9 @@ EDGE_T = (0.2, 0.8)  # top and bottom edges are crossed at 20 % and 80 % from th
 ROLE_IN, ROLE_OUT, ROLE_LOOP = 0, 1, 2  # piece roles; ROLE_LOOP + k: the loop consumed through bottom edge k
 N_KNOTS = 2  # knots per face, every stitch type
 N_UNKNOWNS = 2 * N_KNOTS  # Θ = (θ1, θ2, l1, l2)
-_STITCH_KNOTS = (((0.35, 0.4), (0.65, 0.4)), ((0.08, 0.1), (-0.08, 0.1)))  # centres, c0 − centre (face coords)
-_YARN_OVER_KNOTS = (((0.3, 0.6), (0.7, 0.6)), ((0.07, 0.1), (-0.07, 0.1)))
+STITCH_KNOTS = (((0.35, 0.4), (0.08, 0.1)), ((0.65, 0.4), (-0.08, 0.1)))  # per knot: centre, c0 − centre (face)
+YARN_OVER_KNOTS = (((0.3, 0.6), (0.07, 0.1)), ((0.7, 0.6), (-0.07, 0.1)))
+RELAXED_PATH = Path(__file__).with_name("relaxed_templates.json")  # ``knitrun templates relax`` writes it
 
 
 def _edge(name, b, t):
@@ -86,9 +96,36 @@ def _knot(j, a, c, s):
     return ("knot", j, a, c, s)
 
 
-def template_pieces(code):
+def load_relaxed(path=RELAXED_PATH):
+    """{stitch type name: {"knots": ((centre, axis), (centre, axis)), "points": {role: [(a, c, s), ...]}}} from a
+    relaxed-template document (``template_relax``); {} when the file is absent (the hand-drawn templates then stand).
+    ``FormatError`` for a file that is not one."""
+    if not Path(path).is_file():
+        return {}
+    try:
+        document = json.loads(Path(path).read_text())
+        if document.get("format") != "knit-relaxed-templates" or str(document.get("version", "")).split(".")[0] != "1":
+            raise ValueError("not a knit-relaxed-templates 1.x document")
+        out = {}
+        for name, entry in document["stitch_types"].items():
+            knots = tuple(((float(k[0]), float(k[1])), (float(k[2]), float(k[3]))) for k in entry["knots"])
+            points = {int(role): [tuple(float(x) for x in abc) for abc in spec]
+                      for role, spec in entry["points"].items()}
+            if len(knots) != N_KNOTS or not all(len(abc) == 3 for spec in points.values() for abc in spec):
+                raise ValueError(f"stitch type {name!r}: expected {N_KNOTS} knots and (a, c, s) triples")
+            out[name] = {"knots": knots, "points": points}
+    except (ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
+        raise FormatError(f"{path}: {exc}, expected a knit-relaxed-templates file (knitrun templates relax)") from None
+    return out
+
+
+RELAXED = load_relaxed()
+
+
+def template_pieces(code, relaxed=True):
     """[(role, [point spec, ...]), ...] of stitch type ``code``; a point spec is ('edge', v0, v1, t) or
-    ('knot', j, a, c, s)."""
+    ('knot', j, a, c, s). With ``relaxed``, knit and purl take the relaxed knot points of ``RELAXED`` where it has
+    them (purl mirrored from knit); False gives the hand-drawn templates (the relaxation's seed)."""
     b = int(LOOPS_CONSUMED[code])
     edge = lambda name, t=0.0: ("edge",) + _edge(name, b, t)  # noqa: E731
     legs = [(ROLE_IN, [edge("left"), _knot(0, -1, 0, -1), _knot(0, 0, 1, 0), _knot(0, 1, 0, 1),
@@ -103,6 +140,8 @@ def template_pieces(code):
 
     if code in (KNIT, PURL):
         pieces = legs + [loop(0, 0)]
+        if relaxed and "knit" in RELAXED:
+            pieces = [(role, _with_relaxed(points, RELAXED["knit"]["points"].get(role))) for role, points in pieces]
     elif code == YARN_OVER:
         pieces = legs
     else:
@@ -113,13 +152,37 @@ def template_pieces(code):
     return pieces
 
 
+def knots_of(code, relaxed=True):
+    """((centre, c0 − centre), …) of the two knots of stitch type ``code`` in face coordinates: the relaxed knit knots
+    for knit and purl (with ``relaxed`` and a relaxed document), else the hand-drawn ones."""
+    if code == YARN_OVER:
+        return YARN_OVER_KNOTS
+    if code in (KNIT, PURL) and relaxed and "knit" in RELAXED:
+        return RELAXED["knit"]["knots"]
+    return STITCH_KNOTS
+
+
+def _with_relaxed(points, coefficients):
+    """The piece's points with its knot points' (a, c, s) replaced, in order, by ``coefficients`` (if given)."""
+    if coefficients is None:
+        return points
+    knots = [i for i, p in enumerate(points) if p[0] == "knot"]
+    if len(knots) != len(coefficients):
+        raise FormatError(f"{RELAXED_PATH}: a piece has {len(coefficients)} relaxed points, the template "
+                          f"{len(knots)}")
+    out = list(points)
+    for i, (a, c, s) in zip(knots, coefficients):
+        out[i] = ("knot", points[i][1], a, c, s)
+    return out
+
+
 # Packed layout read by the kernels (plain arrays, first index the stitch-type code, last the point index i):
 I_KNOT, I_V0, I_V1, I_PIECES, I_ROLES = range(5)  # rows of TEMPLATE_INT
 F_T, F_A, F_C, F_S, F_KNOTS = range(5)  # rows of TEMPLATE_FLOAT
 
 
-def _pack():
-    """(TEMPLATE_INT, TEMPLATE_FLOAT) of all stitch types:
+def pack_templates(relaxed=True):
+    """(TEMPLATE_INT, TEMPLATE_FLOAT) of all stitch types (``relaxed`` False: the hand-drawn ones):
 
     * ``TEMPLATE_INT[c, I_KNOT, i]``: knot index of point i, −1 for a boundary point; ``I_V0``/``I_V1``: the boundary
       point's edge vertex slots; ``I_PIECES``: [n_pieces, start_0, ..., start_n_pieces] (piece q is points
@@ -128,7 +191,7 @@ def _pack():
       eq. 1-2 coefficients a, c, s; ``F_KNOTS``: [u_0, v_0, du_0, dv_0, u_1, v_1, du_1, dv_1], each knot's rest centre
       and c0 − centre in face coordinates.
     """
-    all_pieces = [template_pieces(code) for code in range(len(STITCH_TYPES))]
+    all_pieces = [template_pieces(code, relaxed) for code in range(len(STITCH_TYPES))]
     max_points = max(sum(len(p) for _, p in pieces) for pieces in all_pieces)
     ints = np.zeros((len(all_pieces), 5, max_points), np.int64)
     floats = np.zeros((len(all_pieces), 5, max_points), np.float64)
@@ -146,13 +209,12 @@ def _pack():
                     floats[code, F_A, i], floats[code, F_C, i], floats[code, F_S, i] = p[2:]
                 i += 1
         ints[code, I_PIECES, 1 + len(pieces)] = i
-        uv, axis = _YARN_OVER_KNOTS if code == YARN_OVER else _STITCH_KNOTS
-        floats[code, F_KNOTS, :8] = [uv[0][0], uv[0][1], axis[0][0], axis[0][1], uv[1][0], uv[1][1], axis[1][0],
-                                     axis[1][1]]
+        (uv0, axis0), (uv1, axis1) = knots_of(code, relaxed)
+        floats[code, F_KNOTS, :8] = [*uv0, *axis0, *uv1, *axis1]
     return ints, floats
 
 
-TEMPLATE_INT, TEMPLATE_FLOAT = _pack()
+TEMPLATE_INT, TEMPLATE_FLOAT = pack_templates()
 MAX_POINTS = TEMPLATE_INT.shape[2]
 
 

@@ -1,0 +1,288 @@
+"""Relaxation of the knit stitch template on a periodic tile (Huang et al. 2025 §5.1, after Leaf et al. 2018): an
+offline step (``knitrun templates relax``) whose result, ``relaxed_templates.json`` beside this module, the stitch
+templates read (``stitch_templates``).
+
+The tile
+--------
+Stockinette at rest: every face the chart's rest rectangle, ``WIDTH`` × ``ASPECT``·``WIDTH`` (lengths here in stitch
+widths, so ``WIDTH`` = 1), yarn radius r = ``RADIUS`` (the simulator's default r = stitch width / 8). One course
+yarn over one stitch period is the polygon side point → IN's three knot points → top-edge point (t = 0.2) → the
+head of its loop, drawn in the face above (that face's LOOP piece, six knot points, shifted up one course) →
+top-edge point (t = 0.8) → OUT's three knot points → the next face's side point. The fabric is this polygon repeated
+every ``WIDTH`` along the course and every course height up: the tile is periodic in both directions, and the face
+edges stay where the stitch mesh puts them (boundary points fixed on their edges, §5.1). Curves are the runtime's
+uniform Catmull-Rom through the control points (``yarn_assembly.render_points``), sampled ``SAMPLES`` per segment.
+
+Energy (dimensionless; lengths in units of r)
+---------------------------------------------
+Unknowns (10): knot 0's centre (u, v) and axis (du, dv) in face coordinates, and the lift s (along the face normal,
+in r) of each knot point on knot 0: IN's three and the loop's three. Knot 1 and the other knot points are their
+mirror images about the face's centre line x = WIDTH/2 (stockinette seen from the front is mirror-symmetric; without
+the mirror the solve finds lopsided minima that read as chains of S shapes). Every knot point keeps its hand-drawn
+(a, c), so eq. 4 still holds in the plane (c0⁺/c0⁻ share a planar point, |p0 − p1| = 2r) and the runtime's knot
+solver and its measurements (knot centres, Fig. 9) are unchanged; only eq. 2's lift ±r becomes free, and a crossing
+may grow thicker than 2r where the yarns need room. With d_pq the distance between dense samples p and q of two
+*different parts* of the yarns (another course, or the same course more than ``EXCLUDE_RADII`` r along it, incl. the
+periodic copies), ℓ the yarn length per period, α_i the turning angle at dense sample i and Δs_i its mean adjacent
+segment length:
+
+    E = W_CONTACT Σ_pairs max(0, D − d_pq)²/r²                     contact, D = 2r (1 − ``COMPRESSION``)
+      + W_BEND Σ_i α_i² r / Δs_i                                   bending (∫ κ² ds, a discrete elastic rod)
+      + W_LENGTH ((ℓ − ℓ_0)/r)²                                    stretching of the period's yarn, ℓ_0 the seed's
+      + W_ANCHOR |y − y_seed|²                                     a weak pull to the seed, y in radii
+
+The contact pairs are those closer than ``PAIR_RADII`` r at the start of a round; a round is one scipy
+``least_squares`` solve (trust region reflective, finite-difference Jacobian) with that fixed set; rounds repeat
+until the set no longer changes or ``MAX_ROUNDS`` is reached (convergence criterion: the set is stable and the solver
+reports its ftol/xtol met). ``check_crossings`` then refuses a result in which a yarn passed through another (the
+order along the normal at a crossing swapped). Purl is the knit template mirrored through the fabric plane
+(``stitch_templates``), so it is relaxed with it. Yarn-over, k2tog and ssk keep their hand-drawn points (not relaxed:
+their tiles are not periodic on their own).
+
+The result is the knit template's two knots (u, v, du, dv) and every knot point's (a, c, s) by piece role; the
+runtime maps them as before (eqs. 1-2 of ``stitch_templates``), so a deformed face moves the relaxed points with its
+knots. Measured before/after: BENCHMARKS.md, "Contact between simulated yarns".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from data_formats.atomic import atomic_path
+
+WIDTH = 1.0
+ASPECT = 0.8  # course height / stitch width of the chart default (0.2 / 0.25 cm)
+RADIUS = 1.0 / 8.0
+SAMPLES = 8  # Catmull-Rom samples per control segment
+EXCLUDE_RADII = 8.0  # as the contact statistic (knitrun.sim.contact)
+COMPRESSION = 0.0  # contact distance 2r (1 − COMPRESSION): 0 = the yarns do not squeeze
+PAIR_RADII = 3.0
+W_CONTACT, W_BEND, W_LENGTH, W_ANCHOR = 100.0, 1.0, 100.0, 0.01
+ANCHOR_SCALE = np.array([WIDTH, ASPECT * WIDTH, WIDTH, ASPECT * WIDTH] + [RADIUS] * 6) / RADIUS  # unknowns → radii
+MAX_ROUNDS = 8
+SHIFTS = [(i, j) for i in range(-2, 3) for j in range(-2, 3)]
+FORMAT = "knit-relaxed-templates"
+VERSION = "1.0"
+
+
+# --- the knit tile ---------------------------------------------------------------------------------------------------
+
+def _face_vertex(slot, height):
+    """Rest rectangle of a knit face (b = 1): slots BL, BR, TR, TL."""
+    return np.array([(0.0, 0.0), (WIDTH, 0.0), (WIDTH, height), (0.0, height)][slot])
+
+
+def knot_frames(knots):
+    """[(centre (2,), d (2,), b (2,), l)] of the knots, each ``((u, v), (du, dv))`` (``stitch_templates``' form: centre
+    and c0 − centre in face coordinates), on the rest rectangle."""
+    height = ASPECT * WIDTH
+    out = []
+    for (u, v), (du, dv) in knots:
+        axis = np.array([du * WIDTH, dv * height])
+        half = float(np.hypot(*axis))
+        d = axis / half
+        out.append((np.array([u * WIDTH, v * height]), d, np.array([d[1], -d[0]]), half))
+    return out
+
+
+def template_positions(pieces, knots):
+    """{role: (n, 3) rest positions} of a knit face's pieces (``stitch_templates.template_pieces`` form)."""
+    height = ASPECT * WIDTH
+    frames = knot_frames(knots)
+    out = {}
+    for role, points in pieces:
+        xyz = []
+        for p in points:
+            if p[0] == "edge":
+                _, v0, v1, t = p
+                xy = (1.0 - t) * _face_vertex(v0, height) + t * _face_vertex(v1, height)
+                xyz.append((xy[0], xy[1], 0.0))
+            else:
+                _, j, a, c, s = p
+                centre, d, b, half = frames[j]
+                xy = centre + a * half * d + c * RADIUS * b
+                xyz.append((xy[0], xy[1], s * RADIUS))
+        out[role] = np.array(xyz)
+    return out
+
+
+def period_polygon(pos, roles):
+    """(15, 3) control polygon of one course yarn over one stitch (module docstring) from the rest positions of a
+    knit face's pieces; ``roles`` = (IN, OUT, LOOP)."""
+    rin, rout, rloop = roles
+    up = np.array([0.0, ASPECT * WIDTH, 0.0])
+    return np.concatenate([pos[rin][:4], pos[rin][4:5], pos[rloop][1:-1] + up, pos[rloop][-1:] + up,
+                           pos[rout][1:4]])
+
+
+def dense_period(polygon):
+    """Uniform Catmull-Rom samples (SAMPLES per segment) of the polygon repeated every WIDTH along x."""
+    n = len(polygon)
+    shift = np.array([WIDTH, 0.0, 0.0])
+    ext = np.concatenate([polygon[-1:] - shift, polygon, polygon[:2] + shift])  # Q_{-1} … Q_{n+1}
+    t = np.arange(SAMPLES) / SAMPLES
+    t2, t3 = t * t, t * t * t
+    w = np.stack([0.5 * (-t + 2 * t2 - t3), 0.5 * (2 - 5 * t2 + 3 * t3), 0.5 * (t + 4 * t2 - 3 * t3),
+                  0.5 * (t3 - t2)], axis=1)
+    windows = np.stack([ext[i:i + 4] for i in range(n)])  # segment i: Q_{i-1}, Q_i, Q_{i+1}, Q_{i+2}
+    return np.einsum("tk,skd->std", w, windows).reshape(-1, 3)
+
+
+def _arc(dense):
+    """Arc length at every dense sample and the period length."""
+    closing = dense[0] + np.array([WIDTH, 0.0, 0.0])
+    seg = np.linalg.norm(np.diff(np.concatenate([dense, closing[None]]), axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(seg[:-1])]), float(seg.sum()), seg
+
+
+def candidate_pairs(dense, limit):
+    """(p, q, shift index) of sample pairs of different parts closer than ``limit``."""
+    s, length, _ = _arc(dense)
+    height = ASPECT * WIDTH
+    found = []
+    for k, (i, j) in enumerate(SHIFTS):
+        other = dense + np.array([i * WIDTH, j * height, 0.0])
+        d = np.linalg.norm(dense[:, None, :] - other[None, :, :], axis=2)
+        near = d < limit
+        if j == 0:
+            near &= np.abs(s[None, :] + i * length - s[:, None]) > EXCLUDE_RADII * RADIUS
+        p, q = np.nonzero(near)
+        found.append(np.column_stack([p, q, np.full(len(p), k)]))
+    return np.concatenate(found)
+
+
+def pair_distances(dense, pairs):
+    height = ASPECT * WIDTH
+    shift = np.array([[i * WIDTH, j * height, 0.0] for i, j in SHIFTS])
+    return np.linalg.norm(dense[pairs[:, 0]] - dense[pairs[:, 1]] - shift[pairs[:, 2]], axis=1)
+
+
+def _unknowns_to_template(y, pieces, roles):
+    """(pieces, knots) of a knit face for the unknowns y: knot 0 = (u, v), (du, dv); knot 1 its mirror image
+    (1 − u, v), (−du, dv); the knot points keep their (a, c) (eq. 4 holds in the plane) and take the lifts s of y:
+    IN's three points and the loop's three on knot 0, mirrored onto OUT's and the loop's on knot 1."""
+    u, v, du, dv = y[:4]
+    knots = (((u, v), (du, dv)), ((WIDTH - u, v), (-du, dv)))
+    lifts = {roles[0]: list(y[4:7]), roles[1]: list(y[4:7])[::-1], roles[2]: list(y[7:10]) + list(y[7:10])[::-1]}
+    out = []
+    for role, points in pieces:
+        it = iter(lifts[role])
+        out.append((role, [p if p[0] == "edge" else p[:4] + (float(next(it)),) for p in points]))
+    return out, knots
+
+
+def _polygon(y, pieces, roles):
+    new_pieces, knots = _unknowns_to_template(y, pieces, roles)
+    return period_polygon(template_positions(new_pieces, knots), roles)
+
+
+def _residuals(y, pieces, roles, pairs, seed, length0):
+    dense = dense_period(_polygon(y, pieces, roles))
+    contact = np.maximum(0.0, 2.0 * RADIUS * (1.0 - COMPRESSION) - pair_distances(dense, pairs)) / RADIUS
+    _, length, seg = _arc(dense)
+    e_in = np.diff(np.concatenate([dense, dense[:1] + np.array([WIDTH, 0.0, 0.0])]), axis=0)
+    e_prev = np.roll(e_in, 1, axis=0)
+    cos = np.einsum("ij,ij->i", e_prev, e_in) / np.maximum(np.linalg.norm(e_prev, axis=1) *
+                                                           np.linalg.norm(e_in, axis=1), 1e-300)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    ds = 0.5 * (seg + np.roll(seg, 1))
+    bend = angle * np.sqrt(RADIUS / np.maximum(ds, 1e-12))
+    return np.concatenate([math.sqrt(W_CONTACT) * contact, math.sqrt(W_BEND) * bend,
+                           [math.sqrt(W_LENGTH) * (length - length0) / RADIUS],
+                           math.sqrt(W_ANCHOR) * (y - seed) * ANCHOR_SCALE])
+
+
+def tile_contact(polygon):
+    """Contact statistic of the tile: d/2r at every dense sample to the nearest other part (as
+    ``knitrun.sim.contact``, on the dense samples), percentiles 5 and 50."""
+    dense = dense_period(polygon)
+    pairs = candidate_pairs(dense, 2.0 * 2.0 * RADIUS)
+    d = pair_distances(dense, pairs)
+    nearest = np.full(len(dense), 2.0)
+    np.minimum.at(nearest, pairs[:, 0], d / (2.0 * RADIUS))
+    return {"p5": round(float(np.percentile(nearest, 5)), 4), "p50": round(float(np.median(nearest)), 4),
+            "min": round(float(nearest.min()), 4)}
+
+
+def check_crossings(pieces, points):
+    """Raise RuntimeError if the relaxation changed which yarn lies on top at a crossing: at every seed crossing
+    point (a = ±1, c = 0) of a knot, the pieces meeting there must keep their order along the normal (s)."""
+    seed, relaxed = {}, {}
+    for role, spec in pieces:
+        knot_points = [p for p in spec if p[0] == "knot"]
+        for p, (_, _, s) in zip(knot_points, points.get(str(role), [p[2:] for p in knot_points])):
+            if p[3] == 0 and abs(p[2]) == 1:
+                seed.setdefault((p[1], p[2]), []).append(p[4])
+                relaxed.setdefault((p[1], p[2]), []).append(s)
+    for key, before in seed.items():
+        after = relaxed[key]
+        if len(before) == 2 and np.sign(before[0] - before[1]) != np.sign(after[0] - after[1]):
+            raise RuntimeError(f"relaxation swapped the yarns at knot {key[0]}, a = {key[1]:+d}: s {before} → "
+                               f"{[round(x, 3) for x in after]} (a yarn passed through another)")
+
+
+def relax_knit(pieces, knots, roles, progress=None):
+    """Relax the knit template (module docstring) from the hand-drawn ``pieces`` and ``knots``. Returns a dict:
+    ``knots`` [[u, v, du, dv], …], ``points`` {role: [(a, c, s), …] for the knot points of each piece in template
+    order}, the tile's contact before/after, energies, yarn lengths per period, rounds, solver status, seconds."""
+    t0 = time.perf_counter()
+    (u, v), (du, dv) = knots[0]
+    lifts = {role: [p[4] for p in spec if p[0] == "knot"] for role, spec in pieces}
+    seed = np.array([u, v, du, dv, *lifts[roles[0]], *lifts[roles[2]][:3]])
+    if not np.allclose(_polygon(seed, pieces, roles), period_polygon(template_positions(pieces, knots), roles)):
+        raise RuntimeError("the seed template is not mirror-symmetric about the face's centre line")
+    polygon0 = _polygon(seed, pieces, roles)
+    length0 = _arc(dense_period(polygon0))[1]
+    y = seed.copy()
+    rounds, pairs_prev, status = 0, None, None
+    for rounds in range(1, MAX_ROUNDS + 1):
+        pairs = candidate_pairs(dense_period(_polygon(y, pieces, roles)), PAIR_RADII * RADIUS)
+        if pairs_prev is not None and np.array_equal(pairs, pairs_prev) and status is not None and status > 0:
+            break
+        result = least_squares(_residuals, y, args=(pieces, roles, pairs, seed, length0), method="trf",
+                               x_scale=1.0 / ANCHOR_SCALE, max_nfev=400)
+        y, status, pairs_prev = result.x, int(result.status), pairs
+        if progress is not None:
+            progress(rounds, float(result.cost), len(pairs))
+    new_pieces, new_knots = _unknowns_to_template(y, pieces, roles)
+    points = {str(role): [list(p[2:]) for p in spec if p[0] == "knot"] for role, spec in new_pieces}
+    check_crossings(pieces, points)
+    relaxed = _polygon(y, pieces, roles)
+
+    def energy(yy, pp):
+        return 0.5 * float(np.sum(_residuals(yy, pieces, roles, pp, seed, length0) ** 2))
+
+    return {"knots": [[*c, *a] for c, a in new_knots], "points": points,
+            "contact_before": tile_contact(polygon0), "contact_after": tile_contact(relaxed),
+            "energy_before": energy(seed, candidate_pairs(dense_period(polygon0), PAIR_RADII * RADIUS)),
+            "energy_after": energy(y, candidate_pairs(dense_period(relaxed), PAIR_RADII * RADIUS)),
+            "length_before": length0, "length_after": _arc(dense_period(relaxed))[1], "rounds": rounds,
+            "solver_status": status, "seconds": time.perf_counter() - t0}
+
+
+def relax_templates(progress=None) -> dict:
+    """The relaxed-template document (``relaxed_templates.json``): format, version, the tile and energy parameters
+    and, per relaxed stitch type, its knot points' (a, c, s) by piece role, with the before/after figures."""
+    from knitrun.sim import stitch_templates as st
+
+    pieces = st.template_pieces(st.KNIT, relaxed=False)
+    result = relax_knit(pieces, st.STITCH_KNOTS, (st.ROLE_IN, st.ROLE_OUT, st.ROLE_LOOP), progress)
+    return {"format": FORMAT, "version": VERSION,
+            "tile": {"width": WIDTH, "aspect": ASPECT, "radius": RADIUS, "samples": SAMPLES},
+            "energy": {"w_contact": W_CONTACT, "w_bend": W_BEND, "w_length": W_LENGTH, "w_anchor": W_ANCHOR,
+                       "compression": COMPRESSION, "exclude_radii": EXCLUDE_RADII, "pair_radii": PAIR_RADII,
+                       "max_rounds": MAX_ROUNDS},
+            "stitch_types": {"knit": result}}
+
+
+def write_relaxed(path, document):
+    """Write the document as JSON atomically (no half-written file)."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "w") as fh:
+            json.dump(document, fh, indent=1)
+            fh.write("\n")

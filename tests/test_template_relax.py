@@ -1,0 +1,103 @@
+"""The relaxed stitch templates (``knitrun.sim.template_relax``, ``stitch_templates.RELAXED``): the shipped file is
+what the relaxation gives, the relaxation lowers its energy and reaches contact, keeps the knots' eq. 4 and the
+crossing order, and simulated knits touch instead of interpenetrating."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cli.knitrun_cli import main as knitrun
+from data_formats.errors import FormatError
+from knitrun.sim import stitch_templates as st
+from knitrun.sim import template_relax as tr
+from knitrun.sim.contact import contact_statistic
+from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
+from knitrun.sim.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def document():
+    return tr.relax_templates()
+
+
+def test_the_shipped_file_is_what_the_relaxation_gives(document):
+    """``relaxed_templates.json`` in the package must be regenerated (``knitrun templates relax``) whenever the
+    relaxation or the hand-drawn seed changes."""
+    shipped = st.load_relaxed()
+    knit = document["stitch_types"]["knit"]
+    np.testing.assert_allclose(np.array(shipped["knit"]["knots"]).reshape(2, 4), knit["knots"], atol=1e-9)
+    for role, points in knit["points"].items():
+        np.testing.assert_allclose(shipped["knit"]["points"][int(role)], points, atol=1e-9)
+
+
+def test_relaxation_lowers_the_energy_and_reaches_contact_in_the_tile(document):
+    knit = document["stitch_types"]["knit"]
+    assert knit["energy_after"] < 0.05 * knit["energy_before"]
+    assert knit["contact_before"]["p5"] < 0.5 and knit["contact_after"]["p5"] >= 0.85
+    assert 0.95 <= knit["contact_after"]["p50"] <= 1.10
+    assert abs(knit["length_after"] / knit["length_before"] - 1) < 0.1 and knit["solver_status"] > 0
+
+
+def test_relaxed_knit_keeps_eq4_in_the_plane_and_is_mirror_symmetric():
+    pieces = st.template_pieces(st.KNIT)
+    seed = st.template_pieces(st.KNIT, relaxed=False)
+    for (role, points), (_, hand) in zip(pieces, seed):  # (a, c) are the hand-drawn ones: eq. 4 holds
+        assert [p[:4] for p in points] == [p[:4] for p in hand]
+    pos = tr.template_positions(pieces, st.knots_of(st.KNIT))
+    mirror = np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(pos[st.ROLE_OUT][::-1] * mirror + [tr.WIDTH, 0, 0], pos[st.ROLE_IN], atol=1e-12)
+    loop = pos[st.ROLE_LOOP]
+    np.testing.assert_allclose(loop[::-1] * mirror + [tr.WIDTH, 0, 0], loop, atol=1e-12)
+
+
+def test_purl_is_the_relaxed_knit_mirrored_and_hand_drawn_types_are_untouched():
+    knit, purl = st.template_pieces(st.KNIT), st.template_pieces(st.PURL)
+    for (_, k), (_, p) in zip(knit, purl):
+        assert [q[:4] + (-q[4],) if q[0] == "knot" else q for q in k] == p
+    assert st.knots_of(st.PURL) == st.knots_of(st.KNIT) != st.knots_of(st.KNIT, relaxed=False)
+    for code in (st.YARN_OVER, st.K2TOG, st.SSK):
+        assert st.template_pieces(code) == st.template_pieces(code, relaxed=False)
+
+
+def test_a_relaxation_that_swaps_a_crossing_is_refused():
+    pieces = st.template_pieces(st.KNIT, relaxed=False)
+    points = {str(role): [list(p[2:]) for p in spec if p[0] == "knot"] for role, spec in pieces}
+    tr.check_crossings(pieces, points)  # the seed itself is fine
+    points[str(st.ROLE_LOOP)][0][2] = -3.0  # the loop dives under the leg it passed over at c1 of knot 0
+    with pytest.raises(RuntimeError, match="swapped"):
+        tr.check_crossings(pieces, points)
+
+
+def test_relaxed_file_errors_are_one_line(tmp_path):
+    assert st.load_relaxed(tmp_path / "absent.json") == {}
+    cases = {"junk.json": "{not json", "other.json": json.dumps({"format": "x", "version": "1.0"}),
+             "short.json": json.dumps({"format": "knit-relaxed-templates", "version": "1.0",
+                                       "stitch_types": {"knit": {"knots": [[0.3, 0.4, 0.1, 0.1]], "points": {}}}})}
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(FormatError) as info:
+            st.load_relaxed(tmp_path / name)
+        assert "\n" not in str(info.value) and name in str(info.value)
+
+
+@pytest.mark.parametrize("pattern", ["stockinette", "garter", "rib1x1", "seed"])
+def test_simulated_knits_touch_at_rest(pattern):
+    """The issue-14 targets at rest, on the product path (chart → simulate → curves): 5th percentile of the
+    contact statistic ≥ 0.8, median in [0.95, 1.10]. Before the relaxation: 0.37 / 0.74."""
+    mesh = chart_to_mesh(pattern_chart(pattern, 8, 8))
+    curves, report = simulate(mesh, mesh.vertices[None])
+    stats = contact_statistic(curves, report["yarn_radius"])
+    assert stats["p5"] >= 0.8 and 0.95 <= stats["p50"] <= 1.10, stats
+
+
+def test_cli_relax_writes_the_document(tmp_path, document):
+    out = tmp_path / "t.json"
+    result = CliRunner().invoke(knitrun, ["templates", "relax", "-o", str(out), "--json"], catch_exceptions=False)
+    assert result.exit_code == 0 and "round 1" in result.stderr
+    printed = json.loads(result.stdout)
+    assert printed["output"] == str(out) and printed["stitch_types"]["knit"]["contact_after"] == \
+        document["stitch_types"]["knit"]["contact_after"]
+    assert st.load_relaxed(out)["knit"]["knots"] == st.load_relaxed()["knit"]["knots"]
+    assert CliRunner().invoke(knitrun, ["templates", "relax", "-o", str(tmp_path / "t.txt")]).exit_code != 0
