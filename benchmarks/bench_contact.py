@@ -3,10 +3,15 @@ deformations: the 5th percentile and the median of d / 2r (1 = touching, below 1
 the fraction of samples below 0.8. Target (issue 14): 5th percentile ≥ 0.80 and median in [0.95, 1.10] in every
 cell. ``--hand-drawn`` measures the templates before the relaxation (``stitch_templates.pack_templates(False)``);
 ``--images DIR --pack PACK`` renders a 6 × 6 stockinette and 1×1 rib patch at rest with both templates side by side
-(DIR/templates_<pattern>.png: hand-drawn | relaxed; strip renderer, one directional light).
+(DIR/templates_<pattern>.png: hand-drawn | relaxed; strip renderer, one directional light). ``--weights W,…``
+relaxes the templates in-process with each weight of the sheared tiles' contact (``template_relax.W_DEFORMED``) and
+prints the trade it sets: the worst 5th percentile over the knit/purl patterns at rest, sheared 0.3 and stretched
+1.5 either way, against the Fig. 9 ratio (knot solver's RMS control-segment length error / naive interpolation's,
+6 × 6 stockinette; ``tests/test_simulate.py`` asks for < 0.9).
 
     .venv/bin/python benchmarks/bench_contact.py [--rows 12 --cols 12] [--hand-drawn]
     .venv/bin/python benchmarks/bench_contact.py --images docs --pack out/bench/cotton1_standard.h5
+    .venv/bin/python benchmarks/bench_contact.py --weights 0,0.05,0.1,0.2,0.3,0.5
 
 Each cell simulates the pattern's chart (``knitrun pattern P --rows R --cols C``) with one frame of the full
 deformation (the default 3 Gauss-Newton iterations) and measures that frame with the simulator's radius.
@@ -76,6 +81,65 @@ def table(rows, cols):
     return radius
 
 
+BEYOND = {"shear 0.15": ["shear=0.15"], "shear -0.2, stretch-x 1.2": ["shear=-0.2", "stretch-x=1.2"],
+          "stretch-x 1.3, stretch-y 1.2": ["stretch-x=1.3", "stretch-y=1.2"], "cylinder 1 cm": ["cylinder=1.0"],
+          "stretch-x 2.0": ["stretch-x=2.0"], "shear 0.5": ["shear=0.5"]}
+
+
+def beyond(rows, cols):
+    """Deformations other than the issue's cells, on stockinette and 1×1 rib: p5 / median."""
+    print(f"\n| pattern | {' | '.join(BEYOND)} |")
+    print("|---" * (len(BEYOND) + 1) + "|")
+    for pattern in ("stockinette", "rib1x1"):
+        mesh = chart_to_mesh(pattern_chart(pattern, rows, cols))
+        cells = []
+        for specs in BEYOND.values():
+            curves, report = simulate(mesh, deformation_frames(mesh.vertices, specs, 1))
+            s = contact_statistic(curves, report["yarn_radius"], 0)
+            cells.append(f"{s['p5']:.3f} / {s['p50']:.3f}")
+        print(f"| {pattern} | " + " | ".join(cells) + " |")
+
+
+def weight_scan(weights):
+    from knitrun.sim import template_relax
+    from knitrun.sim.simulate import control_segment_lengths, prepare, solve_frame
+
+    def length_error(model, vertices, **mode):
+        points = solve_frame(model, vertices, **mode).points
+        ratio = control_segment_lengths(model, points) / control_segment_lengths(model, model.rest_points)
+        return float(np.sqrt(np.mean((ratio - 1) ** 2)))
+
+    knit_purl = [p for p in PATTERNS if p != "eyelet"]
+    print("| W_DEFORMED | worst p5 (knit/purl patterns; rest, shear 0.3, stretch-x/y 1.5) | in which cell | "
+          "Fig. 9 ratio stretch-x 1.5 / 2.0 / stretch-y 1.5 | yarn length / seed |")
+    print("|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for weight in weights:
+            for name, (F, _) in list(template_relax.DEFORMATIONS.items())[1:]:
+                template_relax.DEFORMATIONS[name] = (F, weight)
+            document = template_relax.relax_templates()
+            path = Path(tmp) / "t.json"
+            template_relax.write_relaxed(path, document)
+            stitch_templates.RELAXED.clear()
+            stitch_templates.RELAXED.update(stitch_templates.load_relaxed(path))
+            use_templates(True)
+            worst = (9.0, "")
+            for pattern in knit_purl:
+                mesh = chart_to_mesh(pattern_chart(pattern, 12, 12))
+                for name, specs in DEFORMATIONS.items():
+                    curves, report = simulate(mesh, deformation_frames(mesh.vertices, specs, 1))
+                    p5 = contact_statistic(curves, report["yarn_radius"], 0)["p5"]
+                    worst = min(worst, (p5, f"{pattern}, {name}"))
+            model = prepare(chart_to_mesh(pattern_chart("stockinette", 6, 6)))
+            ratios = []
+            for spec in ("stretch-x=1.5", "stretch-x=2.0", "stretch-y=1.5"):
+                v = deformation_frames(model.mesh.vertices, [spec])[0]
+                ratios.append(length_error(model, v) / length_error(model, v, naive=True))
+            knit = document["stitch_types"]["knit"]
+            print(f"| {weight:g} | {worst[0]:.3f} | {worst[1]} | {' / '.join(f'{r:.3f}' for r in ratios)} | "
+                  f"{knit['length_after'] / knit['length_before']:.3f} |")
+
+
 def images(folder, pack):
     from PIL import Image
 
@@ -113,8 +177,12 @@ def main():
     parser.add_argument("--hand-drawn", action="store_true", help="the templates before the relaxation")
     parser.add_argument("--images", type=Path, help="folder for the before/after renders (needs --pack)")
     parser.add_argument("--pack", help="cotton1 asset pack for --images")
+    parser.add_argument("--weights", help="comma-separated W_DEFORMED values to scan (module docstring)")
     args = parser.parse_args()
     t0 = time.perf_counter()
+    if args.weights is not None:
+        weight_scan([float(w) for w in args.weights.split(",")])
+        return
     if args.images is not None:
         if args.pack is None:
             parser.error("--images needs --pack")
@@ -122,6 +190,7 @@ def main():
         return
     use_templates(not args.hand_drawn)
     radius = table(args.rows, args.cols)
+    beyond(args.rows, args.cols)
     which = "hand-drawn" if args.hand_drawn else "relaxed"
     print(f"\n{args.rows}×{args.cols} stitches, {which} templates, r = {radius} (the simulator's), "
           f"{time.perf_counter() - t0:.1f} s")

@@ -37,7 +37,10 @@ def test_relaxation_lowers_the_energy_and_reaches_contact_in_the_tile(document):
     assert knit["energy_after"] < 0.05 * knit["energy_before"]
     assert knit["contact_before"]["p5"] < 0.5 and knit["contact_after"]["p5"] >= 0.85
     assert 0.95 <= knit["contact_after"]["p50"] <= 1.10
-    assert abs(knit["length_after"] / knit["length_before"] - 1) < 0.1 and knit["solver_status"] > 0
+    # the hand-drawn seed is too short for yarns of radius w/8 to pass round each other: the yarn grows ~10 %
+    assert 1.0 < knit["length_after"] / knit["length_before"] < 1.15 and knit["solver_status"] > 0
+    for name, contact in knit["contact_deformed"].items():  # the deformed tiles of its contact term
+        assert contact["after"]["p5"] >= 0.8 > contact["before"]["p5"], name
 
 
 def test_relaxed_knit_keeps_eq4_in_the_plane_and_is_mirror_symmetric():
