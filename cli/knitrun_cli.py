@@ -141,6 +141,8 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
         deformation_frames(mesh.vertices, specs, frames or 1)
     curves, report = run_simulation(mesh, vertex_frames, iterations=iterations, w_length=w_length, beta=beta)
     report["contact"] = contact_over_frames(curves, report["yarn_radius"])
+    for warning in report["warnings"]:
+        click.echo(f"warning: {warning}", err=True)
     if suffix == ".bcc":
         write_bcc(output, curves, frame=curves.points.shape[0] - 1)
     else:

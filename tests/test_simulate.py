@@ -261,3 +261,15 @@ def test_cli_errors_are_one_line(tmp_path):
     (frames / "f0.obj").write_text("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     assert_one_line_error(run("simulate", h5, "--obj-dir", frames, "-o", tmp_path / "y.h5"), "not finite")
     assert not (tmp_path / "y.h5").exists()
+
+
+def test_a_radius_off_the_templates_sizing_is_named():
+    """The templates are sized for r = stitch width / 8: within 5 % no warning; a 40 % thicker yarn is simulated
+    but named (overlap), with the scale that would fit it; a thinner one leaves gaps."""
+    mesh = chart_to_mesh(pattern_chart("stockinette", 3, 3))  # 0.25 cm stitches
+    assert simulate(mesh, mesh.vertices[None])[1]["warnings"] == []
+    assert simulate(mesh, mesh.vertices[None], radius=0.0297)[1]["warnings"] == []  # cotton1: 5 % thinner
+    (thick,) = simulate(mesh, mesh.vertices[None], radius=0.04375)[1]["warnings"]
+    assert "overlap" in thick and "1.4" in thick and "\n" not in thick
+    (thin,) = simulate(mesh, mesh.vertices[None], radius=0.02)[1]["warnings"]
+    assert "leave gaps" in thin

@@ -3,8 +3,9 @@
 Passes, each timed (``RenderResult.timings``, seconds):
 
 1. ``load``: the scene's curves at ``render.frame`` (a stitch mesh is simulated at rest by ``knitrun.sim.simulate``
-   with the entry's radius; curves that carry the radius they were built for and are drawn more than 5 % thicker or
-   thinner give a warning in ``RenderResult.facts["warnings"]``),
+   with the entry's radius, and a radius more than 5 % off the templates' sizing gives a warning; curves that carry
+   the radius they were built for and are drawn more than 5 % thicker or thinner give one too: both in
+   ``RenderResult.facts["warnings"]``),
    evaluated by their curve type (``data_formats.curve_eval``: PL as drawn, C0 as uniform Catmull-Rom, BS, BZ) into
    polylines of ``samples_per_segment`` samples per smooth segment, each sample with its rest arc length; each
    yarn entry's pack (``knitrun.render.yarn_look``), reading only the tables the scene needs.
@@ -78,13 +79,14 @@ class _Polylines:
     normal: np.ndarray  # (P, 3) the yarn frame's normal N (data_formats.curve_eval.yarn_frame)
 
 
-def _scene_curves(entry, units, frame):
+def _scene_curves(entry, units, frame, warnings):
     if entry.stitch_mesh is not None:
         from data_formats.stitch_mesh import load_stitch_mesh
         from knitrun.sim.simulate import simulate
 
         mesh = load_stitch_mesh(entry.stitch_mesh)
-        curves, _ = simulate(mesh, mesh.vertices[None], radius=entry.radius)
+        curves, report = simulate(mesh, mesh.vertices[None], radius=entry.radius)
+        warnings.extend(f"{entry.stitch_mesh}: {w}" for w in report["warnings"])
         return curves, 0
     curves = read_curves(entry.curves, units)
     return curves, frame
@@ -104,7 +106,7 @@ def radius_mismatch(curves, drawn: float, where: str) -> str | None:
 def _polylines(scene: Scene, samples_per_segment: int, warnings: list) -> _Polylines:
     pts, rest, normals, entry_of, sizes = [], [], [], [], [0]
     for k, entry in enumerate(scene.yarns):
-        curves, frame = _scene_curves(entry, scene.units, scene.render.frame)
+        curves, frame = _scene_curves(entry, scene.units, scene.render.frame, warnings)
         message = radius_mismatch(curves, entry.radius, f"yarns[{k}]")
         if message is not None:
             warnings.append(message)

@@ -12,7 +12,8 @@ Conventions
 -----------
 * Lengths are in the mesh's ``units``. The yarn radius r defaults to ``RADIUS_PER_STITCH`` × the length scale h
   (the median rest length of the faces' top edges, i.e. one stitch width): 0.25 cm stitches (the chart default) give
-  r = 0.031 cm, about cotton1's. Energies are dimensionless (lengths divided by h, ``knot_solver``).
+  r = 0.031 cm, about cotton1's. The templates are sized and relaxed for that ratio; another radius (more than 5 %
+  off) is simulated but named in ``report["warnings"]`` (``template_size_warnings``). Energies are dimensionless (lengths divided by h, ``knot_solver``).
 * Output points are the Catmull-Rom samples of the control points (``samples`` per control segment, curve type
   ``"PL"``: rendering vertices), or the control points themselves for ``samples = 1`` (curve type ``"C0"``).
 * ``rest_arclength`` is the cumulative length of the rendering points of the rest mesh (not of frame 0), the same
@@ -40,6 +41,7 @@ from knitrun.sim.stitch_templates import (F_A, F_C, I_KNOT, I_PIECES, MAX_POINTS
 from knitrun.sim.yarn_assembly import face_point_offsets, render_points, upsample_plan, yarn_layout
 
 RADIUS_PER_STITCH = 1.0 / 8.0  # default yarn radius / stitch width: a stitch 4 yarn diameters wide
+RADIUS_TOLERANCE = 0.05  # radius / (RADIUS_PER_STITCH × stitch width) beyond 1 ± this: a warning
 CHUNKS_PER_THREAD = 16  # faces are split in this many chunks per thread (each chunk allocates its scratch once)
 
 
@@ -195,8 +197,21 @@ def simulate(mesh, frames, radius=None, frame_time=None, **options):
               "threads": numba.get_num_threads(), "prepare_s": prepare_s, "ms_per_frame": times,
               "ms_per_frame_median": float(np.median(times)), "frame_energy": frame_energy,
               "energy_history": history.tolist(), "final_energy": float(history[-1]), "yarn_radius": model.radius,
-              "length_scale": model.length_scale}
+              "length_scale": model.length_scale, "warnings": template_size_warnings(model)}
     return curves, report
+
+
+def template_size_warnings(model) -> list:
+    """One-line warnings when the yarn radius is off the radius the stitch templates are sized (and relaxed) for,
+    ``RADIUS_PER_STITCH`` × the stitch width, by more than ``RADIUS_TOLERANCE``: thicker yarns overlap, thinner
+    ones leave gaps. The remedy is to scale the stitch mesh, not the yarn."""
+    sized = RADIUS_PER_STITCH * model.length_scale
+    ratio = model.radius / sized
+    if abs(ratio - 1.0) <= RADIUS_TOLERANCE:
+        return []
+    return [f"yarn radius {model.radius:.4g} is {ratio:.2f}× the {sized:.4g} the stitch templates are sized for "
+            f"(stitch width {model.length_scale:.4g} / {1 / RADIUS_PER_STITCH:g}): the simulated yarns will "
+            f"{'overlap' if ratio > 1 else 'leave gaps'}; scale the stitch mesh by {ratio:.3g} to fit this yarn"]
 
 
 def face_problem(model, vertices, f):
