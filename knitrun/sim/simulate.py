@@ -13,7 +13,8 @@ Conventions
 * Lengths are in the mesh's ``units``. The yarn radius r defaults to ``RADIUS_PER_STITCH`` × the length scale h
   (the median rest length of the faces' top edges, i.e. one stitch width): 0.25 cm stitches (the chart default) give
   r = 0.031 cm, about cotton1's. The templates are sized and relaxed for that ratio; another radius (more than 5 %
-  off) is simulated but named in ``report["warnings"]`` (``template_size_warnings``). Energies are dimensionless (lengths divided by h, ``knot_solver``).
+  off) is simulated but named in ``report["warnings"]`` (``template_size_warnings``). Energies are dimensionless
+  (lengths divided by h, ``knot_solver``).
 * Output points are the Catmull-Rom samples of the control points (``samples`` per control segment, curve type
   ``"PL"``: rendering vertices), or the control points themselves for ``samples = 1`` (curve type ``"C0"``).
 * ``rest_arclength`` is the cumulative length of the rendering points of the rest mesh (not of frame 0), the same
