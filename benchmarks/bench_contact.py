@@ -2,8 +2,8 @@
 deformations: the 5th percentile and the median of d / 2r (1 = touching, below 1 the yarns interpenetrate), with
 the fraction of samples below 0.8. Target (issue 14): 5th percentile ≥ 0.80 and median in [0.95, 1.10] in every
 cell. ``--hand-drawn`` measures the templates before the relaxation (``stitch_templates.pack_templates(False)``);
-``--images DIR --pack PACK`` renders a 6 × 6 stockinette and 1×1 rib patch at rest with both templates side by side
-(DIR/templates_<pattern>.png: hand-drawn | relaxed; strip renderer, one directional light). ``--weights W,…``
+``--images DIR --pack PACK`` renders 6 × 6 stockinette, 1×1 rib and eyelet patches at rest with both templates side
+by side (DIR/templates_<pattern>.png: hand-drawn | relaxed; strip renderer, one directional light). ``--weights W,…``
 relaxes the templates in-process with each weight of the sheared tiles' contact (``template_relax.W_DEFORMED``) and
 prints the trade it sets: the worst 5th percentile over the knit/purl patterns at rest, sheared 0.3 and stretched
 1.5 either way, against the Fig. 9 ratio (knot solver's RMS control-segment length error / naive interpolation's,
@@ -151,7 +151,7 @@ def images(folder, pack):
     folder.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        for pattern in ("stockinette", "rib1x1"):
+        for pattern in ("stockinette", "rib1x1", "eyelet"):
             mesh_path = tmp / f"{pattern}.h5"
             write_stitch_mesh(mesh_path, chart_to_mesh(pattern_chart(pattern, 6, 6)))
             scene_path = tmp / f"{pattern}.toml"

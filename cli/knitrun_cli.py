@@ -172,8 +172,9 @@ def templates():
                    "which the simulator reads].")
 @click.option("--json", "as_json", is_flag=True, help="Print the result (figures per stitch type) as JSON.")
 def relax(output, as_json):
-    """Relax the knit (and so purl) stitch template on a periodic tile: yarns as elastic rods with bending,
-    stretching and contact at 2r (knitrun/sim/template_relax.py). Prints each round and the tile's contact before
+    """Relax the stitch templates: knit (and so purl) on a periodic tile, then yarn-over, k2tog and ssk in an
+    eyelet context: yarns as elastic rods with bending, stretching and contact at 2r (knitrun/sim/template_relax.py,
+    patch_relax.py; about 30 s). Prints each round and the tile's contact before
     and after. The simulator reads the package's file at import, so a new file takes effect in a new process.
 
     Example: knitrun templates relax -o my_templates.json --json

@@ -55,7 +55,8 @@ the whole mesh). The templates are drawn by hand (sized for the chart default 0.
 width / 8); knit and purl then take the relaxed knots and lifts of ``RELAXED`` (``relaxed_templates.json``, written by
 ``knitrun templates relax``, ``template_relax``: a periodic stockinette tile relaxed with yarn contact, as the paper
 relaxes its templates, §5.1), which keep every (a, c) below, so eq. 4 holds, but lift the knot points off ±r where
-the yarns need room. Yarn-over, k2tog and ssk stay hand-drawn. ``template_pieces(code, relaxed=False)`` and
+the yarns need room. Yarn-over, k2tog and ssk take theirs from a relaxation in an eyelet context (``patch_relax``),
+which may also move their knots and a decrease's outer-loop points. ``template_pieces(code, relaxed=False)`` and
 ``knots_of(code, relaxed=False)`` give the hand-drawn seed.
 """
 
@@ -124,8 +125,8 @@ RELAXED = load_relaxed()
 
 def template_pieces(code, relaxed=True):
     """[(role, [point spec, ...]), ...] of stitch type ``code``; a point spec is ('edge', v0, v1, t) or
-    ('knot', j, a, c, s). With ``relaxed``, knit and purl take the relaxed knot points of ``RELAXED`` where it has
-    them (purl mirrored from knit); False gives the hand-drawn templates (the relaxation's seed)."""
+    ('knot', j, a, c, s). With ``relaxed``, every type takes the relaxed knot points of ``RELAXED`` where it has them
+    (purl mirrored from knit); False gives the hand-drawn templates (the relaxations' seed)."""
     b = int(LOOPS_CONSUMED[code])
     edge = lambda name, t=0.0: ("edge",) + _edge(name, b, t)  # noqa: E731
     legs = [(ROLE_IN, [edge("left"), _knot(0, -1, 0, -1), _knot(0, 0, 1, 0), _knot(0, 1, 0, 1),
@@ -140,26 +141,26 @@ def template_pieces(code, relaxed=True):
 
     if code in (KNIT, PURL):
         pieces = legs + [loop(0, 0)]
-        if relaxed and "knit" in RELAXED:
-            pieces = [(role, _with_relaxed(points, RELAXED["knit"]["points"].get(role))) for role, points in pieces]
     elif code == YARN_OVER:
         pieces = legs
     else:
         inner = 0 if code == K2TOG else 1
         pieces = legs + [loop(inner, 0), loop(1 - inner, 2)]
+    name = "knit" if code == PURL else STITCH_TYPES[code]
+    if relaxed and name in RELAXED:
+        pieces = [(role, _with_relaxed(points, RELAXED[name]["points"].get(role))) for role, points in pieces]
     if code == PURL:  # knit mirrored through the fabric plane
         pieces = [(role, [p[:4] + (-p[4],) if p[0] == "knot" else p for p in points]) for role, points in pieces]
     return pieces
 
 
 def knots_of(code, relaxed=True):
-    """((centre, c0 − centre), …) of the two knots of stitch type ``code`` in face coordinates: the relaxed knit knots
-    for knit and purl (with ``relaxed`` and a relaxed document), else the hand-drawn ones."""
-    if code == YARN_OVER:
-        return YARN_OVER_KNOTS
-    if code in (KNIT, PURL) and relaxed and "knit" in RELAXED:
-        return RELAXED["knit"]["knots"]
-    return STITCH_KNOTS
+    """((centre, c0 − centre), …) of the two knots of stitch type ``code`` in face coordinates: the relaxed ones (with
+    ``relaxed`` and a relaxed document; purl takes knit's), else the hand-drawn ones."""
+    name = "knit" if code == PURL else STITCH_TYPES[code]
+    if relaxed and name in RELAXED:
+        return RELAXED[name]["knots"]
+    return YARN_OVER_KNOTS if code == YARN_OVER else STITCH_KNOTS
 
 
 def _with_relaxed(points, coefficients):

@@ -45,8 +45,8 @@ The contact pairs are those closer than ``PAIR_RADII`` r at the start of a round
 until the set no longer changes or ``MAX_ROUNDS`` is reached (convergence criterion: the set is stable and the solver
 reports its ftol/xtol met). ``check_crossings`` then refuses a result in which a yarn passed through another (the
 order along the normal at a crossing swapped). Purl is the knit template mirrored through the fabric plane
-(``stitch_templates``), so it is relaxed with it. Yarn-over, k2tog and ssk keep their hand-drawn points (not relaxed:
-their tiles are not periodic on their own).
+(``stitch_templates``), so it is relaxed with it. Yarn-over, k2tog and ssk are relaxed next, in
+an eyelet context around the relaxed knit (``patch_relax``); ``relax_templates`` runs both.
 
 The result is the knit template's two knots (u, v, du, dv) and every knot point's (a, c, s) by piece role; the
 runtime maps them as before (eqs. 1-2 of ``stitch_templates``), so a deformed face moves the relaxed points with its
@@ -286,6 +286,7 @@ def relax_knit(pieces, knots, roles, progress=None):
     points = {str(role): [list(p[2:]) for p in spec if p[0] == "knot"] for role, spec in new_pieces}
     check_crossings(pieces, points)
     relaxed = _polygon(y, pieces, roles)
+
     def energy(yy, pp):
         return 0.5 * float(np.sum(_residuals(yy, pieces, roles, pp, seed, length0) ** 2))
 
@@ -306,14 +307,30 @@ def relax_templates(progress=None) -> dict:
     and, per relaxed stitch type, its knot points' (a, c, s) by piece role, with the before/after figures."""
     from knitrun.sim import stitch_templates as st
 
+    from knitrun.sim.patch_relax import relax_in_patch
+
     pieces = st.template_pieces(st.KNIT, relaxed=False)
     result = relax_knit(pieces, st.STITCH_KNOTS, (st.ROLE_IN, st.ROLE_OUT, st.ROLE_LOOP), progress)
+    # the other types are relaxed around the relaxed knit: pack it for the while, then put everything back
+    saved = dict(st.RELAXED), st.TEMPLATE_INT.copy(), st.TEMPLATE_FLOAT.copy()
+    try:
+        st.RELAXED.clear()
+        st.RELAXED["knit"] = {"knots": tuple((tuple(k[:2]), tuple(k[2:])) for k in result["knots"]),
+                              "points": {int(role): [tuple(abc) for abc in spec]
+                                         for role, spec in result["points"].items()}}
+        st.TEMPLATE_INT[...], st.TEMPLATE_FLOAT[...] = st.pack_templates(True)
+        others = relax_in_patch(progress)
+    finally:
+        st.RELAXED.clear()
+        st.RELAXED.update(saved[0])
+        st.TEMPLATE_INT[...], st.TEMPLATE_FLOAT[...] = saved[1], saved[2]
+    context = others.pop("context")
     return {"format": FORMAT, "version": VERSION,
             "tile": {"width": WIDTH, "aspect": ASPECT, "radius": RADIUS, "samples": SAMPLES},
             "energy": {"w_contact": W_CONTACT, "w_bend": W_BEND, "w_length": W_LENGTH, "w_anchor": W_ANCHOR,
                        "compression": COMPRESSION, "exclude_radii": EXCLUDE_RADII, "pair_radii": PAIR_RADII,
                        "max_rounds": MAX_ROUNDS},
-            "stitch_types": {"knit": result}}
+            "context": context, "stitch_types": {"knit": result, **others}}
 
 
 def write_relaxed(path, document):
