@@ -94,7 +94,10 @@ def test_relaxed_file_errors_are_one_line(tmp_path):
     assert st.load_relaxed(tmp_path / "absent.json") == {}
     cases = {"junk.json": "{not json", "other.json": json.dumps({"format": "x", "version": "1.0"}),
              "short.json": json.dumps({"format": "knit-relaxed-templates", "version": "1.0",
-                                       "stitch_types": {"knit": {"knots": [[0.3, 0.4, 0.1, 0.1]], "points": {}}}})}
+                                       "stitch_types": {"knit": {"knots": [[0.3, 0.4, 0.1, 0.1]], "points": {}}}}),
+             "nan.json": json.dumps({"format": "knit-relaxed-templates", "version": "1.0",
+                                     "stitch_types": {"knit": {"knots": [[0.3, 0.4, 0.1, 0.1], [0.7, 0.4, -0.1, 0.1]],
+                                                               "points": {"0": [[1.0, 0.0, float("nan")]]}}}})}
     for name, text in cases.items():
         (tmp_path / name).write_text(text)
         with pytest.raises(FormatError) as info:

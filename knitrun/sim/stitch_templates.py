@@ -62,10 +62,10 @@ which may also move their knots and a decrease's outer-loop points. ``template_p
 
 from __future__ import annotations
 
-import numpy as np
-
 import json
 from pathlib import Path
+
+import numpy as np
 
 from data_formats.errors import FormatError
 from data_formats.stitch_mesh import LOOPS_CONSUMED, STITCH_TYPES
@@ -114,6 +114,10 @@ def load_relaxed(path=RELAXED_PATH):
                       for role, spec in entry["points"].items()}
             if len(knots) != N_KNOTS or not all(len(abc) == 3 for spec in points.values() for abc in spec):
                 raise ValueError(f"stitch type {name!r}: expected {N_KNOTS} knots and (a, c, s) triples")
+            values = np.array([x for k in knots for pair in k for x in pair]
+                              + [x for spec in points.values() for abc in spec for x in abc])
+            if not np.isfinite(values).all():
+                raise ValueError(f"stitch type {name!r}: a value is not finite")
             out[name] = {"knots": knots, "points": points}
     except (ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
         raise FormatError(f"{path}: {exc}, expected a knit-relaxed-templates file (knitrun templates relax)") from None
