@@ -88,7 +88,8 @@ def main():
         curves = make_yarn_curves(yarn_points(model, pts), model.plan.offsets, curve_type="PL")
         s = contact_statistic(curves, radius)
         print(f"{args.pattern}, shear 0.3, {name}: p5 {s['p5']:.4f}, median {s['p50']:.4f}")
-    print(f"knot-point pairs of different pieces within 3r at rest: {total}; closer than at rest at the start: {closer}")
+    print(f"knot-point pairs of different pieces within 3r at rest: {total}; "
+          f"closer than at rest at the start: {closer}")
 
 
 if __name__ == "__main__":
