@@ -36,6 +36,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
+from data_formats.yarn_curves import control_polygon_arclength
 from knitrun.sim import stitch_templates as st
 from knitrun.sim.contact import contact_statistic
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
@@ -101,20 +102,13 @@ class _Patch:
         # at rest knot interpolation is the template itself: no Gauss-Newton iterations needed
         return yarn_points(self.model, solve_frame(self.model, m.vertices, iterations=0).points)
 
-    def arclength(self, points):
-        step = np.zeros(len(points))
-        step[1:] = np.linalg.norm(np.diff(points, axis=0), axis=1)
-        step[self.first] = 0.0
-        cum = np.cumsum(step)
-        return cum - np.repeat(cum[self.model.plan.offsets[:-1]], np.diff(self.model.plan.offsets))
-
     def pairs(self, points):
         tree = cKDTree(points)
         pairs = tree.query_pairs(PAIR_RADII * self.radius, output_type="ndarray")
         if not len(pairs):
             return pairs.reshape(0, 2)
         p, q = pairs[:, 0], pairs[:, 1]
-        arc = self.arclength(points)
+        arc = control_polygon_arclength(points, self.model.plan.offsets)
         other = (self.curve[p] != self.curve[q]) | (np.abs(arc[p] - arc[q]) > EXCLUDE_RADII * self.radius)
         return pairs[other & (self.active[p] | self.active[q])]
 
