@@ -55,12 +55,12 @@ from knitrun.render.yarn_look import load_look, no_full_table, ones_factor
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import sg_integral
 from knitrun.shading.srbf_fit import fit_srbf
+from knitrun.sim.simulate import RADIUS_TOLERANCE
 
 SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
 MS_MERGE_DEG = 30.0  # lobes this close share one multiple-scattering evaluation
-RADIUS_TOLERANCE = 0.05  # drawn radius / the radius the curves were built for: beyond 1 ± this, a warning
 
 
 @dataclass

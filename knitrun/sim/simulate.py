@@ -42,7 +42,7 @@ from knitrun.sim.stitch_templates import (F_A, F_C, I_KNOT, I_PIECES, MAX_POINTS
 from knitrun.sim.yarn_assembly import face_point_offsets, render_points, upsample_plan, yarn_layout
 
 RADIUS_PER_STITCH = 1.0 / 8.0  # default yarn radius / stitch width: a stitch 4 yarn diameters wide
-RADIUS_TOLERANCE = 0.05  # radius / (RADIUS_PER_STITCH × stitch width) beyond 1 ± this: a warning
+RADIUS_TOLERANCE = 0.05  # a yarn radius more than this far (relative) off the one it was built for: a warning
 CHUNKS_PER_THREAD = 16  # faces are split in this many chunks per thread (each chunk allocates its scratch once)
 
 
