@@ -4,7 +4,9 @@ Per face of a 12 × 12 chart sheared 0.3, the face's least-squares problem (``si
 solver's length and angle residuals in Θ = (θ1, θ2, l1, l2)) gets one more residual per pair of knot points of
 different pieces of the face closer than 3r at rest, √w · min(0, d − d_rest)/h (penalised only when closer than at
 rest), and is solved to convergence (scipy LM). The contact statistic of the result is printed next to the product's
-(3 Gauss-Newton iterations), with how many of those pairs start closer than at rest.
+(3 Gauss-Newton iterations), with how many of those pairs start closer than at rest, and next to the two
+interpolations the solver starts from or replaces: knot interpolation (0 iterations) and the naive affine map of every
+template point (``naive``), so the loss of contact can be traced to the step that causes it.
 
     .venv/bin/python benchmarks/probe_face_contact.py [--pattern stockinette] [--weight 1000]
 
@@ -83,7 +85,9 @@ def main():
         p = points(least_squares(all_residuals, theta0, method="lm", max_nfev=200).x)
         for i in kp:
             probed[model.point_offset[f] + i] = frame[0] + p[i, 0] * frame[1] + p[i, 1] * frame[2] + p[i, 2] * frame[3]
-    runs = (("product (3 Gauss-Newton iterations)", product), (f"with contact residuals, w = {args.weight:g}", probed))
+    runs = (("naive interpolation of control points (x = F X)", solve_frame(model, vertices, naive=True).points),
+            ("knot interpolation (0 iterations)", solve_frame(model, vertices, iterations=0).points),
+            ("product (3 Gauss-Newton iterations)", product), (f"with contact residuals, w = {args.weight:g}", probed))
     for name, pts in runs:
         curves = make_yarn_curves(yarn_points(model, pts), model.plan.offsets, curve_type="PL")
         s = contact_statistic(curves, radius)
