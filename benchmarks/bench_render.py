@@ -7,7 +7,7 @@ MSAA 4, shadow maps 2048² (lobes 512²). Every figure is the median of ``--fram
 render (which pays Numba's compile or cache load). ``load`` re-reads the pack and re-evaluates the curves each
 frame (an interactive viewer would keep them); the per-frame work is the other passes.
 
-    .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3] [--light directional|sky16]
+    .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3] [--light directional|sky16] [--no-sweep]
 
 Without ``--pack`` a draft cotton1 pack is baked (or taken from the bake cache).
 """
@@ -69,6 +69,7 @@ def main():
     parser.add_argument("--pack", default=None)
     parser.add_argument("--frames", type=int, default=3)
     parser.add_argument("--light", choices=sorted(LIGHTS), default=None, help="only the cases under this light")
+    parser.add_argument("--no-sweep", action="store_true", help="only the 60K-point 1280×960 cases, not the sweep")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="knit_bench_render_"))
     pack = args.pack
@@ -82,6 +83,8 @@ def main():
     cases = [("directional", 60, 1280, 960), ("sky16", 60, 1280, 960),
              ("directional", 15, 1280, 960), ("directional", 30, 1280, 960), ("directional", 120, 1280, 960),
              ("directional", 60, 640, 480), ("directional", 60, 2560, 1920)]
+    if args.no_sweep:
+        cases = cases[:2]
     for light, rows, width, height in [c for c in cases if args.light in (None, c[0])]:
         total, timings, facts = time_scene(folder, pack, rows, width, height, light, args.frames)
         passes = " | ".join(f"{1e3 * timings.get(k, 0.0):.0f}" for k in
