@@ -1,17 +1,36 @@
 """Numba settings shared by every kernel of the toolchain.
 
 * Compiled kernels are cached on disk (``cache=True``) so compile cost is paid once per machine. The cache lives in
-  ``$NUMBA_CACHE_DIR`` if set, else in ``~/.cache/knit/numba`` (a writable folder even when the package is
-  installed read-only). This module must be imported before numba compiles anything; ``data_formats/__init__``
-  (the bottom layer, which every package imports first) does.
+  ``$NUMBA_CACHE_DIR`` if set, else in ``~/.cache/knit/numba/<sources>`` (a writable folder even when the package
+  is installed read-only), ``<sources>`` a hash of every Python source of the toolchain: Numba checks only the
+  timestamp of a kernel's own file, so a kernel whose callee in another module changed would load its stale
+  machine code (seen: an edited normaliser in ``fiber_bcsdf`` left ``strip_shading`` on the old one). Other
+  sources give another folder; old folders can be deleted at any time. This module must be imported before numba
+  compiles anything; ``data_formats/__init__`` (the bottom layer, which every package imports first) does.
 * Kernels never turn on all of fastmath (that drops NaN/Inf checks); ``FASTMATH`` is the flag set that keeps them.
 """
 
+import hashlib
 import os
 from pathlib import Path
 
+PACKAGES = ("data_formats", "knitbake", "knitrun", "cli")  # the toolchain's packages, beside this one's
+
+
+def sources_hash(root=None) -> str:
+    """A short hash of the content of every ``.py`` file of ``PACKAGES`` under ``root`` (default: this checkout or
+    installation), in path order."""
+    root = Path(__file__).resolve().parent.parent if root is None else Path(root)
+    digest = hashlib.blake2b(digest_size=8)
+    for package in PACKAGES:
+        for path in sorted((root / package).rglob("*.py")):
+            digest.update(str(path.relative_to(root)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
 if "NUMBA_CACHE_DIR" not in os.environ:
-    _cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "knit" / "numba"
+    _cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "knit" / "numba" / sources_hash()
     try:
         _cache.mkdir(parents=True, exist_ok=True)
         os.environ["NUMBA_CACHE_DIR"] = str(_cache)

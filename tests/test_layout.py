@@ -109,3 +109,18 @@ def test_no_module_imports_another_modules_private_names():
 def test_loads_without_numba(module):
     code = f"import sys, {module}; sys.exit('numba' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], cwd=ROOT).returncode == 0, f"{module} imports numba"
+
+
+def test_the_kernel_cache_folder_follows_every_source(tmp_path):
+    """Numba checks only a kernel's own file, so the cache folder is keyed by all sources: an edit to any module
+    (a callee in another file) moves it, the same sources keep it."""
+    from data_formats.numba_setup import PACKAGES, sources_hash
+
+    for package in PACKAGES:
+        (tmp_path / package / "sub").mkdir(parents=True)
+        (tmp_path / package / "sub" / "m.py").write_text("x = 1\n")
+    first = sources_hash(tmp_path)
+    assert sources_hash(tmp_path) == first
+    (tmp_path / "knitrun" / "sub" / "m.py").write_text("x = 2\n")
+    assert sources_hash(tmp_path) != first
+    assert sources_hash() != first and len(sources_hash()) == 16

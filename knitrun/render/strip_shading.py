@@ -416,7 +416,7 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
             wi = light_dir[light]
             wl[0], wl[1], wl[2] = dot(wi, tf), dot(wi, ny), -dot(wi, b)
             spread_params(params, spread2, azimuth_difference(tf, wo, wi), wide)
-            evaluate(wide, context(wide, wo_l), wl, f)
+            evaluate(wide, context(wide, wo_l, False), wl, f)
             cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
             lit = light_vis[light, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wi, psi,
                                                      scratch)
@@ -426,7 +426,7 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
             wj = lobe_dir[j]
             phi_f = azimuth_difference(tf, wo, wj)
             spread_params(params, spread2, phi_f, wide)
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, wide, context(wide, wo_l), theta_o_f,
+            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, wide, context(wide, wo_l, False), theta_o_f,
                       longitudinal_angle(tf, wj), -phi_f, lobe_lambda[j], f)
             lit = lobe_vis[j, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wj, psi, scratch)
             for ch in range(3):

@@ -53,7 +53,7 @@ from numba import njit, prange
 
 from data_formats.conventions import HALF_PI, THETA_RANGE
 from knitrun.shading.fiber_bcsdf import (INV_PI2, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R, P_BETA_TT,
-                                         P_GAMMA_TT, context, cos2_normaliser, evaluate, gauss, lobe_centre,
+                                         P_GAMMA_TT, context, cos2_normaliser, evaluate, gauss, lobe_centre_at,
                                          tt_logistic_scale)
 from knitrun.shading.fiber_frame import wrap_angle
 from knitrun.shading.table_lookup import axis_cell
@@ -146,10 +146,11 @@ def n_back_global(phi):
 # --- the runtime kernel ------------------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _lobe(theta_i, sin_o, alpha, width):
-    """M(α, w): the BCSDF's longitudinal lobe with θ_h mean α and standard deviation w (1/rad, w.r.t. cos²θ_i dθ_i)."""
+def _lobe(theta_i, theta_o, alpha, width):
+    """M(α, w): the BCSDF's longitudinal lobe with θ_h mean α and standard deviation w (1/rad, w.r.t. cos²θ_i dθ_i),
+    centred by ``fiber_bcsdf.lobe_centre_at``."""
     sigma = 2.0 * max(width, WIDTH_FLOOR)
-    mu = lobe_centre(alpha, sigma, sin_o)
+    mu = lobe_centre_at(alpha, sigma, theta_o)
     g = gauss(theta_i, mu, sigma)
     return g / cos2_normaliser(mu, sigma) if g > 0.0 else 0.0
 
@@ -167,18 +168,21 @@ def forward_fraction(tab, theta, out):
 @njit(cache=True)
 def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out):
     """One DS evaluation. ``p``: BCSDF parameters; ``tab``: ``pack_tables`` output (5, N_theta, 3); ``direct``: D in
-    [0, 1]; ``out`` (7, 3) receives the rows of ``COMPONENTS`` (the last is L_o/E)."""
+    [0, 1]; ``out`` (7, 3) receives the rows of ``COMPONENTS`` (the last is L_o/E). Terms of weight zero are not
+    evaluated and read 0: f (in F_direct) when D = 0, f_back^scatter and f_s^scatter when D = 1, f_back^direct on the
+    front half (N_b = 0)."""
     i0, i1, fr = axis_cell(theta_i, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
     sin_o, cos_o = math.sin(theta_o), math.cos(theta_o)
     cos_i = math.cos(theta_i)
     wo = np.array([sin_o, cos_o, 0.0])  # φ_o = 0, so φ_i = −φ
     wi = np.array([math.sin(theta_i), cos_i * math.cos(phi), -cos_i * math.sin(phi)])
-    c = context(p, wo)
-    f_single = np.empty(3)
-    evaluate(p, c, wi, f_single)
+    f_single = np.zeros(3)
+    if direct > 0.0:  # the direct terms; a point wholly in shadow skips f and f_back^direct (weight D = 0)
+        evaluate(p, context(p, wo, False), wi, f_single)
     n_r_g = 0.5 * INV_PI
     n_tt_g = n_tt_global(phi, p[P_GAMMA_TT])
     n_b, n_b_g = n_back(phi), n_back_global(phi)
+    theta_o = math.asin(sin_o)  # θ_o clamped to [−π/2, π/2] as the caller's lobes see it
     for ch in range(3):
         a_f = (1.0 - fr) * tab[R_A_F, i0, ch] + fr * tab[R_A_F, i1, ch]
         beta_f = (1.0 - fr) * tab[R_BETA_F, i0, ch] + fr * tab[R_BETA_F, i1, ch]
@@ -187,11 +191,14 @@ def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out):
         sigma_b = (1.0 - fr) * tab[R_SIGMA_B, i0, ch] + fr * tab[R_SIGMA_B, i1, ch]
         t_f = d_f * min(max(a_f, 0.0), 1.0) ** n_front
         s2 = n_front * beta_f * beta_f
-        back_direct = a_back * _lobe(theta_i, sin_o, delta_b, sigma_b) * n_b
-        back_scatter = a_back * _lobe(theta_i, sin_o, delta_b, math.sqrt(sigma_b * sigma_b + s2)) * n_b_g
-        single_scatter = (p[P_A_R + ch] * _lobe(theta_i, sin_o, p[P_ALPHA_R], math.sqrt(p[P_BETA_R] ** 2 + s2)) * n_r_g
-                          + p[P_A_TT + ch] * _lobe(theta_i, sin_o, p[P_ALPHA_TT], math.sqrt(p[P_BETA_TT] ** 2 + s2))
-                          * n_tt_g + p[P_A_D + ch] * INV_PI2)
+        back_direct = a_back * _lobe(theta_i, theta_o, delta_b, sigma_b) * n_b if n_b > 0.0 else 0.0
+        back_scatter = single_scatter = 0.0
+        if direct < 1.0:  # the scattered terms (weight 1 − D)
+            back_scatter = a_back * _lobe(theta_i, theta_o, delta_b, math.sqrt(sigma_b * sigma_b + s2)) * n_b_g
+            single_scatter = (p[P_A_R + ch] * _lobe(theta_i, theta_o, p[P_ALPHA_R], math.sqrt(p[P_BETA_R] ** 2 + s2))
+                              * n_r_g + p[P_A_TT + ch] * n_tt_g
+                              * _lobe(theta_i, theta_o, p[P_ALPHA_TT], math.sqrt(p[P_BETA_TT] ** 2 + s2))
+                              + p[P_A_D + ch] * INV_PI2)
         f_direct = direct * (f_single[ch] + d_b * back_direct)
         f_scatter = (1.0 - direct) * t_f * (single_scatter + d_b * back_scatter)
         out[K_T_F, ch] = t_f

@@ -56,6 +56,11 @@ SQRT2 = math.sqrt(2.0)
 LOBE_WINDOW = 9.0  # a longitudinal lobe is integrated over μ ± LOBE_WINDOW σ (beyond it: < e^{−40} of its peak)
 COS_FLOOR = 1e-12  # cos θ_i floor in the solid-angle pdf (θ_i = ±π/2 exactly)
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(32)  # Z to < 1e-9 relative for every σ ≥ 1e-4, μ
+FADDEEVA_TERMS = 32  # Weideman's expansion: |w| to 3e-13 relative over the half plane the normaliser uses
+NORMALISER_CLOSED_SIGMA = 0.03  # rad: narrower lobes cut by an end are normalised by quadrature
+NORMALISER_WIDE_SIGMA = 0.5  # rad: wider lobes cut at both ends by the 16-node rule on [−π/2, π/2] (4e-11 relative)
+_WIDE_X, _WIDE_W = np.polynomial.legendre.leggauss(16)
+_WIDE_X, _WIDE_W = HALF_PI * _WIDE_X, HALF_PI * _WIDE_W * np.cos(HALF_PI * _WIDE_X) ** 2  # nodes, weights × cos²
 
 
 def params_from_optics(optics) -> np.ndarray:
@@ -183,8 +188,13 @@ def _normal_sample(a, b, u):
 @njit(cache=True)
 def lobe_centre(alpha, sigma, sin_o):
     """Centre μ = 2α − θ_o of a longitudinal lobe (θ_o = asin(sin_o)), clamped to at most 4σ beyond ±π/2."""
-    mu = 2.0 * alpha - clamped_asin(sin_o)
-    return min(max(mu, -HALF_PI - 4.0 * sigma), HALF_PI + 4.0 * sigma)
+    return lobe_centre_at(alpha, sigma, clamped_asin(sin_o))
+
+
+@njit(cache=True)
+def lobe_centre_at(alpha, sigma, theta_o):
+    """``lobe_centre`` for a known θ_o ∈ [−π/2, π/2]."""
+    return min(max(2.0 * alpha - theta_o, -HALF_PI - 4.0 * sigma), HALF_PI + 4.0 * sigma)
 
 
 @njit(cache=True)
@@ -193,13 +203,80 @@ def lobe_window(mu, sigma):
     return max(-HALF_PI, mu - LOBE_WINDOW * sigma), min(HALF_PI, mu + LOBE_WINDOW * sigma)
 
 
+def _weideman_coefficients(n):
+    """Coefficients (highest power first) and scale L of Weideman's rational expansion of the Faddeeva function
+    (Weideman 1994, "Computation of the complex error function", SIAM J. Numer. Anal. 31(5), eq. 3.8): w(z) =
+    2 p(Z)/(L − iz)² + (1/√π)/(L − iz), Z = (L + iz)/(L − iz), p of degree n − 1, for Im z ≥ 0."""
+    m = 2 * n
+    k = np.arange(-m + 1, m)
+    scale = math.sqrt(n / math.sqrt(2.0))
+    t = scale * np.tan(0.5 * k * math.pi / m)
+    f = np.concatenate([[0.0], np.exp(-t * t) * (scale * scale + t * t)])
+    a = np.real(np.fft.fft(np.fft.fftshift(f))) / (2 * m)
+    return np.ascontiguousarray(a[1:n + 1][::-1]), scale
+
+
+_W_COEF, _W_L = _weideman_coefficients(FADDEEVA_TERMS)
+_INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
+
+
+@njit(cache=True)
+def _faddeeva_upper(x, y):
+    """Re w(x + iy) for y ≥ 0, w(z) = e^{−z²} erfc(−iz) the Faddeeva function (``_weideman_coefficients``)."""
+    iz = complex(-y, x)
+    den = _W_L - iz
+    zz = (_W_L + iz) / den
+    p = complex(0.0, 0.0)
+    for k in range(_W_COEF.shape[0]):
+        p = p * zz + _W_COEF[k]
+    return (2.0 * p / (den * den) + _INV_SQRT_PI / den).real
+
+
+@njit(cache=True)
+def _cos2_tail(d, sigma):
+    """∫_{π/2}^{∞} exp(−(θ − μ)²/(2σ²)) cos²θ dθ for d = π/2 − μ (the lobe's part beyond one end of the domain):
+    with y = θ − π/2, cos²θ = (1 − cos 2y)/2, and completing the square,
+    ½σ√(π/2) [erfc(d/(σ√2)) − Re(e^{−d²/(2σ²)} w(√2σ + i d/(σ√2)))], w the Faddeeva function; for d < 0 through
+    w(z) = 2e^{−z²} − w(−z) and w(−z̄) = conj w(z), so nothing overflows."""
+    x = SQRT2 * sigma
+    y = d / (SQRT2 * sigma)
+    if y >= 0.0:
+        scaled = math.exp(-y * y) * _faddeeva_upper(x, y)
+    else:
+        scaled = 2.0 * math.exp(-x * x) * math.cos(2.0 * x * y) - math.exp(-y * y) * _faddeeva_upper(x, -y)
+    return 0.5 * sigma * math.sqrt(0.5 * math.pi) * (math.erfc(y) - scaled)
+
+
 @njit(cache=True)
 def cos2_normaliser(mu, sigma):
-    """Z = ∫_{−π/2}^{π/2} exp(−(θ − μ)²/(2σ²)) cos²θ dθ over the lobe's window (``lobe_window``): in closed form,
-    ½√(2π)σ (1 + e^{−2σ²} cos 2μ) (cos²θ = (1 + cos 2θ)/2 against the Gaussian's characteristic function), when the
-    window lies inside [−π/2, π/2]; else by Gauss–Legendre over the window's part inside it."""
-    if mu - LOBE_WINDOW * sigma >= -HALF_PI and mu + LOBE_WINDOW * sigma <= HALF_PI:
-        return 0.5 * math.sqrt(2.0 * math.pi) * sigma * (1.0 + math.exp(-2.0 * sigma * sigma) * math.cos(2.0 * mu))
+    """Z = ∫_{−π/2}^{π/2} exp(−(θ − μ)²/(2σ²)) cos²θ dθ over the lobe's window (``lobe_window``), in closed form:
+    over the whole line it is ½√(2π)σ (1 + e^{−2σ²} cos 2μ) (cos²θ = (1 + cos 2θ)/2 against the Gaussian's
+    characteristic function), exact when the window lies inside [−π/2, π/2]; a window cut by an end loses that end's
+    tail (``_cos2_tail``, through the Faddeeva function). Both parts lose digits to cancellation for a narrow lobe at
+    an end (Z ∝ σ³ there), so below ``NORMALISER_CLOSED_SIGMA`` a cut window is integrated by Gauss–Legendre instead;
+    a lobe wider than ``NORMALISER_WIDE_SIGMA`` cut at both ends is a smooth integrand on the whole domain, where 16
+    fixed nodes (cos² folded into their weights) are cheaper than two tails.
+    Agrees with direct quadrature to 3e-8 relative (``tests/test_fiber_bcsdf.py``)."""
+    lo_cut = mu - LOBE_WINDOW * sigma < -HALF_PI
+    hi_cut = mu + LOBE_WINDOW * sigma > HALF_PI
+    if (lo_cut or hi_cut) and sigma < NORMALISER_CLOSED_SIGMA:
+        return _cos2_quadrature(mu, sigma)
+    if lo_cut and hi_cut and sigma >= NORMALISER_WIDE_SIGMA:
+        z = 0.0
+        for k in range(_WIDE_X.shape[0]):
+            z += _WIDE_W[k] * math.exp(-0.5 * ((_WIDE_X[k] - mu) / sigma) ** 2)
+        return z
+    z = 0.5 * math.sqrt(2.0 * math.pi) * sigma * (1.0 + math.exp(-2.0 * sigma * sigma) * math.cos(2.0 * mu))
+    if hi_cut:
+        z -= _cos2_tail(HALF_PI - mu, sigma)
+    if lo_cut:
+        z -= _cos2_tail(HALF_PI + mu, sigma)
+    return z
+
+
+@njit(cache=True)
+def _cos2_quadrature(mu, sigma):
+    """Z of ``cos2_normaliser`` by ``_GL_X``-point Gauss–Legendre over the window's part inside [−π/2, π/2]."""
     lo, hi = lobe_window(mu, sigma)
     half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
     z = 0.0
@@ -236,8 +313,10 @@ def _logistic_sample(u, s):
 # --- the BCSDF ---------------------------------------------------------------------------------------------------
 
 @njit(cache=True)
-def context(p, wo):
-    """Per-ω_o quantities (local frame, unit wo): angles, lobe centres, widths, normalisers, lobe probabilities."""
+def context(p, wo, sampling=True):
+    """Per-ω_o quantities (local frame, unit wo): angles, lobe centres, widths, normalisers, lobe probabilities.
+    ``sampling`` False skips what only ``pdf`` and ``sample`` read (lobe masses and probabilities: NaN then), for
+    callers that only ``evaluate``."""
     c = np.empty(N_CONTEXT)
     s = min(max(wo[0], -1.0), 1.0)
     c[C_SIN_O] = s
@@ -249,8 +328,13 @@ def context(p, wo):
         c[C_MU + k] = mu
         c[C_SIGMA + k] = sigma
         c[C_Z + k] = cos2_normaliser(mu, sigma)
-        c[C_MASS + k] = sigma * math.sqrt(2.0 * math.pi) * _normal_mass((-HALF_PI - mu) / sigma,
-                                                                        (HALF_PI - mu) / sigma)
+        c[C_MASS + k] = math.nan
+        if sampling:
+            c[C_MASS + k] = sigma * math.sqrt(2.0 * math.pi) * _normal_mass((-HALF_PI - mu) / sigma,
+                                                                            (HALF_PI - mu) / sigma)
+    if not sampling:
+        c[C_PROB:C_PROB + 3] = math.nan
+        return c
     w_r = (p[P_A_R] + p[P_A_R + 1] + p[P_A_R + 2]) / 3.0
     w_tt = (p[P_A_TT] + p[P_A_TT + 1] + p[P_A_TT + 2]) / 3.0
     w_d = (p[P_A_D] + p[P_A_D + 1] + p[P_A_D + 2]) / 3.0
@@ -265,7 +349,7 @@ def context(p, wo):
 def view_context(p, theta_o):
     """``context`` of a view at longitudinal angle θ_o and azimuth 0: enough for every quantity that depends on the
     view through θ_o alone (I_M, the dual-scattering averages)."""
-    return context(p, np.array([math.sin(theta_o), math.cos(theta_o), 0.0]))
+    return context(p, np.array([math.sin(theta_o), math.cos(theta_o), 0.0]), False)
 
 
 @njit(cache=True)
