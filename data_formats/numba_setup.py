@@ -5,13 +5,15 @@
   is installed read-only), ``<sources>`` a hash of every Python source of the toolchain: Numba checks only the
   timestamp of a kernel's own file, so a kernel whose callee in another module changed would load its stale
   machine code (seen: an edited normaliser in ``fiber_bcsdf`` left ``strip_shading`` on the old one). Other
-  sources give another folder; old folders can be deleted at any time. This module must be imported before numba
-  compiles anything; ``data_formats/__init__`` (the bottom layer, which every package imports first) does.
+  sources give another folder; old folders can be deleted at any time. This module must be imported before any
+  kernel is defined; ``data_formats/__init__`` (the bottom layer, which every package imports first) does, and it
+  also sets Numba's setting when a script imported numba first (Numba reads its environment once, at import).
 * Kernels never turn on all of fastmath (that drops NaN/Inf checks); ``FASTMATH`` is the flag set that keeps them.
 """
 
 import hashlib
 import os
+import sys
 from pathlib import Path
 
 PACKAGES = ("data_formats", "knitbake", "knitrun", "cli")  # the toolchain's packages, beside this one's
@@ -36,6 +38,10 @@ if "NUMBA_CACHE_DIR" not in os.environ:
         os.environ["NUMBA_CACHE_DIR"] = str(_cache)
     except OSError:  # read-only home: numba falls back to its own default next to the sources
         pass
+if "numba" in sys.modules:  # imported before us (a script's own ``import numba``): it read its settings already
+    from numba.core import config
+
+    config.CACHE_DIR = os.environ.get("NUMBA_CACHE_DIR", config.CACHE_DIR)
 
 # Reassociation and contraction only: no 'nnan'/'ninf', so NaN and Inf checks still work.
 FASTMATH = {"reassoc", "contract", "arcp"}

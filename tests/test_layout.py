@@ -8,6 +8,7 @@
 """
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -124,3 +125,13 @@ def test_the_kernel_cache_folder_follows_every_source(tmp_path):
     (tmp_path / "knitrun" / "sub" / "m.py").write_text("x = 2\n")
     assert sources_hash(tmp_path) != first
     assert sources_hash() != first and len(sources_hash()) == 16
+
+
+def test_kernels_use_the_keyed_cache_folder_even_after_a_plain_numba_import():
+    """A script that imports numba before the toolchain (``benchmarks/bench_render.py`` does) still caches kernels
+    in the keyed folder, not in ``__pycache__`` beside the sources, where a stale callee would be loaded."""
+    code = ("import numba, os; import knitrun.render.strip_shading; from numba.core import config; "
+            "from data_formats.numba_setup import sources_hash; "
+            "assert config.CACHE_DIR == os.environ['NUMBA_CACHE_DIR'] and config.CACHE_DIR.endswith(sources_hash())")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    subprocess.run([sys.executable, "-c", code], check=True, env=env)

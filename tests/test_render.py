@@ -21,12 +21,13 @@ from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import radius_mismatch, render
 from knitrun.render.strip_shading import resolve, shade_regular, variant_of
+from knitrun.render.shading_inputs import Corrections, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_full_table, ones_factor
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
 from knitrun.shading.equirect import texel_directions
-from knitrun.shading.im_lookup import kernel_axes
+from knitrun.shading.im_lookup import im_table_from
 from knitrun.shading.srbf_fit import fit_srbf
 from tests.helpers import FRONT, ROUGH, SKY, SUN, TEST_SHAPE, TINY, straight, write_scene
 
@@ -123,7 +124,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     integration of the sky itself."""
     table = im.bake_im_table(ROUGH, TEST_SHAPE, nodes=4)[0]
     axes = im.im_axes(TEST_SHAPE)
-    lo, hi, repeat, codes = kernel_axes(axes)
+    i_m = im_table_from(table, axes)
     rng = np.random.default_rng(5)
     n = 12
     tangent = rng.normal(size=(n, 3))
@@ -132,6 +133,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     view /= np.linalg.norm(view, axis=1, keepdims=True)
     flat = mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]])
     full = mip_stack([[np.ones((2, 4))]])
+    off = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor())
     sky = sky_image(64, 128)
     dirs = texel_directions(64, 128).reshape(-1, 3)
     texel_sr = (np.pi / 64) * (2 * np.pi / 128) * np.cos(np.arcsin(np.clip(dirs[:, 1], -1, 1)))
@@ -139,13 +141,10 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     for j in (1, 16, 64):
         fit = fit_srbf(sky, n_lobes=j, seed=0)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
-        shade_regular(np.arange(n), view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3),
-                      ROUGH, np.ones((5, 4, 3)), no_full_table(), ones_factor(), ones_factor(), no_full_table(),
-                      ones_factor(), ones_factor(), flat.data, flat.offset, flat.rows,
-                      flat.cols, full.data, full.offset, full.rows, full.cols, 1.0, 1.0, 0.0, 0.0,
-                      np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)), fit.directions, fit.sharpness,
-                      fit.weights, np.ones((j, n)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)), table, lo,
-                      hi, repeat, codes, rgb, alpha)
+        points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
+        look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0)
+        shade_regular(np.arange(n), points, look, off, flat, full, no_lights(n),
+                      Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n), i_m, rgb, alpha)
         theta_o = np.arcsin(np.sum(view * tangent, axis=1))
         direct = np.zeros((n, 3))
         for wj, lam, w in zip(fit.directions, fit.sharpness, fit.weights):
@@ -226,18 +225,18 @@ def test_texture_sampling_hits_texel_centres_and_wraps_u():
     for i in range(4):
         for j in range(8):
             u, v = (j + 0.5) / 8, -1 + (i + 0.5) * 2 / 4
-            sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.0, u + 3.0, v, out)
+            sample_mip(stack, 0, 0.0, u + 3.0, v, out)
             assert np.allclose(out, level0[i, j], atol=1e-6)
     # halfway between the last and the first column: the mean of the two (u repeats)
-    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.0, 1.0, -1 + 0.25, out)
+    sample_mip(stack, 0, 0.0, 1.0, -1 + 0.25, out)
     assert np.allclose(out, (level0[0, 0] + level0[0, 7]) / 2, atol=1e-6)
     # level 0.5 blends the two levels; levels beyond the chain clamp to the last
-    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.5, 0.3125, -0.75, out)
+    sample_mip(stack, 0, 0.5, 0.3125, -0.75, out)
     a, b = np.empty(2), np.empty(2)
-    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 0.0, 0.3125, -0.75, a)
-    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 1.0, 0.3125, -0.75, b)
+    sample_mip(stack, 0, 0.0, 0.3125, -0.75, a)
+    sample_mip(stack, 0, 1.0, 0.3125, -0.75, b)
     assert np.allclose(out, (a + b) / 2)
-    sample_mip(stack.data, stack.offset, stack.rows, stack.cols, 0, 9.0, 0.3125, -0.75, out)
+    sample_mip(stack, 0, 9.0, 0.3125, -0.75, out)
     assert np.allclose(out, b)
 
 

@@ -50,10 +50,11 @@ from knitrun.render.camera import scene_camera
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
+from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
-from knitrun.render.yarn_look import load_look, no_full_table, ones_factor
+from knitrun.render.yarn_look import load_look, no_full_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
-from knitrun.shading.im_lookup import sg_integral
+from knitrun.shading.im_lookup import no_im_table, sg_integral
 from knitrun.shading.srbf_fit import fit_srbf
 from knitrun.sim.simulate import RADIUS_TOLERANCE
 
@@ -306,32 +307,23 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
 
     h, w = camera.height, camera.width
     rgb, alpha = np.zeros((len(points["weight"]), 3)), np.zeros(len(points["weight"]))
+    kernel_looks = [shading_look(look) for look in looks]
+    regular = _kernel_points(points, lines, looks)
     for k, look in enumerate(looks):
         idx = np.flatnonzero(points["yarn"] == k)
-        im = look.im if look.im is not None else _NO_IM
-        shade_regular(idx, points["view_dir"], points["tangent"],
-                      view_phase_arclength(points, lines, looks), points["v"].astype(np.float64), points["footprint"],
-                      look.params, look.ds, look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm,
-                      look.psi_gn,
-                      look.tangent.data, look.tangent.offset, look.tangent.rows, look.tangent.cols,
-                      look.coverage.data, look.coverage.offset, look.coverage.rows, look.coverage.cols,
-                      look.period, look.radius, look.n_occluded, look.n_cross,
-                      light_dir, light_e, light_vis[0], lobe_dir, lobe_lambda, lobe_w, lobe_vis[0], ms_dir, ms_e,
-                      ms_vis[0], *im, rgb, alpha)
+        shade_regular(idx, regular, *kernel_looks[k][:2], look.tangent, look.coverage,
+                      Lights(light_dir, light_e, light_vis[0]), Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]),
+                      Lights(ms_dir, ms_e, ms_vis[0]), look.im if look.im is not None else no_im_table(), rgb, alpha)
     if fly_points is not None:
         n_fly = len(fly_points["weight"])
         fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
+        hairs = _kernel_points(fly_points, lines, looks)
         for k in drawn_fly:
             look = looks[k]
             idx = np.flatnonzero(fly_points["yarn"] == k)
-            im = look.im if look.im is not None else _NO_IM
-            shade_flyaway(idx, fly_points["view_dir"], fly_points["tangent"],
-                          view_phase_arclength(fly_points, lines, looks), fly_points["v"].astype(np.float64),
-                          fly_points["footprint"], fly_points["curve"].astype(np.int64), look.params, look.ds,
-                          look.flyaway.data, look.flyaway.offset, look.flyaway.rows, look.flyaway.cols,
-                          look.period, look.flyaway_half_width, look.radius, look.psi_full, look.psi_gm,
-                          look.psi_gn, light_dir, light_e, light_vis[1], lobe_dir,
-                          lobe_lambda, lobe_w, lobe_vis[1], *im, fly_rgb, fly_alpha, fly_transmit)
+            shade_flyaway(idx, hairs, *kernel_looks[k],
+                          Lights(light_dir, light_e, light_vis[1]), Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]),
+                          look.im if look.im is not None else no_im_table(), fly_rgb, fly_alpha, fly_transmit)
     lap("shade")
 
     image = np.empty((h * w, 3))
@@ -346,4 +338,7 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     return RenderResult(image.reshape(h, w, 3).astype(np.float32), timings, facts)
 
 
-_NO_IM = (np.zeros((1, 1, 1, 1, 3)), np.zeros(4), np.ones(4), np.zeros(4, np.bool_), np.arange(4, dtype=np.int64))
+def _kernel_points(points, lines, looks) -> Points:
+    """The shading kernels' view of a set of shading points (``shading_inputs.Points``)."""
+    return Points(points["view_dir"], points["tangent"], view_phase_arclength(points, lines, looks),
+                  points["v"].astype(np.float64), points["footprint"], points["curve"].astype(np.int64))

@@ -240,13 +240,13 @@ def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
         out[ch] *= scratch[ch]
 
 
-@njit(cache=True)
-def _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, w, xi, psi, scratch):
-    """ξ(v, θ_d, φ) into ``xi`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` for light direction ω = ``w`` seen from θ_o
-    (θ_i and φ by ``_strip_angles``, θ_d = (θ_o − θ_i)/2)."""
+@njit(cache=True, inline='always')
+def _corrections(tables, v, t, n, b, theta_o, w, xi, psi, scratch):
+    """ξ(v, θ_d, φ) into ``xi`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` (``tables``: ``shading_inputs.Corrections``)
+    for light direction ω = ``w`` seen from θ_o (θ_i and φ by ``_strip_angles``, θ_d = (θ_o − θ_i)/2)."""
     theta_i, phi = _strip_angles(w, t, n, b)
-    _factored_or_full(xi_full, xi_m, xi_n, v, 0.5 * (theta_o - theta_i), phi, xi, scratch)
-    _factored_or_full(psi_full, psi_gm, psi_gn, v, theta_i, phi, psi, scratch)
+    _factored_or_full(tables.xi_full, tables.xi_m, tables.xi_n, v, 0.5 * (theta_o - theta_i), phi, xi, scratch)
+    _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, psi, scratch)
 
 
 @njit(cache=True)
@@ -295,28 +295,26 @@ def _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha):
 # --- regular fibers --------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
-def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
-                  params, ds, xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn,
-                  tan_data, tan_off, tan_rows, tan_cols, cov_data, cov_off, cov_rows, cov_cols,
-                  period, half_width, n_occluded, n_cross,
-                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis, ms_dir, ms_e, ms_vis,
-                  im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha):
-    """Shade the points ``idx`` (indices into the point arrays) of one yarn; writes rgb[idx], alpha[idx].
-    ``ms_dir`` (C, 3), ``ms_e`` (C, 3), ``ms_vis`` (C, N): the environment's multiple-scattering lights (module
-    docstring)."""
-    texel_u = period / tan_cols[0, 0]
-    texel_v = 2.0 * half_width / tan_rows[0, 0]
+def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lobes, ms, im, rgb, alpha):
+    """Shade the points ``idx`` (indices into ``points``) of one yarn; writes rgb[idx], alpha[idx]. ``points``,
+    ``look``, ``corrections`` (ξ, Ψ^Fiber), the textures ``tangent`` and ``coverage``, ``lights`` (directional),
+    ``lobes`` (SRBF), ``ms`` (the environment's multiple-scattering lights, module docstring) and ``im``: the named
+    tuples of ``knitrun.render.shading_inputs``."""
+    params, ds, period = look.params, look.ds, look.period
+    n_occluded, n_cross = look.n_occluded, look.n_cross
+    texel_u = period / tangent.cols[0, 0]
+    texel_v = 2.0 * look.radius / tangent.rows[0, 0]
     for m in prange(idx.shape[0]):
         q = idx[m]
-        t, wo = tangent[q], view_dir[q]
+        t, wo = points.tangent[q], points.view_dir[q]
         n, b, tf = np.empty(3), np.empty(3), np.empty(3)
-        drawn, u, v = _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha)
+        drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
         if not drawn:
             continue
-        level = mip_level(footprint[q], texel_u, texel_v)
+        level = mip_level(points.footprint[q], texel_u, texel_v)
         cov, tex = np.empty(1), np.empty(3)
-        sample_mip(cov_data, cov_off, cov_rows, cov_cols, 0, level, u, v, cov)
-        sample_mip(tan_data, tan_off, tan_rows, tan_cols, 0, level, u, v, tex)
+        sample_mip(coverage, 0, level, u, v, cov)
+        sample_mip(tangent, 0, level, u, v, tex)
         alpha[q] = min(max(cov[0], 0.0), 1.0)
         _texture_tangent(tex, t, n, b, tf)
         spread2 = tangent_spread(tex, cov[0])
@@ -324,34 +322,33 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
         theta_o_f = longitudinal_angle(tf, wo)
         xi, psi, scratch, comp = np.ones(3), np.ones(3), np.empty(3), np.empty((7, 3))
         wide = np.empty(params.shape[0])
-        for light in range(light_dir.shape[0]):
-            wi = light_dir[light]
-            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wi, xi, psi, scratch)
+        for light in range(lights.direction.shape[0]):
+            wi = lights.direction[light]
+            _corrections(corrections, v, t, n, b, theta_o, wi, xi, psi, scratch)
             fiber_lit = _fiber_lit(psi)
-            vis = light_vis[light, q]
+            vis = lights.visibility[light, q]
             n_front = n_occluded + (1.0 - vis) * n_cross
             phi_f = azimuth_difference(tf, wo, wi)
             spread_params(params, spread2, phi_f, wide)
             ds_kernel(wide, ds, longitudinal_angle(tf, wi), theta_o_f, phi_f, n_front, D_F, D_B, vis * fiber_lit, comp)
             for ch in range(3):
-                rgb[q, ch] += light_e[light, ch] * xi[ch] * comp[K_TOTAL, ch]
-        im = np.empty(3)
-        for j in range(lobe_dir.shape[0]):
-            wj = lobe_dir[j]
-            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wj, xi, psi, scratch)
+                rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
+        i_m = np.empty(3)
+        for j in range(lobes.direction.shape[0]):
+            wj = lobes.direction[j]
+            _corrections(corrections, v, t, n, b, theta_o, wj, xi, psi, scratch)
             theta_j_f = longitudinal_angle(tf, wj)
             phi_f = azimuth_difference(tf, wo, wj)
             spread_params(params, spread2, phi_f, wide)
             # the BCSDF context of the fiber-frame view, for I_M's R lobe
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, wide, view_context(wide, theta_o_f), theta_o_f,
-                      theta_j_f, -phi_f, lobe_lambda[j], im)
-            vis = lobe_vis[j, q]
+            im_kernel(im, wide, view_context(wide, theta_o_f), theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
+            vis = lobes.visibility[j, q]
             for ch in range(3):
-                rgb[q, ch] += lobe_w[j, ch] * vis * xi[ch] * psi[ch] * im[ch]
-        for c in range(ms_dir.shape[0]):  # multiple scattering: clusters of lobes as distant lights
-            wc = ms_dir[c]
-            _corrections(xi_full, xi_m, xi_n, psi_full, psi_gm, psi_gn, v, t, n, b, theta_o, wc, xi, psi, scratch)
-            vis = ms_vis[c, q]
+                rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
+        for c in range(ms.direction.shape[0]):  # multiple scattering: clusters of lobes as distant lights
+            wc = ms.direction[c]
+            _corrections(corrections, v, t, n, b, theta_o, wc, xi, psi, scratch)
+            vis = ms.visibility[c, q]
             lit = vis * _fiber_lit(psi)
             theta_c_f = longitudinal_angle(tf, wc)
             phi_f = azimuth_difference(tf, wo, wc)
@@ -360,7 +357,7 @@ def shade_regular(idx, view_dir, tangent, arclength, v_coord, footprint,
             cos_c = math.cos(theta_c_f)
             for ch in range(3):
                 multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
-                rgb[q, ch] += ms_e[c, ch] * xi[ch] * multiple
+                rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
 
 
 # --- flyaways --------------------------------------------------------------------------------------------------------
@@ -377,24 +374,24 @@ def variant_of(curve, period_index):
 
 
 @njit(parallel=True, cache=True)
-def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, params, ds,
-                  fly_data, fly_off, fly_rows, fly_cols, period, half_width, radius, psi_full, psi_gm, psi_gn,
-                  light_dir, light_e, light_vis, lobe_dir, lobe_lambda, lobe_w, lobe_vis,
-                  im_table, im_lo, im_hi, im_repeat, im_codes, rgb, alpha, transmit):
-    """Shade the flyaway-layer points ``idx`` of one yarn; writes rgb[idx], alpha[idx] and transmit[idx] (RGB,
-    the hair's forward fraction ā_f(θ_o): what it passes on of the radiance behind it)."""
-    texel_u = period / fly_cols[0, 0]
-    texel_v = 2.0 * half_width / fly_rows[0, 0]
+def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit):
+    """Shade the flyaway-layer points ``idx`` of one yarn (the named tuples of ``knitrun.render.shading_inputs``;
+    ``flyaway``: its three texture variants); writes rgb[idx], alpha[idx] and transmit[idx] (RGB, the hair's
+    forward fraction ā_f(θ_o): what it passes on of the radiance behind it)."""
+    params, ds, period = look.params, look.ds, look.period
+    half_width, radius = look.flyaway_half_width, look.radius
+    texel_u = period / flyaway.cols[0, 0]
+    texel_v = 2.0 * half_width / flyaway.rows[0, 0]
     for m in prange(idx.shape[0]):
         q = idx[m]
-        t, wo = tangent[q], view_dir[q]
+        t, wo = points.tangent[q], points.view_dir[q]
         n, b, tf = np.empty(3), np.empty(3), np.empty(3)
-        drawn, u, v = _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha)
+        drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
         if not drawn:
             continue
         texel = np.empty(4)
-        sample_mip(fly_data, fly_off, fly_rows, fly_cols, variant_of(curve[q], int(math.floor(u))),
-                   mip_level(footprint[q], texel_u, texel_v), u, v, texel)
+        sample_mip(flyaway, variant_of(points.curve[q], int(math.floor(u))),
+                   mip_level(points.footprint[q], texel_u, texel_v), u, v, texel)
         if not _texture_tangent(texel, t, n, b, tf):
             continue
         alpha[q] = min(max(texel[3], 0.0), 1.0)
@@ -412,34 +409,33 @@ def shade_flyaway(idx, view_dir, tangent, arclength, v_coord, footprint, curve, 
         # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
         v_strip = v * half_width / radius
         on_body = abs(v_strip) <= 1.0
-        for light in range(light_dir.shape[0]):
-            wi = light_dir[light]
+        for light in range(lights.direction.shape[0]):
+            wi = lights.direction[light]
             wl[0], wl[1], wl[2] = dot(wi, tf), dot(wi, ny), -dot(wi, b)
             spread_params(params, spread2, azimuth_difference(tf, wo, wi), wide)
             evaluate(wide, context(wide, wo_l, False), wl, f)
             cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
-            lit = light_vis[light, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wi, psi,
-                                                     scratch)
+            lit = lights.visibility[light, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, wi, psi, scratch)
             for ch in range(3):
-                rgb[q, ch] += light_e[light, ch] * lit * f[ch] * cos_i
-        for j in range(lobe_dir.shape[0]):
-            wj = lobe_dir[j]
+                rgb[q, ch] += lights.irradiance[light, ch] * lit * f[ch] * cos_i
+        for j in range(lobes.direction.shape[0]):
+            wj = lobes.direction[j]
             phi_f = azimuth_difference(tf, wo, wj)
             spread_params(params, spread2, phi_f, wide)
-            im_kernel(im_table, im_lo, im_hi, im_repeat, im_codes, wide, context(wide, wo_l, False), theta_o_f,
-                      longitudinal_angle(tf, wj), -phi_f, lobe_lambda[j], f)
-            lit = lobe_vis[j, q] * _body_shadow(on_body, psi_full, psi_gm, psi_gn, v_strip, t, n, b, wj, psi, scratch)
+            im_kernel(im, wide, context(wide, wo_l, False), theta_o_f, longitudinal_angle(tf, wj), -phi_f,
+                      lobes.sharpness[j], f)
+            lit = lobes.visibility[j, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, wj, psi, scratch)
             for ch in range(3):
-                rgb[q, ch] += lobe_w[j, ch] * lit * f[ch]
+                rgb[q, ch] += lobes.weight[j, ch] * lit * f[ch]
 
 
-@njit(cache=True)
-def _body_shadow(on_body, psi_full, psi_gm, psi_gn, v, t, n, b, wi, psi, scratch):
+@njit(cache=True, inline='always')
+def _body_shadow(on_body, tables, v, t, n, b, wi, psi, scratch):
     """Ψ^Fiber_G (mean RGB, clamped to [0, 1]) at strip coordinate v toward ω_i, or 1 off the yarn body."""
     if not on_body:
         return 1.0
     theta_i, phi = _strip_angles(wi, t, n, b)
-    _factored_or_full(psi_full, psi_gm, psi_gn, v, theta_i, phi, psi, scratch)
+    _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, psi, scratch)
     return _fiber_lit(psi)
 
 

@@ -6,20 +6,19 @@ real-valued ``level`` (clamped to the stored chain), blended linearly, as a GPU 
 and GL_TEXTURE_MAX_LEVEL at the last stored level.
 
 A ``MipStack`` flattens one texture's chain (or, for the three flyaway variants, three chains) into a single
-(total texels, C) float32 array with per-level offsets, so a kernel receives plain arrays.
+(total texels, C) float32 array with per-level offsets; it is a named tuple, so a kernel receives it whole.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 
-@dataclass
-class MipStack:
+class MipStack(NamedTuple):
     """``data`` (total, C) float32; ``offset``, ``rows``, ``cols`` (V, L) int64: where level l of variant k starts
     in ``data`` and its size (V = 1 for an ordinary texture, 3 for the flyaway variants)."""
 
@@ -27,6 +26,11 @@ class MipStack:
     offset: np.ndarray
     rows: np.ndarray
     cols: np.ndarray
+
+
+def empty_mip_stack(channels: int, variants: int = 1) -> MipStack:
+    """A one-texel stack of zeros: the stand-in a kernel receives for a texture the scene does not draw."""
+    return mip_stack([[np.zeros((1, 1, channels))] for _ in range(variants)])
 
 
 def mip_stack(chains) -> MipStack:
@@ -69,10 +73,11 @@ def _bilinear(data, start, rows, cols, u, v, weight, out):
         out[ch] += weight * ((1.0 - fy) * top + fy * bottom)
 
 
-@njit(cache=True)
-def sample_mip(data, offset, rows, cols, variant, level, u, v, out):
-    """out[:C] = trilinear sample of ``variant`` at (u, v) and real mip ``level`` (0 = finest; clamped to the chain).
-    u is any real (repeat), v in [−1, 1] (clamp)."""
+@njit(cache=True, inline='always')
+def sample_mip(mip, variant, level, u, v, out):
+    """out[:C] = trilinear sample of ``variant`` of the ``MipStack`` ``mip`` at (u, v) and real mip ``level``
+    (0 = finest; clamped to the chain). u is any real (repeat), v in [−1, 1] (clamp)."""
+    data, offset, rows, cols = mip
     n_levels = offset.shape[1]
     level = min(max(level, 0.0), n_levels - 1.0)
     l0 = int(math.floor(level))

@@ -26,10 +26,11 @@ import numpy as np
 from data_formats.asset_pack import read_pack
 from data_formats.conventions import CM_PER_UNIT, LUMINANCE
 from data_formats.yarn_spec import loads_spec
-from knitrun.render.texture_sampling import MipStack, mip_stack
+from knitrun.render.shading_inputs import Corrections, Look
+from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
 from knitrun.shading.dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables
 from knitrun.shading.fiber_bcsdf import params_from_pack, tinted
-from knitrun.shading.im_lookup import kernel_axes
+from knitrun.shading.im_lookup import IMTable, im_table_from
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
@@ -59,7 +60,7 @@ class YarnLook:
     n_occluded: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
     yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
-    im: tuple | None  # (I_M^{TT,D} table (…, 3) float64, lo, hi, repeat, codes) for ``im_lookup.im_kernel``
+    im: IMTable | None  # the I_M^{TT,D} table for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
 
 
@@ -123,8 +124,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:
-        lo, hi, repeat, codes = kernel_axes(pack.info["environment/I_M_TT_D"].axes)
-        im = (np.ascontiguousarray(pack.tables["environment/I_M_TT_D"] * colour, np.float64), lo, hi, repeat, codes)
+        im = im_table_from(pack.tables["environment/I_M_TT_D"] * colour, pack.info["environment/I_M_TT_D"].axes)
     yarn_albedo = float(np.asarray(pack.tables[ALBEDO_TABLE], np.float64) * colour @ LUMINANCE) \
         if ALBEDO_TABLE in names else None
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
@@ -141,6 +141,15 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
         n_cross=n_cross, n_occluded=n_occluded, twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
         yarn_albedo=yarn_albedo, im=im, residuals=residuals)
+
+
+def shading_look(look: YarnLook) -> tuple:
+    """What the shading kernels receive for ``look`` (``shading_inputs``): (``Look``, ``Corrections``, the flyaway
+    ``MipStack``, a one-texel stand-in of its three variants for a yarn without a flyaway layer)."""
+    return (Look(look.params, look.ds, float(look.period), float(look.radius), float(look.flyaway_half_width),
+                 float(look.n_occluded), float(look.n_cross)),
+            Corrections(look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm, look.psi_gn),
+            look.flyaway if look.flyaway is not None else empty_mip_stack(4, 3))
 
 
 def _half_width(pack, base):

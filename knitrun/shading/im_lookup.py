@@ -79,6 +79,7 @@ standard shape. Schema 1.x tabulated the R lobe too, which no grid of practical 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -114,6 +115,28 @@ def _field(axis, key):
     return axis[key] if isinstance(axis, dict) else getattr(axis, key)
 
 
+class IMTable(NamedTuple):
+    """The I_M^{TT,D} table as ``im_kernel`` reads it: ``table`` (N_a, N_b, N_c, N_d, 3) float64 and, per sampled
+    axis, ``lo``, ``hi`` (float64), ``repeat`` (bool) and ``codes`` (int64, ``AXIS_CODES``)."""
+
+    table: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    repeat: np.ndarray
+    codes: np.ndarray
+
+
+def im_table_from(table, axes) -> IMTable:
+    """An ``IMTable`` from a table and its axes (``kernel_axes``)."""
+    return IMTable(np.ascontiguousarray(table, np.float64), *kernel_axes(axes))
+
+
+def no_im_table() -> IMTable:
+    """A table of zeros: the stand-in a kernel receives when the scene has no environment light."""
+    return IMTable(np.zeros((1, 1, 1, 1, 3)), np.zeros(4), np.ones(4), np.zeros(4, np.bool_),
+                   np.arange(4, dtype=np.int64))
+
+
 def kernel_axes(axes):
     """(lo, hi, repeat, codes) arrays for ``im_kernel`` from the four sampled axes of an I_M table (dicts or
     ``AxisInfo``; the channel axis is ignored); ValueError naming the axes for a parameterisation this renderer
@@ -137,22 +160,21 @@ def im_lookup(table, axes, params, theta_o, theta_j, dphi, lam):
     table was baked for (its R lobe is integrated here). θ_o, θ_j in [−π/2, π/2], dphi = φ_j − φ_o (any real),
     lam > 0 (values outside the table's λ range take its end samples). A parameterisation with an axis not in
     ``data_formats.asset_pack.IM_AXES`` is refused."""
-    lo, hi, repeat, codes = kernel_axes(axes)
+    im = im_table_from(table, axes)
     args = np.broadcast_arrays(*[np.asarray(x, np.float64) for x in (theta_o, theta_j, dphi, lam)])
     if np.any(~(args[3] > 0)):
         raise ValueError("I_M lookup: λ must be > 0")
     flat = [np.ascontiguousarray(x.ravel()) for x in args]
-    out = _im_batch(np.ascontiguousarray(table, np.float64), lo, hi, repeat, codes, np.asarray(params, np.float64),
-                    *flat)
+    out = _im_batch(im, np.asarray(params, np.float64), *flat)
     return out.reshape(args[0].shape + (3,))
 
 
 @njit(parallel=True, cache=True)
-def _im_batch(table, lo, hi, repeat, codes, params, theta_o, theta_j, dphi, lam):
+def _im_batch(im, params, theta_o, theta_j, dphi, lam):
     out = np.empty((theta_o.shape[0], 3))
     for k in prange(theta_o.shape[0]):
         c = fb.view_context(params, theta_o[k])
-        im_kernel(table, lo, hi, repeat, codes, params, c, theta_o[k], theta_j[k], dphi[k], lam[k], out[k])
+        im_kernel(im, params, c, theta_o[k], theta_j[k], dphi[k], lam[k], out[k])
     return out
 
 
@@ -201,11 +223,12 @@ def r_lobe_integral(c, theta_j, lam):
     return half * total / z
 
 
-@njit(cache=True)
-def im_kernel(table, lo, hi, repeat, codes, params, c, theta_o, theta_j, dphi, lam, out):
-    """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0): the I_M^{TT,D} table by multilinear interpolation over its four
+@njit(cache=True, inline='always')
+def im_kernel(im, params, c, theta_o, theta_j, dphi, lam, out):
+    """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0): the ``IMTable`` ``im`` by multilinear interpolation over its four
     sampled axes (the §4.3 rule per axis, ``table_lookup.axis_cell``) plus A_R times ``r_lobe_integral``. ``c`` is
     ``fiber_bcsdf.context`` of ``params`` for a view at θ_o (the caller's, so a shading point pays for it once)."""
+    table, lo, hi, repeat, codes = im
     i0 = np.empty(4, np.int64)
     i1 = np.empty(4, np.int64)
     fr = np.empty(4)

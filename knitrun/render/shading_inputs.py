@@ -1,0 +1,78 @@
+"""What the strip renderer's shading kernels receive (``strip_shading.shade_regular`` and ``shade_flyaway``): a few
+named tuples of arrays, one per kind of input, instead of dozens of positional arrays. Numba passes a named tuple to a
+kernel whole and types it by its fields, so each field keeps one dtype and number of dimensions. The tuples are flat
+(no tuple inside a tuple): Numba's ``prange`` lowering splits argument tuples into their fields and cannot rebuild
+a nested one, so a yarn's textures travel as ``MipStack`` arguments of their own.
+
+=================  =======================================================================================
+structure          fields (units: scene lengths, radians, linear RGB; N = shading points)
+=================  =======================================================================================
+``Points``         ``view_dir`` (N, 3) unit toward the camera, ``tangent`` (N, 3) unit yarn tangent,
+                   ``arclength`` (N,) rest arc length shifted by the view phase, ``v`` (N,) across the strip
+                   in [−1, 1], ``footprint`` (N,) pixel size at the point, ``curve`` (N,) int64 curve index
+``Corrections``    ``xi_full``, ``psi_full`` (N_v, N_θ, N_φ, 3) or (0, 1, 1, 3) for "use the factors";
+                   ``xi_m``, ``xi_n``, ``psi_gm``, ``psi_gn`` (N_v, N, 3) factors (ASSET_PACK.md §6–7)
+``Look``           one yarn entry: ``params`` fiber BCSDF vector, ``ds`` dual-scattering tables (5, N_θ, 3),
+                   ``period`` texture period, ``radius`` regular strip half-width, ``flyaway_half_width``,
+                   fiber counts ``n_occluded``, ``n_cross``
+``MipStack``       a texture (``knitrun.render.texture_sampling``): tangent, coverage, flyaway (3 variants)
+``Lights``         distant lights: ``direction`` (L, 3) unit toward the light, ``irradiance`` (L, 3),
+                   ``visibility`` (L, N) yarn-level, per point (also the multiple-scattering clusters of the
+                   SRBF lobes, ``pipeline.ms_lights``)
+``Lobes``          SRBF lobes: ``direction`` (J, 3), ``sharpness`` λ (J,), ``weight`` W (J, 3),
+                   ``visibility`` (J, N)
+``IMTable``        the I_M^{TT,D} table and its axes (``knitrun.shading.im_lookup``)
+=================  =======================================================================================
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Points(NamedTuple):
+    view_dir: np.ndarray
+    tangent: np.ndarray
+    arclength: np.ndarray
+    v: np.ndarray
+    footprint: np.ndarray
+    curve: np.ndarray
+
+
+class Corrections(NamedTuple):
+    xi_full: np.ndarray
+    xi_m: np.ndarray
+    xi_n: np.ndarray
+    psi_full: np.ndarray
+    psi_gm: np.ndarray
+    psi_gn: np.ndarray
+
+
+class Look(NamedTuple):
+    params: np.ndarray
+    ds: np.ndarray
+    period: float
+    radius: float
+    flyaway_half_width: float
+    n_occluded: float
+    n_cross: float
+
+
+class Lights(NamedTuple):
+    direction: np.ndarray
+    irradiance: np.ndarray
+    visibility: np.ndarray
+
+
+class Lobes(NamedTuple):
+    direction: np.ndarray
+    sharpness: np.ndarray
+    weight: np.ndarray
+    visibility: np.ndarray
+
+
+def no_lights(n_points: int) -> Lights:
+    """No distant light (an environment-only scene, or no multiple-scattering cluster)."""
+    return Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n_points)))
