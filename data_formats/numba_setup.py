@@ -1,13 +1,14 @@
 """Numba settings shared by every kernel of the toolchain.
 
 * Compiled kernels are cached on disk (``cache=True``) so compile cost is paid once per machine. The cache lives in
-  ``$NUMBA_CACHE_DIR`` if set, else in ``~/.cache/knit/numba/<sources>`` (a writable folder even when the package
-  is installed read-only), ``<sources>`` a hash of every Python source of the toolchain: Numba checks only the
-  timestamp of a kernel's own file, so a kernel whose callee in another module changed would load its stale
-  machine code (seen: an edited normaliser in ``fiber_bcsdf`` left ``strip_shading`` on the old one). Other
-  sources give another folder; old folders can be deleted at any time. This module must be imported before any
-  kernel is defined; ``data_formats/__init__`` (the bottom layer, which every package imports first) does, and it
-  also sets Numba's setting when a script imported numba first (Numba reads its environment once, at import).
+  ``$NUMBA_CACHE_DIR`` if set, else in the cache's ``numba/<sources>`` (``data_formats.cache_folders``, by default
+  ``~/.cache/knit``: writable even when the package is installed read-only), ``<sources>`` a hash of every Python
+  source of the toolchain: Numba checks only the timestamp of a kernel's own file, so a kernel whose callee in
+  another module changed would load its stale machine code (seen: an edited normaliser in ``fiber_bcsdf`` left
+  ``strip_shading`` on the old one). Other sources give another folder; old folders can be deleted at any time.
+  This module must be imported before any kernel is defined; ``data_formats/__init__`` (the bottom layer, which
+  every package imports first) does, and it also sets Numba's setting when a script imported numba first (Numba
+  reads its environment once, at import).
 * Kernels never turn on all of fastmath (that drops NaN/Inf checks); ``FASTMATH`` is the flag set that keeps them.
 """
 
@@ -15,6 +16,8 @@ import hashlib
 import os
 import sys
 from pathlib import Path
+
+from data_formats.cache_folders import cache_root
 
 PACKAGES = ("data_formats", "knitbake", "knitrun", "cli")  # the toolchain's packages, beside this one's
 
@@ -32,7 +35,7 @@ def sources_hash(root=None) -> str:
 
 
 if "NUMBA_CACHE_DIR" not in os.environ:
-    _cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "knit" / "numba" / sources_hash()
+    _cache = cache_root() / "numba" / sources_hash()
     try:
         _cache.mkdir(parents=True, exist_ok=True)
         os.environ["NUMBA_CACHE_DIR"] = str(_cache)

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from data_formats.cache_folders import cache_root
 from data_formats.asset_pack import write_pack
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
 from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
@@ -84,8 +85,7 @@ STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 4, "shadowin
 
 
 def cache_dir() -> Path:
-    root = os.environ.get("KNIT_CACHE_DIR") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "knit"
-    return Path(root) / "bake"
+    return cache_root() / "bake"
 
 
 def stage_key(stage: str, spec: YarnSpec, settings: dict, seed: int) -> str:

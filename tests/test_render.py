@@ -383,3 +383,17 @@ def test_curves_drawn_off_the_radius_they_were_built_for_give_a_warning(tmp_path
     write_yarn_curves(tmp_path / "s.h5", dataclasses.replace(curves, radius=drawn / 1.5))
     warnings = _render(path, pack).facts["warnings"]
     assert len(warnings) == 1 and "overlap" in warnings[0]
+
+
+def test_lobes_of_zero_weight_are_not_drawn_and_the_fit_is_cached(tmp_path, pack, monkeypatch):
+    """The fit of the built-in sky leaves some of 16 lobes at zero weight: the renderer draws the others only, and a
+    second render reads the fit from the cache (``knitrun.shading.srbf_cache``) and gives the same image."""
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(tmp_path / "cache"))
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY)
+    path.write_text(path.read_text().replace("srbf_count = 4", "srbf_count = 16"))
+    first, again = _render(path, pack), _render(path, pack)
+    fit = fit_srbf(np.asarray(sky_image(), np.float64), n_lobes=16, seed=0)
+    assert first.facts["srbf_lobes"] == 16
+    assert first.facts["srbf_lobes_drawn"] == int(np.any(fit.weights > 0, axis=1).sum()) < 16
+    assert not first.facts["srbf_fit_cached"] and again.facts["srbf_fit_cached"]
+    assert np.array_equal(first.image, again.image)

@@ -10,7 +10,9 @@ Passes, each timed (``RenderResult.timings``, seconds):
    polylines of ``samples_per_segment`` samples per smooth segment, each sample with its rest arc length; each
    yarn entry's pack (``knitrun.render.yarn_look``), reading only the tables the scene needs.
 2. ``srbf_fit`` (environment light only): J = ``render.srbf_count`` spherical Gaussians fitted to the map
-   (``knitrun.shading.srbf_fit``); the fit's errors are in ``RenderResult.facts``.
+   (``knitrun.shading.srbf_fit``), or read from the fit cache by the map's content (``srbf_cache``); the fit's
+   errors are in ``RenderResult.facts``. Lobes the fit leaves at zero weight are not drawn (no shadow map, no
+   shading): they add nothing.
 3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample G-buffer (``strip_raster``);
    with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second one. A flyaway
    sample is kept where no regular strip is nearer than the yarn radius.
@@ -35,6 +37,7 @@ Fig. 7.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -55,7 +58,7 @@ from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, 
 from knitrun.render.yarn_look import load_look, no_full_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import no_im_table, sg_integral
-from knitrun.shading.srbf_fit import fit_srbf
+from knitrun.shading.srbf_cache import cached_fit
 from knitrun.sim.simulate import RADIUS_TOLERANCE
 
 SHADOW_BIAS_RADII = 1.5
@@ -193,14 +196,15 @@ def _pack_path(k, entry, packs):
     return path
 
 
-def _environment(scene: Scene):
+def _environment(scene: Scene, use_cache: bool):
+    """(SRBF fit of the scene's environment, fit read from the cache), or (None, False) without one."""
     envs = [light for light in scene.lights if isinstance(light, EnvironmentLight)]
     if not envs:
-        return None
+        return None, False
     env = envs[0]
     image = environment_image(env)
-    return fit_srbf(np.asarray(image, np.float64) * np.asarray(env.scale, np.float64),
-                    n_lobes=scene.render.srbf_count, seed=scene.render.seed)
+    return cached_fit(np.asarray(image, np.float64) * np.asarray(env.scale, np.float64), scene.render.srbf_count,
+                      scene.render.seed, use_cache)
 
 
 def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers):
@@ -213,10 +217,12 @@ def _visibility(lines, radius_of_curve, direction, size, angular_radius, receive
 
 
 def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,
-           progress=None) -> RenderResult:
+           progress=None, use_cache: bool = True) -> RenderResult:
     """Render ``scene``; ``packs`` maps an entry index (as a string), a yarn as written in the scene or a yarn spec's
-    name to a pack path, overriding the scene's ``pack``; ``progress(name, seconds)`` is called as each pass ends.
-    ValueError (one line) for a scene the renderer cannot draw (a missing pack, a pack for another yarn)."""
+    name to a pack path, overriding the scene's ``pack``; ``progress(name, seconds)`` is called as each pass ends;
+    ``use_cache`` False fits the environment's SRBFs again instead of reading the fit cache
+    (``knitrun.shading.srbf_cache``). ValueError (one line) for a scene the renderer cannot draw (a missing pack, a
+    pack for another yarn)."""
     packs = packs or {}
     timings, facts = {}, {}
     clock = [time.perf_counter()]
@@ -245,10 +251,13 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
     lap("load")
 
-    fit = _environment(scene)
+    fit, cached = _environment(scene, use_cache)
     if fit is not None:
-        facts.update(srbf_lobes=int(len(fit.sharpness)), srbf_relative_l2_error=fit.relative_l2_error,
-                     srbf_irradiance_error=fit.irradiance_error)
+        used = np.any(np.asarray(fit.weights) > 0.0, axis=1)  # lobes of zero weight add nothing: not drawn
+        facts.update(srbf_lobes=int(len(fit.sharpness)), srbf_lobes_drawn=int(used.sum()), srbf_fit_cached=cached,
+                     srbf_relative_l2_error=fit.relative_l2_error, srbf_irradiance_error=fit.irradiance_error)
+        fit = dataclasses.replace(fit, directions=fit.directions[used], sharpness=fit.sharpness[used],
+                                  weights=fit.weights[used])
         lap("srbf_fit")
 
     camera = scene_camera(scene)
