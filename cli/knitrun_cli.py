@@ -212,8 +212,18 @@ def _pack_overrides(values):
 
 @main.command()
 @click.argument("scene_path", metavar="SCENE", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", type=SuffixPath(".png"), required=True, help="Tone-mapped PNG image.")
-@click.option("--exr", "exr_path", type=SuffixPath(".exr"), default=None, help="Also write the linear EXR.")
+@click.option("-o", "--output", type=SuffixPath(".png"), required=True,
+              help="Tone-mapped PNG image; with --frames a pattern whose run of '#' takes the frame number "
+                   "(out/frame_####.png).")
+@click.option("--exr", "exr_path", type=SuffixPath(".exr"), default=None,
+              help="Also write the linear EXR (a pattern with --frames).")
+@click.option("--frames", "frame_range", default=None, metavar="A:B",
+              help="Draw frames A to B−1 of the scene's yarn curves (A:, N) with one renderer: packs, kernels and "
+                   "the environment fit are loaded once.")
+@click.option("--gif", "gif_path", type=SuffixPath(".gif"), default=None,
+              help="With --frames: also an animated GIF of the frames.")
+@click.option("--fps", type=click.FloatRange(min=0.1, max=100), default=12.0, show_default=True,
+              help="Frame rate of the GIF.")
 @click.option("--pack", "pack_values", multiple=True, metavar="YARN=FILE",
               help="Asset pack for a yarn (its name or entry index); overrides the scene's `pack`. Repeatable.")
 @click.option("--ablation", type=click.Choice(list(ABLATIONS)), default="full", show_default=True,
@@ -224,20 +234,31 @@ def _pack_overrides(values):
               help="Samples per pixel (default: the scene's).")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="PNG exposure in stops.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary: time per pass, counts.")
-def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segment, msaa, exposure, as_json):
+def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values, ablation, samples_per_segment, msaa,
+           exposure, as_json):
     """Render a scene with the strip renderer (yarns as textured strips shaded from their asset packs).
 
-    Example: knitrun render examples/scenes/knit_patch_directional.toml --pack cotton1=cotton1.h5 -o patch.png
+    \b
+    Examples:
+      knitrun render examples/scenes/knit_patch_directional.toml --pack cotton1=cotton1.h5 -o patch.png
+      knitrun render stretch.toml --frames 0:30 -o out/frame_####.png --gif stretch.gif
     """
     import dataclasses
 
     from data_formats.images import write_exr, write_png
     from data_formats.scene import load_scene
+    from knitrun.render.pipeline import Renderer
     from knitrun.render.pipeline import render as render_scene
 
     scene = load_scene(scene_path)
     if msaa is not None:
         scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, msaa=int(msaa)))
+    if gif_path is not None and frame_range is None:
+        raise FormatError("--gif needs --frames (the frames to animate)")
+    if frame_range is not None:
+        _render_frames(Renderer(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment),
+                       scene_path, frame_range, output, exr_path, gif_path, fps, exposure, as_json)
+        return
     result = render_scene(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
                           progress=lambda name, s: click.echo(f"  {name}: {s * 1e3:.0f} ms", err=True))
     for warning in result.facts["warnings"]:
@@ -256,6 +277,33 @@ def render(scene_path, output, exr_path, pack_values, ablation, samples_per_segm
     passes = ", ".join(f"{k} {v * 1e3:.0f}" for k, v in result.timings.items())
     click.echo(f"{output}: {scene.camera.width}x{scene.camera.height}, {result.facts['points']} points, "
                f"{total * 1e3:.0f} ms ({passes} ms)")
+
+
+def _render_frames(renderer, scene_path, frame_range, output, exr_path, gif_path, fps, exposure, as_json):
+    """``knitrun render --frames``: a progress bar over the frames, each frame's time, a summary."""
+    import statistics
+    import sys
+
+    from knitrun.render.sequence import parse_frames, render_sequence
+
+    frames = parse_frames(frame_range, renderer.frame_count)
+    for warning in renderer.warnings:
+        click.echo(f"warning: {warning}", err=True)
+    setup = {k: v * 1e3 for k, v in renderer.setup_timings.items()}
+    click.echo("setup: " + ", ".join(f"{k} {v:.0f} ms" for k, v in setup.items()), err=True)
+    with click.progressbar(length=len(frames), label="frames", file=sys.stderr,
+                           item_show_func=lambda r: r and f"frame {r['frame']}: {r['ms']:.0f} ms") as bar:
+        records = render_sequence(renderer, frames, output, exposure=exposure, exr_pattern=exr_path, gif=gif_path,
+                                  gif_fps=fps, on_frame=lambda record: bar.update(1, record))
+    ms = [r["ms"] for r in records]
+    summary = {"scene": scene_path, "frames": [frames.start, frames.stop], "output": output, "exr": exr_path,
+               "gif": gif_path, "setup_ms": setup, "ms_per_frame": ms, "ms_median": statistics.median(ms),
+               "per_frame": records}
+    if as_json:
+        echo_json(summary)
+        return
+    click.echo(f"{len(records)} frames → {output}{' and ' + gif_path if gif_path else ''}: median "
+               f"{statistics.median(ms):.0f} ms per frame (first {ms[0]:.0f}, min {min(ms):.0f}, max {max(ms):.0f})")
 
 
 @main.command()

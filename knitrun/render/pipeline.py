@@ -83,7 +83,8 @@ class _Polylines:
     normal: np.ndarray  # (P, 3) the yarn frame's normal N (data_formats.curve_eval.yarn_frame)
 
 
-def _scene_curves(entry, units, frame, warnings):
+def _scene_curves(entry, units, warnings):
+    """The yarn curves of a scene entry, every frame: its curve file, or its stitch mesh simulated at rest."""
     if entry.stitch_mesh is not None:
         from data_formats.stitch_mesh import load_stitch_mesh
         from knitrun.sim.simulate import simulate
@@ -91,9 +92,8 @@ def _scene_curves(entry, units, frame, warnings):
         mesh = load_stitch_mesh(entry.stitch_mesh)
         curves, report = simulate(mesh, mesh.vertices[None], radius=entry.radius)
         warnings.extend(f"{entry.stitch_mesh}: {w}" for w in report["warnings"])
-        return curves, 0
-    curves = read_curves(entry.curves, units)
-    return curves, frame
+        return curves
+    return read_curves(entry.curves, units)
 
 
 def radius_mismatch(curves, drawn: float, where: str) -> str | None:
@@ -107,20 +107,17 @@ def radius_mismatch(curves, drawn: float, where: str) -> str | None:
             f"simulate with the drawn radius or set the entry's radius")
 
 
-def _polylines(scene: Scene, samples_per_segment: int, warnings: list) -> _Polylines:
+def _polylines(scene: Scene, entry_curves: list, frame: int, samples_per_segment: int) -> _Polylines:
+    """The scene's yarns at ``frame`` as polylines (an entry with a single frame is drawn at it whatever ``frame``)."""
     pts, rest, normals, entry_of, sizes = [], [], [], [], [0]
-    for k, entry in enumerate(scene.yarns):
-        curves, frame = _scene_curves(entry, scene.units, scene.render.frame, warnings)
-        message = radius_mismatch(curves, entry.radius, f"yarns[{k}]")
-        if message is not None:
-            warnings.append(message)
+    for k, (entry, curves) in enumerate(zip(scene.yarns, entry_curves)):
+        f = frame if curves.points.shape[0] > 1 else 0
         wanted = entry.yarn_type_indices or tuple(range(len(curves.yarn_types)))
         for c in range(len(curves.offsets) - 1):
-            control = curves.points[frame, curves.offsets[c]:curves.offsets[c + 1]]
+            control = curves.points[f, curves.offsets[c]:curves.offsets[c + 1]]
             if curves.yarn_type[c] not in wanted or len(control) < 2 or np.all(control == control[0]):
                 continue  # not this entry's, or nothing to draw (a point)
-            xyz, sigma, _, normal = yarn_frame(curves, c, frame,
-                                               None if curves.curve_type == "PL" else samples_per_segment)
+            xyz, sigma, _, normal = yarn_frame(curves, c, f, None if curves.curve_type == "PL" else samples_per_segment)
             pts.append(xyz)
             rest.append(sigma)
             normals.append(normal)
@@ -216,135 +213,182 @@ def _visibility(lines, radius_of_curve, direction, size, angular_radius, receive
     return [shadow_visibility(sm, p, bias, angular_radius) for p, bias in receivers]
 
 
+class Renderer:
+    """A scene made ready to draw: its asset packs read (``yarn_look``), its yarn curves read once with all their
+    frames (a stitch mesh simulated at rest), the environment's SRBFs fitted (or read from the fit cache) and the
+    kernels compiled by the first frame. ``render(frame)`` then draws any frame of the curves without reloading
+    anything; an interactive viewer or a sequence keeps one ``Renderer``.
+
+    ``packs`` maps an entry index (as a string), a yarn as written in the scene or a yarn spec's name to a pack path,
+    overriding the scene's ``pack``; ``use_cache`` False fits the environment again instead of reading the fit cache
+    (``knitrun.shading.srbf_cache``). ValueError (one line) for a scene the renderer cannot draw (a missing pack, a
+    pack for another yarn). ``setup_timings`` holds the seconds of ``load`` and ``srbf_fit`` spent here."""
+
+    def __init__(self, scene: Scene, packs: dict | None = None, features: Features = Features(),
+                 samples_per_segment: int = 4, use_cache: bool = True, progress=None):
+        packs = packs or {}
+        self.scene, self.features, self.samples_per_segment = scene, features, samples_per_segment
+        self.setup_timings, self.setup_facts = {}, {}
+        start = time.perf_counter()
+        environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
+        looks = [load_look(_pack_path(k, e, packs), e, scene.units,
+                           corrections=features.xi or features.fiber_shadowing, full_tables=features.full_tables,
+                           flyaways=features.flyaways, environment=environment)
+                 for k, e in enumerate(scene.yarns)]
+        for look in looks:
+            if not features.xi:
+                look.xi_full, look.xi_m, look.xi_n = no_full_table(), ones_factor(), ones_factor()
+            if not features.fiber_shadowing:
+                look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
+                look.n_occluded = 0.0
+        self.looks = looks
+        self.kernel_looks = [shading_look(look) for look in looks]
+        self.im_tables = [look.im if look.im is not None else no_im_table() for look in looks]
+        self.environment = environment
+        self.warnings = []
+        self.curves = [_scene_curves(entry, scene.units, self.warnings) for entry in scene.yarns]
+        for k, (entry, curves) in enumerate(zip(scene.yarns, self.curves)):
+            message = radius_mismatch(curves, entry.radius, f"yarns[{k}]")
+            if message is not None:
+                self.warnings.append(message)
+        counts = {c.points.shape[0] for c in self.curves if c.points.shape[0] > 1}
+        self.frame_count = min(counts) if counts else 1  # entries with one frame are drawn in every frame
+        now = time.perf_counter()
+        self.setup_timings["load"] = now - start
+        if progress is not None:
+            progress("load", now - start)
+        fit, cached = _environment(scene, use_cache)
+        if fit is not None:
+            used = np.any(np.asarray(fit.weights) > 0.0, axis=1)  # lobes of zero weight add nothing: not drawn
+            self.setup_facts.update(srbf_lobes=int(len(fit.sharpness)), srbf_lobes_drawn=int(used.sum()),
+                                    srbf_fit_cached=cached, srbf_relative_l2_error=fit.relative_l2_error,
+                                    srbf_irradiance_error=fit.irradiance_error)
+            fit = dataclasses.replace(fit, directions=fit.directions[used], sharpness=fit.sharpness[used],
+                                      weights=fit.weights[used])
+            self.setup_timings["srbf_fit"] = time.perf_counter() - now
+            if progress is not None:
+                progress("srbf_fit", self.setup_timings["srbf_fit"])
+        self.fit = fit
+
+    def render(self, frame: int | None = None, progress=None) -> RenderResult:
+        """Draw ``frame`` of the yarn curves (default: the scene's ``render.frame``); ``progress(name, seconds)`` is
+        called as each pass ends. Timings are this frame's passes (``load``: evaluating its curves)."""
+        scene, features, looks, fit = self.scene, self.features, self.looks, self.fit
+        frame = scene.render.frame if frame is None else int(frame)
+        if not 0 <= frame < self.frame_count:
+            raise ValueError(f"frame {frame} is out of range: the scene's curves have {self.frame_count} frame(s)")
+        timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
+        clock = [time.perf_counter()]
+
+        def lap(name):
+            now = time.perf_counter()
+            start = clock[0]
+            timings[name] = timings.get(name, 0.0) + now - clock[0]
+            clock[0] = now
+            if progress is not None:
+                progress(name, now - start)
+
+        lines = _polylines(scene, self.curves, frame, self.samples_per_segment)
+        facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
+        lap("load")
+
+        camera = scene_camera(scene)
+        msaa = scene.render.msaa
+        pattern = SAMPLE_PATTERNS[msaa]
+        radius = np.array([looks[k].radius for k in lines.entry])
+        fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
+        gbuffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
+        points = shading_points(gbuffer, camera, pattern)
+        drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
+        fly_points = None
+        if drawn_fly and len(lines.entry):
+            fly_curves = np.isin(lines.entry, drawn_fly)
+            fly_buffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest,
+                                          np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
+            tolerance = float(radius.max())
+            mask = ~gbuffer.coverage | (fly_buffer.depth <= gbuffer.depth + tolerance)
+            mask &= np.isin(fly_buffer.yarn, drawn_fly)
+            fly_points = shading_points(fly_buffer, camera, pattern, mask=mask)
+        facts.update(shading_points=int(len(points["weight"])),
+                     flyaway_points=0 if fly_points is None else int(len(fly_points["weight"])))
+        lap("raster")
+
+        sets = [points] + ([fly_points] if fly_points is not None else [])
+        bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
+        receivers = [(s["position"], bias_radius[s["yarn"]] if len(s["yarn"]) else np.zeros(0)) for s in sets]
+        directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
+        light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)
+        light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
+        size = scene.render.shadow_map_size
+        light_vis = [np.empty((len(light_dir), len(s["weight"]))) for s in sets]
+        for i, d in enumerate(light_dir):
+            for out, vis in zip(light_vis, _visibility(lines, radius, d, size, 0.0, receivers)):
+                out[i] = vis
+        lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
+        lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
+        lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
+        lobe_vis = [np.empty((len(lobe_dir), len(s["weight"]))) for s in sets]
+        for j, d in enumerate(lobe_dir):
+            angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
+            for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
+                                                      receivers)):
+                out[j] = vis
+        albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
+            np.zeros(len(looks))
+        if len(lobe_dir) and albedo.any():
+            lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :]) for v, s in zip(lobe_vis, sets)]
+        if self.environment:
+            facts["interreflection"] = {
+                look.name: "off (Features.interreflection)" if not features.interreflection else
+                round(float(a), 4) if look.yarn_albedo is not None else "absent from the pack (schema < 2.1)"
+                for look, a in zip(looks, albedo)}
+        ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
+        facts["ms_lights"] = int(len(ms_dir))
+        lap("shadow")
+
+        h, w = camera.height, camera.width
+        rgb, alpha = np.zeros((len(points["weight"]), 3)), np.zeros(len(points["weight"]))
+        regular = _kernel_points(points, lines, looks)
+        for k, look in enumerate(looks):
+            idx = np.flatnonzero(points["yarn"] == k)
+            kernel_look, corrections, _ = self.kernel_looks[k]
+            shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage,
+                          Lights(light_dir, light_e, light_vis[0]),
+                          Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]), Lights(ms_dir, ms_e, ms_vis[0]),
+                          self.im_tables[k], rgb, alpha)
+        if fly_points is not None:
+            n_fly = len(fly_points["weight"])
+            fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
+            hairs = _kernel_points(fly_points, lines, looks)
+            for k in drawn_fly:
+                idx = np.flatnonzero(fly_points["yarn"] == k)
+                shade_flyaway(idx, hairs, *self.kernel_looks[k], Lights(light_dir, light_e, light_vis[1]),
+                              Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]), self.im_tables[k], fly_rgb,
+                              fly_alpha, fly_transmit)
+        lap("shade")
+
+        image = np.empty((h * w, 3))
+        resolve(points["start"], points["weight"], rgb, alpha, np.zeros_like(rgb),
+                np.ascontiguousarray(np.broadcast_to(np.asarray(scene.background, np.float64), (h * w, 3))), image)
+        if fly_points is not None:
+            resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image.copy(), image)
+        if not np.all(np.isfinite(image)):
+            raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
+        lap("resolve")
+        facts["residuals"] = {look.name: look.residuals for look in looks}
+        return RenderResult(image.reshape(h, w, 3).astype(np.float32), timings, facts)
+
+
 def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,
            progress=None, use_cache: bool = True) -> RenderResult:
-    """Render ``scene``; ``packs`` maps an entry index (as a string), a yarn as written in the scene or a yarn spec's
-    name to a pack path, overriding the scene's ``pack``; ``progress(name, seconds)`` is called as each pass ends;
-    ``use_cache`` False fits the environment's SRBFs again instead of reading the fit cache
-    (``knitrun.shading.srbf_cache``). ValueError (one line) for a scene the renderer cannot draw (a missing pack, a
-    pack for another yarn)."""
-    packs = packs or {}
-    timings, facts = {}, {}
-    clock = [time.perf_counter()]
-
-    def lap(name):
-        now = time.perf_counter()
-        start = clock[0]
-        timings[name] = timings.get(name, 0.0) + now - clock[0]
-        clock[0] = now
-        if progress is not None:
-            progress(name, now - start)
-
-    environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
-    looks = [load_look(_pack_path(k, e, packs), e, scene.units, corrections=features.xi or features.fiber_shadowing,
-                       full_tables=features.full_tables, flyaways=features.flyaways, environment=environment)
-             for k, e in enumerate(scene.yarns)]
-    for look in looks:
-        if not features.xi:
-            look.xi_full, look.xi_m, look.xi_n = no_full_table(), ones_factor(), ones_factor()
-        if not features.fiber_shadowing:
-            look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
-            look.n_occluded = 0.0
-    warnings = []
-    lines = _polylines(scene, samples_per_segment, warnings)
-    facts["warnings"] = warnings
-    facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
-    lap("load")
-
-    fit, cached = _environment(scene, use_cache)
-    if fit is not None:
-        used = np.any(np.asarray(fit.weights) > 0.0, axis=1)  # lobes of zero weight add nothing: not drawn
-        facts.update(srbf_lobes=int(len(fit.sharpness)), srbf_lobes_drawn=int(used.sum()), srbf_fit_cached=cached,
-                     srbf_relative_l2_error=fit.relative_l2_error, srbf_irradiance_error=fit.irradiance_error)
-        fit = dataclasses.replace(fit, directions=fit.directions[used], sharpness=fit.sharpness[used],
-                                  weights=fit.weights[used])
-        lap("srbf_fit")
-
-    camera = scene_camera(scene)
-    msaa = scene.render.msaa
-    pattern = SAMPLE_PATTERNS[msaa]
-    radius = np.array([looks[k].radius for k in lines.entry])
-    fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
-    gbuffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
-    points = shading_points(gbuffer, camera, pattern)
-    drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
-    fly_points = None
-    if drawn_fly and len(lines.entry):
-        fly_curves = np.isin(lines.entry, drawn_fly)
-        fly_buffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest,
-                                      np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
-        tolerance = float(radius.max())
-        mask = ~gbuffer.coverage | (fly_buffer.depth <= gbuffer.depth + tolerance)
-        mask &= np.isin(fly_buffer.yarn, drawn_fly)
-        fly_points = shading_points(fly_buffer, camera, pattern, mask=mask)
-    facts.update(shading_points=int(len(points["weight"])),
-                 flyaway_points=0 if fly_points is None else int(len(fly_points["weight"])))
-    lap("raster")
-
-    sets = [points] + ([fly_points] if fly_points is not None else [])
-    bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
-    receivers = [(s["position"], bias_radius[s["yarn"]] if len(s["yarn"]) else np.zeros(0)) for s in sets]
-    directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
-    light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)
-    light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
-    size = scene.render.shadow_map_size
-    light_vis = [np.empty((len(light_dir), len(s["weight"]))) for s in sets]
-    for i, d in enumerate(light_dir):
-        for out, vis in zip(light_vis, _visibility(lines, radius, d, size, 0.0, receivers)):
-            out[i] = vis
-    lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
-    lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
-    lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
-    lobe_vis = [np.empty((len(lobe_dir), len(s["weight"]))) for s in sets]
-    for j, d in enumerate(lobe_dir):
-        angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
-        for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
-                                                  receivers)):
-            out[j] = vis
-    albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
-        np.zeros(len(looks))
-    if len(lobe_dir) and albedo.any():
-        lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :]) for v, s in zip(lobe_vis, sets)]
-    if environment:
-        facts["interreflection"] = {
-            look.name: "off (Features.interreflection)" if not features.interreflection else
-            round(float(a), 4) if look.yarn_albedo is not None else "absent from the pack (schema < 2.1)"
-            for look, a in zip(looks, albedo)}
-    ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
-    facts["ms_lights"] = int(len(ms_dir))
-    lap("shadow")
-
-    h, w = camera.height, camera.width
-    rgb, alpha = np.zeros((len(points["weight"]), 3)), np.zeros(len(points["weight"]))
-    kernel_looks = [shading_look(look) for look in looks]
-    regular = _kernel_points(points, lines, looks)
-    for k, look in enumerate(looks):
-        idx = np.flatnonzero(points["yarn"] == k)
-        shade_regular(idx, regular, *kernel_looks[k][:2], look.tangent, look.coverage,
-                      Lights(light_dir, light_e, light_vis[0]), Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]),
-                      Lights(ms_dir, ms_e, ms_vis[0]), look.im if look.im is not None else no_im_table(), rgb, alpha)
-    if fly_points is not None:
-        n_fly = len(fly_points["weight"])
-        fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
-        hairs = _kernel_points(fly_points, lines, looks)
-        for k in drawn_fly:
-            look = looks[k]
-            idx = np.flatnonzero(fly_points["yarn"] == k)
-            shade_flyaway(idx, hairs, *kernel_looks[k],
-                          Lights(light_dir, light_e, light_vis[1]), Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]),
-                          look.im if look.im is not None else no_im_table(), fly_rgb, fly_alpha, fly_transmit)
-    lap("shade")
-
-    image = np.empty((h * w, 3))
-    resolve(points["start"], points["weight"], rgb, alpha, np.zeros_like(rgb),
-            np.ascontiguousarray(np.broadcast_to(np.asarray(scene.background, np.float64), (h * w, 3))), image)
-    if fly_points is not None:
-        resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image.copy(), image)
-    if not np.all(np.isfinite(image)):
-        raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
-    lap("resolve")
-    facts["residuals"] = {look.name: look.residuals for look in looks}
-    return RenderResult(image.reshape(h, w, 3).astype(np.float32), timings, facts)
+    """Render one frame of ``scene`` (its ``render.frame``): a ``Renderer`` set up and used once (arguments there);
+    the timings include the setup (``load``: packs, curves and this frame's polylines; ``srbf_fit``)."""
+    renderer = Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
+    result = renderer.render(progress=progress)
+    timings = {name: renderer.setup_timings.get(name, 0.0) + result.timings.get(name, 0.0)
+               for name in ("load", "srbf_fit") if name in renderer.setup_timings or name in result.timings}
+    result.timings = {**timings, **{k: v for k, v in result.timings.items() if k not in timings}}
+    return result
 
 
 def _kernel_points(points, lines, looks) -> Points:
