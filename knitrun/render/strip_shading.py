@@ -335,6 +335,9 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
                 rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
         i_m = np.empty(3)
         for j in range(lobes.direction.shape[0]):
+            vis = lobes.visibility[j, q]
+            if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
+                continue
             wj = lobes.direction[j]
             _corrections(corrections, v, t, n, b, theta_o, wj, xi, psi, scratch)
             theta_j_f = longitudinal_angle(tf, wj)
@@ -342,7 +345,6 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
             spread_params(params, spread2, phi_f, wide)
             # the BCSDF context of the fiber-frame view, for I_M's R lobe
             im_kernel(im, wide, view_context(wide, theta_o_f), theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
-            vis = lobes.visibility[j, q]
             for ch in range(3):
                 rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
         for c in range(ms.direction.shape[0]):  # multiple scattering: clusters of lobes as distant lights
@@ -419,6 +421,8 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
             for ch in range(3):
                 rgb[q, ch] += lights.irradiance[light, ch] * lit * f[ch] * cos_i
         for j in range(lobes.direction.shape[0]):
+            if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
+                continue
             wj = lobes.direction[j]
             phi_f = azimuth_difference(tf, wo, wj)
             spread_params(params, spread2, phi_f, wide)

@@ -91,6 +91,7 @@ from knitrun.shading.table_lookup import axis_cell
 
 R_NODES = 12  # Gauss–Legendre nodes of the R-lobe integral (``r_lobe_integral``)
 R_WINDOW = 6.0  # its window: the product Gaussian's centre ± R_WINDOW standard deviations (e^{−18} of the peak)
+R_NEGLIGIBLE = 1e-10  # I_M^R / A_R below which (by a bound) the rule is not evaluated
 _R_GX, _R_GW = np.polynomial.legendre.leggauss(R_NODES)
 
 
@@ -203,8 +204,15 @@ def i0e(x):
 def r_lobe_integral(c, theta_j, lam):
     """∫ M_R N_R G cos θ_i dω_i without the albedo A_R (the module docstring's I_M^R / A_R) for the view of context
     ``c`` (``fiber_bcsdf.context``), θ_j ∈ [−π/2, π/2], λ > 0: ``R_NODES``-point Gauss–Legendre on the window of the
-    product of the R lobe and the SRBF (module docstring). Finite and ≥ 0 for every input in range."""
+    product of the R lobe and the SRBF (module docstring), or 0 when a bound puts the integral below
+    ``R_NEGLIGIBLE`` (the lobe and the SRBF far apart, the common case under a sun-sized SRBF). Finite and ≥ 0 for
+    every input in range."""
     mu, sigma, z = c[fb.C_MU], c[fb.C_SIGMA], c[fb.C_Z]
+    # A bound first: with cos²θ_i ≤ 1, I0e ≤ 1 and 1 − cos x ≥ 2x²/π² (|x| ≤ π), the integrand is at most the product
+    # of two Gaussians in θ_i, whose peak is exp(−(μ − θ_j)²/(2σ² + π²/(2λ))), so the integral is at most π/Z times
+    # that: below ``R_NEGLIGIBLE`` the lobe and the SRBF do not meet and the rule is skipped.
+    if (mu - theta_j) ** 2 > -math.log(R_NEGLIGIBLE * z / math.pi) * (2.0 * sigma * sigma + math.pi ** 2 / (2.0 * lam)):
+        return 0.0
     precision = 1.0 / (sigma * sigma) + lam
     centre = (mu / (sigma * sigma) + lam * theta_j) / precision
     reach = R_WINDOW / math.sqrt(precision)
