@@ -16,7 +16,8 @@ $(BIN)/knitbake: pyproject.toml
 
 # List the presets, generate two yarns' fibers with preview images, inspect and validate them, path-trace the
 # example straight yarn under the built-in sky, bake a draft asset pack, simulate a diamond-pattern patch stretched
-# and released over 9 frames and render frame 4, the full 1.4x stretch, with the strip renderer (demo_patch.png).
+# and released over 9 frames and render frame 4, the full 1.4x stretch, with the strip renderer (demo_patch.png), then
+# all 9 frames with one renderer (frames/demo_NN.png and demo_patch.gif).
 demo: setup
 	@mkdir -p $(OUT)
 	$(BIN)/knitbake yarn list
@@ -36,7 +37,9 @@ demo: setup
 	  'direction = [0.5, 0.4, 1.0]' 'irradiance = [2.5, 2.5, 2.5]' '[[lights]]' 'type = "environment"' \
 	  'builtin = "sky"' 'scale = [0.3, 0.3, 0.3]' '[render]' 'frame = 4' 'msaa = 4' > $(OUT)/demo_patch.toml
 	$(BIN)/knitrun render $(OUT)/demo_patch.toml -o $(OUT)/demo_patch.png --exr $(OUT)/demo_patch.exr
-	@echo "demo outputs in $(OUT)/ (open demo_patch.png and the *_preview.png images)"
+	@mkdir -p $(OUT)/frames
+	$(BIN)/knitrun render $(OUT)/demo_patch.toml --frames 0:9 -o $(OUT)/frames/demo_##.png --gif $(OUT)/demo_patch.gif
+	@echo "demo outputs in $(OUT)/ (open demo_patch.png, demo_patch.gif and the *_preview.png images)"
 
 test: setup
 	$(BIN)/python -m pytest -q
