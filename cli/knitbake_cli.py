@@ -321,6 +321,9 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
         if not bar.finished:
             bar.__exit__(None, None, None)
     total = time.perf_counter() - t0
+    for stage, row in summary.items():
+        if "cache_warning" in row:
+            click.echo(f"warning: {stage}: {row['cache_warning']}", err=True)
     if as_json:
         echo_json({"yarn": spec.name, "output": output, "quality": quality, "seed": seed, "seconds": total,
                    "stages": summary, "needs": needs, "cache": str(cache_dir())})

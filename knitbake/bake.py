@@ -15,7 +15,9 @@ Stages (each a function ``(spec, settings, seed, progress) -> StageResult``; ``p
 Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
 stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
 is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed), so an
-interrupted or partial re-bake reuses finished stages. Same seed and settings → identical pack contents whatever
+interrupted or partial re-bake reuses finished stages. An entry stores a SHA-256 of its content; an entry that is
+unreadable, truncated or edited is a miss (the stage is baked again and the entry rewritten) and is reported in the
+stage's ``cache_warning``. Same seed and settings → identical pack contents whatever
 the thread count (every stage is deterministic for a seed).
 """
 
@@ -25,12 +27,12 @@ import hashlib
 import importlib.metadata
 import json
 import math
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
+from data_formats.atomic import atomic_path
 from data_formats.cache_folders import cache_root
 from data_formats.asset_pack import write_pack
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
@@ -94,24 +96,47 @@ def stage_key(stage: str, spec: YarnSpec, settings: dict, seed: int) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
+def _content_hash(arrays: dict, meta: str) -> str:
+    """SHA-256 over every array (name, dtype, shape, bytes, in name order) and the metadata of a cache entry."""
+    digest = hashlib.sha256(meta.encode())
+    for name in sorted(arrays):
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}|{value.dtype.str}|{value.shape}".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
+
+
 def _save_stage(path: Path, result: StageResult) -> None:
+    """Write a cache entry atomically under a writer-unique temporary name (concurrent bakes of one yarn may write
+    the same entry; both succeed), with the content hash that ``_load_stage`` checks."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {f"t:{k}": v for k, v in result.tables.items()}
+    arrays = {f"t:{k}": np.asarray(v) for k, v in result.tables.items()}
     arrays.update({f"e:{k}": np.asarray(v) for k, v in result.errors.items()})
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, **arrays, meta=np.array(json.dumps({"attrs": result.attrs, "counts": result.counts})))
-    os.replace(tmp, path)
+    meta = json.dumps({"attrs": result.attrs, "counts": result.counts})
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays, meta=np.array(meta), checksum=np.array(_content_hash(arrays, meta)))
 
 
-def _load_stage(path: Path) -> StageResult | None:
+def _load_stage(path: Path) -> tuple[StageResult | None, str | None]:
+    """(the cached result, None), or (None, why) for an entry that cannot be used: missing, unreadable, truncated,
+    or whose content no longer matches its hash (edited). Any such entry is a miss; the stage is baked again and
+    the entry overwritten."""
+    if not path.exists():
+        return None, None
     try:
         with np.load(path) as data:
-            meta = json.loads(str(data["meta"]))
-            tables = {k[2:]: data[k] for k in data.files if k.startswith("t:")}
-            errors = {k[2:]: (data[k] if data[k].ndim else float(data[k])) for k in data.files if k.startswith("e:")}
-    except (OSError, ValueError, KeyError):
-        return None  # unreadable cache entry: bake the stage again
-    return StageResult(tables, errors, meta["attrs"], meta["counts"])
+            arrays = {k: data[k] for k in data.files if k.startswith(("t:", "e:"))}
+            meta = str(data["meta"])
+            if "checksum" not in data.files:
+                return None, f"cache entry {path.name} has no checksum (an older version's): baking again"
+            if str(data["checksum"]) != _content_hash(arrays, meta):
+                return None, f"cache entry {path.name} does not match its checksum (edited or damaged): baking again"
+            parsed = json.loads(meta)
+    except Exception as e:  # noqa: BLE001  (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, ...)
+        return None, f"cache entry {path.name} is unreadable ({type(e).__name__}): baking again"
+    tables = {k[2:]: v for k, v in arrays.items() if k.startswith("t:")}
+    errors = {k[2:]: (v if v.ndim else float(v)) for k, v in arrays.items() if k.startswith("e:")}
+    return StageResult(tables, errors, parsed["attrs"], parsed["counts"]), None
 
 
 STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
@@ -168,7 +193,7 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
         key = stage_key(stage, spec, settings[stage], seed)
         path = cache_dir() / f"{stage}-{key}.npz"
         t0 = time.perf_counter()
-        result = _load_stage(path) if use_cache and path.exists() else None
+        result, damaged = _load_stage(path) if use_cache else (None, None)
         cached = result is not None
         if result is None:
             progress = progress_factory(stage) if progress_factory else None
@@ -182,6 +207,8 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
         worst = max((float(np.max(e)) if np.ndim(e) else float(e)) for e in result.errors.values())
         summary[stage] = {"seconds": time.perf_counter() - t0, "cached": cached, "tables": len(result.tables),
                           "error_estimate": worst}
+        if damaged:
+            summary[stage]["cache_warning"] = damaged
     yarn = {"name": spec.name, "units": spec.units, "radius": spec.radius, "period": spec.geometry.ply_pitch,
             "plies": spec.geometry.plies}
     provenance = {"yarn_spec_toml": dumps_spec(spec),

@@ -1,0 +1,174 @@
+"""Hostile inputs, damaged caches and concurrent runs (issue 19): each test reproduces one defect of the probe and
+checks that it is gone.
+
+* A damaged stage-cache entry of each kind (a flipped byte, truncated, empty, valid but edited) is detected, reported
+  in the stage's ``cache_warning``, baked again into the same tables, and rewritten (issue 19, item 1).
+* Files we write get the mode a plain ``open(..., "w")`` would: 0666 less the umask, or the mode of the file they
+  replace (item 2).
+* Two bakes of one yarn sharing a cache, at once in two processes, both succeed with identical packs (item 3).
+* A temporary file left by a killed writer is removed by the next write to its path; a live writer's is kept
+  (item 12).
+"""
+
+import dataclasses
+import os
+import stat
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from data_formats.asset_pack import read_pack
+from data_formats.atomic import atomic_path
+from data_formats.images import write_exr, write_png
+from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
+from data_formats.yarn_spec import load_preset
+from knitbake.bake import bake, cache_dir
+from tests.helpers import TINY
+
+ONLY = ["dual_scattering", "shadowing"]
+
+
+def _small_yarn():
+    spec = load_preset("silk1")
+    return dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=12))
+
+
+def _flip_byte(path):
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def _truncate(path):
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def _empty(path):
+    path.write_bytes(b"")
+
+
+def _edit_a_table(path):
+    """A valid entry whose first table was changed in range, its stored checksum kept (tampering)."""
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    name = next(k for k in arrays if k.startswith("t:"))
+    arrays[name] = arrays[name] * 1.01
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+
+
+@pytest.mark.parametrize("damage", [_flip_byte, _truncate, _empty, _edit_a_table])
+def test_a_damaged_cache_entry_is_detected_rebaked_and_rewritten(tmp_path, monkeypatch, damage):
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(tmp_path / "cache"))
+    clean = bake(_small_yarn(), tmp_path / "a.h5", overrides=TINY, only=ONLY)
+    assert not any(r["cached"] for r in clean.values())
+    entry = next(cache_dir().glob("shadowing-*.npz"))
+    damage(entry)
+    again = bake(_small_yarn(), tmp_path / "b.h5", overrides=TINY, only=ONLY)
+    assert again["dual_scattering"]["cached"] and not again["shadowing"]["cached"]
+    assert "baking again" in again["shadowing"]["cache_warning"]
+    a, b = read_pack(tmp_path / "a.h5"), read_pack(tmp_path / "b.h5")
+    assert all(np.array_equal(a.tables[n], b.tables[n]) for n in a.tables)
+    third = bake(_small_yarn(), tmp_path / "c.h5", overrides=TINY, only=ONLY)  # the entry was rewritten
+    assert all(r["cached"] and "cache_warning" not in r for r in third.values())
+
+
+def _writes(folder):
+    """One file of each writer kind: a pack, yarn curves, a PNG and an EXR."""
+    image = np.full((4, 4, 3), 0.5, np.float32)
+    write_png(folder / "i.png", image)
+    write_exr(folder / "i.exr", image)
+    write_yarn_curves(folder / "c.h5", make_yarn_curves(np.zeros((1, 2, 3)) + [[[0, 0, 0], [1, 0, 0]]],
+                                                        np.array([0, 2]), yarn_types=["cotton1"]))
+    return [folder / n for n in ("i.png", "i.exr", "c.h5")]
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077, 0o002])
+def test_written_files_follow_the_umask(tmp_path, umask):
+    old = os.umask(umask)
+    try:
+        paths = _writes(tmp_path)
+        with atomic_path(tmp_path / "t.json") as tmp:
+            tmp.write_text("{}")
+        paths.append(tmp_path / "t.json")
+    finally:
+        os.umask(old)
+    for path in paths:
+        assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask, path.name
+
+
+def test_replacing_a_file_keeps_its_mode(tmp_path):
+    target = tmp_path / "i.png"
+    target.write_bytes(b"old")
+    os.chmod(target, 0o640)
+    old = os.umask(0o077)
+    try:
+        write_png(target, np.zeros((2, 2, 3), np.float32))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(target.stat().st_mode) == 0o640 and target.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_killed_writers_temporary_is_removed_and_a_live_ones_kept(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    stale = tmp_path / f".out.txt.{dead_pid}.abc123.tmp"
+    live = tmp_path / f".out.txt.{os.getppid()}.def456.tmp"
+    other = tmp_path / f".other.txt.{dead_pid}.abc123.tmp"
+    for path in (stale, live, other):
+        path.write_text("partial")
+    with atomic_path(tmp_path / "out.txt") as tmp:
+        tmp.write_text("done")
+    assert not stale.exists() and live.exists() and other.exists()
+    assert (tmp_path / "out.txt").read_text() == "done"
+
+
+def test_two_bakes_of_one_yarn_at_once_both_succeed_with_identical_packs(tmp_path):
+    """Two processes bake the same yarn with one shared, empty cache, started together: both write the same cache
+    entries at about the same time."""
+    code = textwrap.dedent(f"""
+        import dataclasses, sys
+        from data_formats.yarn_spec import load_preset
+        from knitbake.bake import bake
+        from tests.helpers import TINY
+        spec = load_preset("silk1")
+        spec = dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=12))
+        bake(spec, sys.argv[1], overrides=TINY, only={ONLY!r})
+    """)
+    env = dict(os.environ, KNIT_CACHE_DIR=str(tmp_path / "cache"), NUMBA_NUM_THREADS="1")
+    env.pop("NUMBA_CACHE_DIR", None)
+    runs = [subprocess.Popen([sys.executable, "-c", code, str(tmp_path / f"{k}.h5")], env=env, cwd=os.getcwd(),
+                             stderr=subprocess.PIPE, text=True) for k in "ab"]
+    for run in runs:
+        _, err = run.communicate(timeout=600)
+        assert run.returncode == 0, err[-2000:]
+    a, b = read_pack(tmp_path / "a.h5"), read_pack(tmp_path / "b.h5")
+    assert set(a.tables) == set(b.tables) and all(np.array_equal(a.tables[n], b.tables[n]) for n in a.tables)
+    assert not list((tmp_path / "cache" / "bake").glob("*.tmp"))
+
+
+def test_two_writers_of_one_cache_entry_interleaved_both_succeed(tmp_path, monkeypatch):
+    """The deterministic form of the race above: while one bake writes a cache entry, another writes and renames the
+    same entry (here: from inside the first one's write). With one fixed temporary name per entry the first rename
+    then found no file; with a temporary per writer both succeed and the entry is whole."""
+    import knitbake.bake as kb
+    from knitbake.stages.stage_result import StageResult
+
+    result = StageResult({"x/y": np.arange(6.0).reshape(2, 3)}, {"x/y": 0.5}, {}, {"samples": 3})
+    path = tmp_path / "stage-key.npz"
+    real_savez, nested = np.savez, []
+
+    def savez_while_another_writer_finishes(file, **arrays):
+        real_savez(file, **arrays)
+        if not nested:
+            nested.append(True)
+            kb._save_stage(path, result)
+
+    monkeypatch.setattr(np, "savez", savez_while_another_writer_finishes)
+    kb._save_stage(path, result)
+    loaded, problem = kb._load_stage(path)
+    assert nested and problem is None and np.array_equal(loaded.tables["x/y"], result.tables["x/y"])
+    assert [p.name for p in tmp_path.iterdir()] == ["stage-key.npz"]
