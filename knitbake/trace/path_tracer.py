@@ -1,10 +1,14 @@
-"""Wavefront path tracer over explicit, tessellated fibers (the reference renderer and the bake's ground truth).
+"""Path tracer over explicit fibers (the reference renderer and the bake's ground truth).
 
 Design
 ------
-* Waves: all live paths advance one bounce per wave. Numba kernels generate camera rays, shade hits (next-event
-  estimation, BCSDF sampling, Russian roulette) and write each path's own slots only; ``RayScene`` intersects the
-  wave's rays on 2 Python threads (Embree releases the GIL). No kernel runs while another Python thread runs one.
+* Two geometries (``TracerScene``). **Curves**: the fibers as Embree's round linear curves (``embree_curves``), and
+  whole paths in one Numba kernel (``_trace_curves``: camera ray, hits, next-event estimation with its shadow rays,
+  BCSDF sampling), ``prange`` over paths, no Python between rays. **Tubes** (the validation path): the fibers
+  tessellated, and waves: all live paths advance one bounce per wave; Numba kernels generate camera rays, shade hits
+  and write each path's own slots only; ``RayScene`` intersects the wave's rays on 2 Python threads (Embree
+  releases the GIL). Both run the same scattering event (``_escaped``, ``_scatter``) with the same random numbers.
+  No kernel runs while another Python thread runs one.
 * Fibers scatter as far-field curves: at a hit on fiber f the BCSDF of f's yarn type (``knitrun.shading.fiber_bcsdf``)
   is evaluated in the frame of the hit segment's axis (x = tangent); the scattered or shadow ray leaves from the far
   side of that segment's tube (the point at the tube radius, at the hit's axial position, on the side the new
@@ -34,7 +38,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit, prange
 
+from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.tessellate import TubeMesh
+from knitbake.trace.embree_curves import TFAR, CurveScene, intersect, occluded, ray_buffer
 from knitbake.trace.env_light import EnvLight, env_pdf, env_pixel, env_sample
 from knitbake.trace.ray_scene import RayScene
 from knitrun.render.camera import Camera, tan_half_fov
@@ -45,9 +51,11 @@ _MASK = np.uint64(0xFFFFFFFFFFFFFFFF)
 
 @dataclass
 class TracerScene:
-    """Everything the tracer needs: geometry, per-fiber material, lights."""
+    """Everything the tracer needs: geometry, per-fiber material, lights. The geometry is either ``mesh``, the fibers
+    tessellated into tubes (traced by waves through embreex), or ``fibers``, traced as Embree's round linear curves
+    by whole paths in one kernel (``embree_curves``); give exactly one."""
 
-    mesh: TubeMesh
+    mesh: TubeMesh | None
     fiber_type: np.ndarray  # (F,) int32 index into params
     params: np.ndarray  # (types, N_PARAMS) fiber BCSDF parameters
     light_dirs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # toward the light, unit
@@ -55,9 +63,15 @@ class TracerScene:
     env: EnvLight | None = None
     background: np.ndarray | None = None
     ray_scene: RayScene | None = None
+    fibers: FiberSet | None = None
+    curves: CurveScene | None = None
 
     def __post_init__(self):
-        if self.ray_scene is None:
+        if (self.mesh is None) == (self.fibers is None):
+            raise ValueError("TracerScene needs either a tube mesh or fibers, not both")
+        if self.fibers is not None and self.curves is None:
+            self.curves = CurveScene(self.fibers)
+        if self.mesh is not None and self.ray_scene is None:
             self.ray_scene = RayScene(self.mesh)
         self.params = np.ascontiguousarray(self.params, dtype=np.float64).reshape(-1, N_PARAMS)
         self.light_dirs = np.asarray(self.light_dirs, float).reshape(-1, 3)
@@ -99,26 +113,32 @@ def uniform(seed, path, depth, dim):
 
 # --- camera ------------------------------------------------------------------------------------------------------
 
+@njit(cache=True)
+def _camera_ray(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, path, pix, org, d):
+    """The camera ray of path ``path`` through pixel ``pix`` (jittered in the pixel by the path's random numbers)."""
+    px = (pix % width + uniform(seed, path, 0, 0)) / width
+    py = (pix // width + uniform(seed, path, 0, 1)) / height
+    sx = (2.0 * px - 1.0) * width / height
+    sy = 1.0 - 2.0 * py
+    for k in range(3):
+        if ortho_h > 0.0:
+            org[k] = pos[k] + 0.5 * ortho_h * (sx * right[k] + sy * up[k])
+            d[k] = fwd[k]
+        else:
+            org[k] = pos[k]
+            d[k] = fwd[k] + tan_half * (sx * right[k] + sy * up[k])
+    norm = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    for k in range(3):
+        d[k] /= norm
+
+
 @njit(parallel=True, cache=True)
 def camera_rays(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, first_sample, n_samples, org, dirs):
     n_pix = width * height
     for n in prange(n_samples * n_pix):
         pix = n % n_pix
-        path = (first_sample + n // n_pix) * n_pix + pix
-        px = (pix % width + uniform(seed, path, 0, 0)) / width
-        py = (pix // width + uniform(seed, path, 0, 1)) / height
-        sx = (2.0 * px - 1.0) * width / height
-        sy = 1.0 - 2.0 * py
-        for k in range(3):
-            if ortho_h > 0.0:
-                org[n, k] = pos[k] + 0.5 * ortho_h * (sx * right[k] + sy * up[k])
-                dirs[n, k] = fwd[k]
-            else:
-                org[n, k] = pos[k]
-                dirs[n, k] = fwd[k] + tan_half * (sx * right[k] + sy * up[k])
-        norm = math.sqrt(dirs[n, 0] ** 2 + dirs[n, 1] ** 2 + dirs[n, 2] ** 2)
-        for k in range(3):
-            dirs[n, k] /= norm
+        _camera_ray(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, (first_sample + n // n_pix) * n_pix
+                    + pix, pix, org[n], dirs[n])
 
 
 # --- shading -----------------------------------------------------------------------------------------------------
@@ -173,14 +193,98 @@ def leave_points(prims, hits, dirs, tri_fiber, tri_segment, axis_points, tube_ra
         _leave_point(a, t, tube_radius[tri_fiber[prims[n]]] * 1.0001, hits[n], dirs[n], out[n])
 
 
-@njit(parallel=True, cache=True)
-def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput, radiance, prev_pdf, tri_fiber, tri_segment,
-           axis_points, tube_radius, fiber_type, params, light_dirs, light_irr, has_env, env_rad, env_row, env_col,
-           env_prob, background, camera_background, rr_depth, yarn_only_r2, new_org, new_dirs, alive,
-           shadow_org, shadow_dirs, shadow_val):
-    """One wave: escaped paths gather the environment/background; hit paths (when ``scatter``) queue shadow rays
-    for every light and sample their next direction. Each path n writes only row n of every output."""
+@njit(cache=True)
+def _escaped(depth, d, throughput, prev_pdf, has_env, env_rad, env_prob, background, camera_background, radiance):
+    """Radiance a path gathers when its ray (direction d) escapes: the background at depth 0 when the camera sees
+    one, the environment otherwise (MIS-weighted against the BCSDF sample that sent it, of density prev_pdf)."""
+    if depth == 0 and camera_background:
+        for k in range(3):
+            radiance[k] += throughput[k] * background[k]
+    if has_env and (depth > 0 or not camera_background):
+        r, c = env_pixel(env_rad, d)
+        w = 1.0
+        if prev_pdf > 0.0:
+            pe = env_pdf(env_rad, env_prob, d)
+            w = prev_pdf ** 2 / (prev_pdf ** 2 + pe * pe)
+        for k in range(3):
+            radiance[k] += throughput[k] * env_rad[r, c, k] * w
+
+
+@njit(cache=True)
+def _scatter(seed, pid, depth, hit, d, a, t, rad, p, light_dirs, light_irr, has_env, env_rad, env_row, env_col,
+             env_prob, rr_depth, throughput, shadow_org, shadow_dirs, shadow_val, new_org, new_dir):
+    """A scattering event at ``hit`` on the fiber whose hit segment starts at ``a`` with unit tangent ``t`` (leave
+    radius ``rad``), for a ray of direction ``d``: next-event estimation toward every light (row j of ``shadow_org``,
+    ``shadow_dirs``, ``shadow_val``: the shadow ray and the radiance it brings if unblocked; the environment's in
+    row ``len(light_dirs)``), then a BCSDF sample with Russian roulette, which updates ``throughput`` and writes the
+    next ray. Returns the sample's density, or 0 when the path ends."""
     n_lights = light_dirs.shape[0]
+    e1, e2 = _frame(t)
+    wo = np.empty(3)
+    for k in range(3):
+        wo[k] = -d[k]
+    wo_l = np.empty(3)
+    _to_local(wo, t, e1, e2, wo_l)
+    ctx = context(p, wo_l)
+    wi_l = np.empty(3)
+    fval = np.empty(3)
+    # next-event estimation: directional lights
+    for j in range(n_lights):
+        _to_local(light_dirs[j], t, e1, e2, wi_l)
+        evaluate(p, ctx, wi_l, fval)
+        cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
+        _leave_point(a, t, rad, hit, light_dirs[j], shadow_org[j])
+        for k in range(3):
+            shadow_dirs[j, k] = light_dirs[j, k]
+            shadow_val[j, k] = throughput[k] * fval[k] * cos_i * light_irr[j, k]
+    # next-event estimation: environment (MIS with the BCSDF)
+    if has_env:
+        wi = np.empty(3)
+        pe = env_sample(env_rad, env_row, env_col, env_prob, uniform(seed, pid, depth + 1, 0),
+                        uniform(seed, pid, depth + 1, 1), uniform(seed, pid, depth + 1, 2),
+                        uniform(seed, pid, depth + 1, 3), wi)
+        if pe > 0.0:
+            _to_local(wi, t, e1, e2, wi_l)
+            evaluate(p, ctx, wi_l, fval)
+            pb = pdf(p, ctx, wi_l)
+            cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
+            r, c = env_pixel(env_rad, wi)
+            mis = pe * pe / (pe * pe + pb * pb)
+            _leave_point(a, t, rad, hit, wi, shadow_org[n_lights])
+            for k in range(3):
+                shadow_dirs[n_lights, k] = wi[k]
+                shadow_val[n_lights, k] = throughput[k] * fval[k] * cos_i * env_rad[r, c, k] * mis / pe
+    # continue the path: sample the BCSDF
+    pb = sample(p, ctx, uniform(seed, pid, depth + 1, 4), uniform(seed, pid, depth + 1, 5),
+                uniform(seed, pid, depth + 1, 6), wi_l)
+    if not pb > 0.0:
+        return 0.0
+    evaluate(p, ctx, wi_l, fval)
+    cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
+    best = 0.0
+    for k in range(3):
+        throughput[k] *= fval[k] * cos_i / pb
+        best = max(best, throughput[k])
+    if depth + 1 >= rr_depth:
+        q = min(0.95, best)
+        if uniform(seed, pid, depth + 1, 7) >= q:
+            return 0.0
+        for k in range(3):
+            throughput[k] /= q
+    for k in range(3):
+        new_dir[k] = wi_l[0] * t[k] + wi_l[1] * e1[k] + wi_l[2] * e2[k]
+    _leave_point(a, t, rad, hit, new_dir, new_org)
+    return pb
+
+
+@njit(parallel=True, cache=True)
+def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput, radiance, prev_pdf, tri_fiber,
+           tri_segment, axis_points, tube_radius, fiber_type, params, light_dirs, light_irr, has_env, env_rad, env_row,
+           env_col, env_prob, background, camera_background, rr_depth, yarn_only_r2, new_org, new_dirs, alive,
+           shadow_org, shadow_dirs, shadow_val):
+    """One wave of the tube tracer: escaped paths gather the environment/background (``_escaped``); hit paths (when
+    ``scatter``) queue shadow rays for every light and sample their next direction (``_scatter``). Each path n
+    writes only row n of every output."""
     for n in prange(org.shape[0]):
         alive[n] = False
         for j in range(shadow_val.shape[1]):
@@ -188,93 +292,91 @@ def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput
                 shadow_val[n, j, k] = 0.0
         d = dirs[n]
         if hit_prim[n] < 0:  # escaped
-            if depth == 0:
-                for k in range(3):
-                    radiance[n, k] += throughput[n, k] * background[k] if camera_background else 0.0
-            if has_env and (depth > 0 or not camera_background):
-                r, c = env_pixel(env_rad, d)
-                w = 1.0
-                if prev_pdf[n] > 0.0:
-                    pe = env_pdf(env_rad, env_prob, d)
-                    w = prev_pdf[n] ** 2 / (prev_pdf[n] ** 2 + pe * pe)
-                for k in range(3):
-                    radiance[n, k] += throughput[n, k] * env_rad[r, c, k] * w
+            _escaped(depth, d, throughput[n], prev_pdf[n], has_env, env_rad, env_prob, background, camera_background,
+                     radiance[n])
             continue
         if not scatter:  # depth limit reached: a hit adds nothing and ends the path
             continue
-        pid = path_id[n]
         prim = hit_prim[n]
         f = tri_fiber[prim]
         s = tri_segment[prim]
         a = axis_points[s]
         t = axis_points[s + 1] - a
         t /= math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
-        e1, e2 = _frame(t)
         hit = np.empty(3)
-        wo = np.empty(3)
         for k in range(3):
             hit[k] = org[n, k] + hit_t[n] * d[k]
-            wo[k] = -d[k]
         if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
             continue  # scattering outside the yarn's cylinder is global scattering: the path ends
-        wo_l = np.empty(3)
-        _to_local(wo, t, e1, e2, wo_l)
-        p = params[fiber_type[f]]
-        ctx = context(p, wo_l)
-        rad = tube_radius[f] * 1.0001
-        wi_l = np.empty(3)
-        fval = np.empty(3)
-        # next-event estimation: directional lights
-        for j in range(n_lights):
-            _to_local(light_dirs[j], t, e1, e2, wi_l)
-            evaluate(p, ctx, wi_l, fval)
-            cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
-            _leave_point(a, t, rad, hit, light_dirs[j], shadow_org[n, j])
+        pb = _scatter(seed, path_id[n], depth, hit, d, a, t, tube_radius[f] * 1.0001, params[fiber_type[f]],
+                      light_dirs, light_irr, has_env, env_rad, env_row, env_col, env_prob, rr_depth, throughput[n],
+                      shadow_org[n], shadow_dirs[n], shadow_val[n], new_org[n], new_dirs[n])
+        if pb > 0.0:
+            prev_pdf[n] = pb
+            alive[n] = True
+
+
+@njit(parallel=True, cache=True)
+def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, params, light_dirs, light_irr, has_env,
+                  env_rad, env_row, env_col, env_prob, background, camera_background, pos, fwd, right, up, width,
+                  height, tan_half, ortho_h, seed, first_sample, n_samples, max_depth, rr_depth, yarn_only_r2,
+                  radiance, rays):
+    """Whole paths over the fibers as Embree curves (``embree_curves``), one path per iteration, shadow rays traced
+    as they are made: no Python between rays. Path n = sample·pixels + pixel writes ``radiance[n]`` and
+    ``rays[n]`` (rays it traced). The same events and random numbers as the tube tracer's waves."""
+    n_pix = width * height
+    n_shadow = light_dirs.shape[0] + (1 if has_env else 0)
+    for n in prange(n_samples * n_pix):
+        pix = n % n_pix
+        pid = (first_sample + n // n_pix) * n_pix + pix
+        org, d = np.empty(3), np.empty(3)
+        _camera_ray(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, pid, pix, org, d)
+        buf = ray_buffer()
+        throughput = np.ones(3)
+        out = np.zeros(3)
+        shadow_org, shadow_dirs = np.empty((max(n_shadow, 1), 3)), np.empty((max(n_shadow, 1), 3))
+        shadow_val = np.zeros((max(n_shadow, 1), 3))
+        new_org, new_dir = np.empty(3), np.empty(3)
+        prev_pdf = 0.0
+        traced = 0
+        for depth in range(max_depth + 1):
+            prim = intersect(scene, buf, org[0], org[1], org[2], d[0], d[1], d[2], 0.0, np.inf)
+            traced += 1
+            if prim < 0:
+                _escaped(depth, d, throughput, prev_pdf, has_env, env_rad, env_prob, background, camera_background,
+                         out)
+                break
+            if depth == max_depth:
+                break
+            hit = np.empty(3)
             for k in range(3):
-                shadow_dirs[n, j, k] = light_dirs[j, k]
-                shadow_val[n, j, k] = throughput[n, k] * fval[k] * cos_i * light_irr[j, k]
-        # next-event estimation: environment (MIS with the BCSDF)
-        if has_env:
-            wi = np.empty(3)
-            pe = env_sample(env_rad, env_row, env_col, env_prob, uniform(seed, pid, depth + 1, 0),
-                            uniform(seed, pid, depth + 1, 1), uniform(seed, pid, depth + 1, 2),
-                            uniform(seed, pid, depth + 1, 3), wi)
-            if pe > 0.0:
-                _to_local(wi, t, e1, e2, wi_l)
-                evaluate(p, ctx, wi_l, fval)
-                pb = pdf(p, ctx, wi_l)
-                cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
-                r, c = env_pixel(env_rad, wi)
-                mis = pe * pe / (pe * pe + pb * pb)
-                _leave_point(a, t, rad, hit, wi, shadow_org[n, n_lights])
-                for k in range(3):
-                    shadow_dirs[n, n_lights, k] = wi[k]
-                    shadow_val[n, n_lights, k] = throughput[n, k] * fval[k] * cos_i * env_rad[r, c, k] * mis / pe
-        # continue the path: sample the BCSDF
-        pb = sample(p, ctx, uniform(seed, pid, depth + 1, 4), uniform(seed, pid, depth + 1, 5),
-                    uniform(seed, pid, depth + 1, 6), wi_l)
-        if not pb > 0.0:
-            continue
-        evaluate(p, ctx, wi_l, fval)
-        cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
-        best = 0.0
+                hit[k] = org[k] + buf[TFAR] * d[k]
+            if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
+                break
+            v = segment_start[prim]
+            a = vertices[v, :3].astype(np.float64)
+            t = vertices[v + 1, :3].astype(np.float64) - a
+            t /= math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+            shadow_val[:] = 0.0
+            pb = _scatter(seed, pid, depth, hit, d, a, t, float(vertices[v, 3]) * 1.0001,
+                          params[fiber_type[segment_fiber[prim]]], light_dirs, light_irr, has_env, env_rad, env_row,
+                          env_col, env_prob, rr_depth, throughput, shadow_org, shadow_dirs, shadow_val, new_org,
+                          new_dir)
+            for j in range(n_shadow):
+                if shadow_val[j, 0] > 0.0 or shadow_val[j, 1] > 0.0 or shadow_val[j, 2] > 0.0:
+                    traced += 1
+                    o, w = shadow_org[j], shadow_dirs[j]
+                    if not occluded(scene, buf, o[0], o[1], o[2], w[0], w[1], w[2], 0.0, np.inf):
+                        for k in range(3):
+                            out[k] += shadow_val[j, k]
+            if not pb > 0.0:
+                break
+            org[:] = new_org
+            d[:] = new_dir
+            prev_pdf = pb
         for k in range(3):
-            throughput[n, k] *= fval[k] * cos_i / pb
-            best = max(best, throughput[n, k])
-        if depth + 1 >= rr_depth:
-            q = min(0.95, best)
-            if uniform(seed, pid, depth + 1, 7) >= q:
-                continue
-            for k in range(3):
-                throughput[n, k] /= q
-        wi = np.empty(3)
-        for k in range(3):
-            wi[k] = wi_l[0] * t[k] + wi_l[1] * e1[k] + wi_l[2] * e2[k]
-        _leave_point(a, t, rad, hit, wi, new_org[n])
-        for k in range(3):
-            new_dirs[n, k] = wi[k]
-        prev_pdf[n] = pb
-        alive[n] = True
+            radiance[n, k] = out[k]
+        rays[n] = traced
 
 
 def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_depth: int = 16, rr_depth: int = 3,
@@ -289,7 +391,6 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
         samples_per_pass = max(1, min(spp, (1 << 21) // n_pix))
     fwd, right, up = camera.basis()
     tan_half = tan_half_fov(camera)
-    mesh = scene.mesh
     env = scene.env
     has_env = env is not None
     env_arrays = (env.radiance, env.row_cdf, env.col_cdf, env.pixel_prob) if has_env else \
@@ -304,6 +405,21 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
     while done < spp:
         n_s = min(samples_per_pass, spp - done)
         n = n_s * n_pix
+        if scene.curves is not None:
+            radiance, rays = np.empty((n, 3)), np.empty(n, np.int64)
+            _trace_curves(scene.curves.handle, scene.curves.segment_start, scene.curves.segment_fiber,
+                          scene.curves.vertices, scene.fiber_type, scene.params, scene.light_dirs,
+                          scene.light_irradiance, has_env, *env_arrays, background, camera_background,
+                          np.asarray(camera.position, float), fwd, right, up, w, h, tan_half,
+                          float(camera.ortho_height), seed, done, n_s, max_depth, rr_depth,
+                          float(yarn_only_radius) ** 2, radiance, rays)
+            stats.rays += int(rays.sum())
+            for sample_image in radiance.reshape(n_s, n_pix, 3):  # in sample order, as below
+                accum += sample_image
+            done += n_s
+            if progress is not None:
+                progress(done, spp)
+            continue
         org = np.empty((n, 3))
         dirs = np.empty((n, 3))
         camera_rays(np.asarray(camera.position, float), fwd, right, up, w, h, tan_half, float(camera.ortho_height),
@@ -326,7 +442,8 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
             tp, rad, pp = throughput[slot], np.zeros((m, 3)), prev_pdf[slot]
             _shade(seed, depth, depth < max_depth, path_id[slot], org, dirs, hits.t, hits.prim.astype(np.int64), tp,
                    rad, pp,
-                   mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, scene.fiber_type,
+                   scene.mesh.tri_fiber, scene.mesh.tri_segment, scene.mesh.axis_points, scene.mesh.tube_radius,
+                   scene.fiber_type,
                    scene.params, scene.light_dirs, scene.light_irradiance, has_env, *env_arrays, background,
                    camera_background, rr_depth, float(yarn_only_radius) ** 2, new_org, new_dirs, alive, sh_org,
                    sh_dirs, sh_val)
