@@ -225,8 +225,10 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
 @click.option("--max-depth", type=click.IntRange(min=1), default=None,
               help="Maximum scattering events per path (default: the scene's).")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="PNG preview exposure in stops.")
+@click.option("--geometry", type=click.Choice(["curves", "tubes"]), default="curves", show_default=True,
+              help="Fibers as Embree's round curves, or tessellated into 6-sided tubes (the former path, to validate).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
-def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, as_json):
+def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, geometry, as_json):
     """Path-trace a scene with explicit fibers: the ground truth every fast image is compared with.
 
     Example: knitbake reference examples/scenes/straight_yarn_directional.toml -o ref.exr --spp 64
@@ -240,8 +242,9 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, as
     max_depth = max_depth or scene.render.max_depth
 
     def built(facts):
-        click.echo(f"{scene_path}: {facts['fibers']} fibers, {facts['triangles']} triangles "
-                   f"(sweep {facts['sweep_s']:.1f} s, tessellate {facts['tessellate_s']:.1f} s, "
+        shape = (f"{facts['triangles']} triangles, tessellate {facts['tessellate_s']:.1f} s"
+                 if facts["geometry"] == "tubes" else f"{facts['segments']} curve segments")
+        click.echo(f"{scene_path}: {facts['fibers']} fibers, {shape} (sweep {facts['sweep_s']:.1f} s, "
                    f"Embree {facts['embree_build_s']:.1f} s)", err=True)
 
     with click.progressbar(length=spp, label=f"rendering {scene.camera.width}x{scene.camera.height}, {spp} spp",
@@ -253,7 +256,7 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, as
             last[0] = done
 
         image, facts = trace_reference(scene, spp, seed, max_depth, progress=progress, on_built=built,
-                                       fiber_seed=fiber_seed)
+                                       fiber_seed=fiber_seed, geometry=geometry)
     summary = write_reference(output, image, {"scene": scene_path, **facts}, exposure)
     if as_json:
         echo_json(summary)

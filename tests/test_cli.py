@@ -184,6 +184,10 @@ builtin = "sky"
     assert json.loads(out.with_suffix(".json").read_text()) == summary  # the library wrote what the CLI printed
     image = read_exr(out)
     assert image.shape == (16, 48, 3) and np.all(np.isfinite(image)) and image.max() > 0
-    assert (tmp_path / "r.png").stat().st_size > 100 and summary["rays_per_s"] > 0 and summary["triangles"] > 0
+    assert (tmp_path / "r.png").stat().st_size > 100 and summary["rays_per_s"] > 0
+    assert summary["geometry"] == "curves" and summary["segments"] > 0 and summary["triangles"] == 0
+    tubes = json.loads(run(knitbake, "reference", scene, "-o", tmp_path / "t.exr", "--spp", 2, "--fiber-seed", 3,
+                           "--geometry", "tubes", "--json").stdout)
+    assert tubes["triangles"] > 0 and tubes["segments"] == summary["segments"]
     assert_one_line_error(run(knitbake, "reference", scene, "-o", tmp_path / "r.png"), ".exr")
     assert_one_line_error(run(knitbake, "reference", tmp_path / "none.toml", "-o", out), "none.toml")

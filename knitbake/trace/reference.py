@@ -1,7 +1,8 @@
 """Reference rendering of a scene file: explicit fibers swept along the scene's yarn curves, path traced.
 
 ``build_reference(scene)`` turns a ``data_formats.scene.Scene`` into what ``path_tracer.render`` needs:
-curves (HDF5 or BCC) → fibers (``fiber_sweep``) → tubes (``tessellate``) → Embree scene, one fiber-BCSDF
+curves (HDF5 or BCC) → fibers (``fiber_sweep``) → Embree scene of the fibers as round linear curves (``geometry =
+"curves"``, the default) or of tubes (``"tubes"``: ``tessellate``, the former path, kept to validate), one fiber-BCSDF
 parameter row per yarn entry (the spec's optics times the entry's ``color``), directional lights, the environment
 (file or the built-in sky) and the background. Units are the scene's.
 
@@ -33,6 +34,7 @@ from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.fiber_bcsdf import params_from_optics, tinted
 
 TUBE_SIDES = 6
+GEOMETRIES = ("curves", "tubes")
 
 
 @dataclass
@@ -42,8 +44,11 @@ class ReferenceScene:
     facts: dict  # fibers, segments, triangles, build timings
 
 
-def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
-    """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``; ``seed`` draws the fibers."""
+def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves") -> ReferenceScene:
+    """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``; ``seed`` draws the fibers;
+    ``geometry``: ``GEOMETRIES``."""
+    if geometry not in GEOMETRIES:
+        raise ValueError(f"geometry {geometry!r}: expected one of {', '.join(GEOMETRIES)}")
     t0 = time.perf_counter()
     parts, types = [], []
     for k, entry in enumerate(scene.yarns):
@@ -58,7 +63,7 @@ def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
         types.append(np.full(fibers.n_fibers, k, np.int32))
     fibers = _concat(parts)
     t_sweep = time.perf_counter() - t0
-    mesh = tessellate_fibers(fibers, sides=TUBE_SIDES)
+    mesh = tessellate_fibers(fibers, sides=TUBE_SIDES) if geometry == "tubes" else None
     t_tess = time.perf_counter() - t0 - t_sweep
     lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
     envs = [light for light in scene.lights if isinstance(light, EnvironmentLight)]
@@ -68,27 +73,28 @@ def build_reference(scene: Scene, seed: int = 0) -> ReferenceScene:
         image = environment_image(e)
         env = env_from_image(image, e.scale)
     params = np.stack([tinted(params_from_optics(e.spec.optics), e.color) for e in scene.yarns])
-    tracer = TracerScene(mesh, np.concatenate(types), params,
+    tracer = TracerScene(mesh, np.concatenate(types), params, fibers=fibers if mesh is None else None,
                          light_dirs=np.array([light.unit_direction for light in lights]).reshape(-1, 3),
                          light_irradiance=np.array([light.irradiance for light in lights]).reshape(-1, 3),
                          env=env, background=np.asarray(scene.background, float))
     camera = scene_camera(scene)
-    facts = {"fibers": fibers.n_fibers, "segments": fibers.n_segments, "triangles": int(mesh.triangles.shape[0]),
+    facts = {"geometry": geometry, "fibers": fibers.n_fibers, "segments": fibers.n_segments,
+             "triangles": 0 if mesh is None else int(mesh.triangles.shape[0]),
              "sweep_s": t_sweep, "tessellate_s": t_tess, "embree_build_s": time.perf_counter() - t0 - t_sweep - t_tess}
     return ReferenceScene(tracer, camera, facts)
 
 
 def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None,
-                    fiber_seed: int | None = None):
+                    fiber_seed: int | None = None, geometry: str = "curves"):
     """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``seed`` drives the
     path sampling and, unless ``fiber_seed`` is given, the fibers too: another fiber seed draws another instance of
     the same yarns (the fiber-instance floor of a comparison), another sampling seed another estimate of the same
     image (its Monte Carlo floor). ``on_built(facts)`` is called once the tracer scene exists (before rendering),
     ``progress(done, total)`` per pass of samples. facts: width, height, spp, seed, fiber_seed, max_depth, render_s,
-    rays, rays_per_s, the build facts of ``build_reference`` (fibers, segments, triangles, sweep_s, tessellate_s,
-    embree_build_s) and mean_rgb."""
+    rays, rays_per_s, the build facts of ``build_reference`` (geometry, fibers, segments, triangles, sweep_s,
+    tessellate_s, embree_build_s) and mean_rgb."""
     fiber_seed = seed if fiber_seed is None else fiber_seed
-    built = build_reference(scene, seed=fiber_seed)
+    built = build_reference(scene, seed=fiber_seed, geometry=geometry)
     if on_built is not None:
         on_built(built.facts)
     image, stats = render(built.tracer, built.camera, spp, seed=seed, max_depth=max_depth, progress=progress)
