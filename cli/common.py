@@ -65,6 +65,32 @@ class FriendlyGroup(click.Group):
             sys.exit(130)
 
 
+def check_outputs(outputs: dict, inputs=()) -> None:
+    """Before any work: every output's folder exists, no output is one of the ``inputs`` (it would be overwritten
+    while the command still reads it, or replace the user's data), and no two outputs are the same file.
+    ``outputs``: option label → path (None: not asked for). One-line ``FormatError`` otherwise."""
+    seen = {}
+    for label, path in outputs.items():
+        if path is None:
+            continue
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(folder):
+            raise FormatError(f"{path}: output folder {os.path.dirname(path) or '.'} does not exist ({label})")
+        for source in inputs:
+            if source is not None and _same_file(path, source):
+                raise FormatError(f"{path}: is both an input and an output ({label}); it would be overwritten")
+        for other, other_path in seen.items():
+            if _same_file(path, other_path):
+                raise FormatError(f"{path}: given as two outputs ({other} and {label})")
+        seen[label] = path
+
+
+def _same_file(a, b) -> bool:
+    if os.path.exists(a) and os.path.exists(b):
+        return os.path.samefile(a, b)
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
 def file_kind(path):
     """(kind, module) of a file the toolchain reads, recognised by its content; FormatError if none."""
     if not os.path.isfile(path):

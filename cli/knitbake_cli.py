@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from cli.common import CONTEXT, FriendlyGroup, SuffixPath, echo_json, echo_tree, file_kind
+from cli.common import CONTEXT, FriendlyGroup, SuffixPath, check_outputs, echo_json, echo_tree, file_kind
 from data_formats import FormatError
 from data_formats.yarn_spec import FIELDS, SECTIONS, describe_spec, dumps_spec, load_preset, preset_names, resolve_yarn
 
@@ -185,6 +185,7 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
     from knitbake.fibers.fiber_set import KIND_NAMES
     from knitbake.fibers.procedural_yarn import generate_fibers
 
+    check_outputs({"--output": output, "--preview": preview}, [yarn_name])
     suffix = Path(output).suffix.lower()
     spec = resolve_yarn(yarn_name)
     t0 = time.perf_counter()
@@ -236,6 +237,8 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
     from data_formats.scene import load_scene
     from knitbake.trace.reference import trace_reference, write_reference
 
+    check_outputs({"--output": output, "PNG preview": str(Path(output).with_suffix(".png")),
+                   "JSON summary": str(Path(output).with_suffix(".json"))}, [scene_path])
     scene = load_scene(scene_path)
     spp = spp or scene.render.spp
     seed = scene.render.seed if seed is None else seed
@@ -288,6 +291,7 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
 
     from knitbake.bake import bake, cache_dir, scene_needs
 
+    check_outputs({"--output": output}, [yarn_name, scene_path])
     spec = resolve_yarn(yarn_name)
     needs = None
     if scene_path:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from cli.common import CONTEXT, FriendlyGroup, SuffixPath, echo_json, file_kind
+from cli.common import CONTEXT, FriendlyGroup, SuffixPath, check_outputs, echo_json, file_kind
 from data_formats import FormatError
 from knitrun.render.ablations import ABLATION_LABELS, ABLATIONS
 
@@ -38,6 +38,7 @@ def convert(source, target, frame, units):
     from data_formats.bcc import read_bcc, write_bcc
     from data_formats.yarn_curves import read_yarn_curves, write_yarn_curves
 
+    check_outputs({"TARGET": target}, [source])
     kind, _ = file_kind(source)
     if kind == "bcc":
         curves = read_bcc(source, units=units)
@@ -76,6 +77,7 @@ def pattern(source, rows, cols, output, as_json):
     from data_formats.stitch_mesh import summary, write_obj_stitch_mesh, write_stitch_mesh
     from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
 
+    check_outputs({"--output": output, "labels": _labels(output)}, [source])
     suffix = Path(output).suffix.lower()
     if Path(source).is_file():
         if rows is not None or cols is not None:
@@ -132,6 +134,7 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     from knitrun.sim.deformations import deformation_frames, parse_deformation, read_obj_frames
     from knitrun.sim.simulate import simulate as run_simulation
 
+    check_outputs({"--output": output}, [mesh_path, _labels(mesh_path)])
     suffix = Path(output).suffix.lower()
     if obj_dir is not None and (deforms or frames is not None):
         raise FormatError("--obj-dir gives the frames: use it without --deform and --frames")
@@ -199,6 +202,23 @@ def relax(output, as_json):
     click.echo(f"wrote {path}")
 
 
+def _scene_files(scene_path):
+    """The files a scene reads (its yarns' curves, stitch meshes and packs), for ``check_outputs``; none when the
+    scene cannot be read (loading it reports why)."""
+    from data_formats.scene import load_scene
+
+    try:
+        scene = load_scene(scene_path)
+    except FormatError:
+        return []
+    return [p for e in scene.yarns for p in (e.curves, e.stitch_mesh, e.pack) if p]
+
+
+def _labels(path):
+    """The ``.labels`` sidecar of an OBJ stitch mesh (None for other files)."""
+    return str(Path(path).with_suffix(".labels")) if str(path).lower().endswith(".obj") else None
+
+
 def _pack_overrides(values):
     """--pack YARN=FILE (or INDEX=FILE) options as a dict."""
     out = {}
@@ -250,6 +270,8 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
     from knitrun.render.pipeline import Renderer
     from knitrun.render.pipeline import render as render_scene
 
+    check_outputs({"--output": output, "--exr": exr_path, "--gif": gif_path},
+                  [scene_path] + [e for e in _scene_files(scene_path) if e])
     scene = load_scene(scene_path)
     if msaa is not None:
         scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, msaa=int(msaa)))

@@ -8,6 +8,8 @@ checks that it is gone.
 * Two bakes of one yarn sharing a cache, at once in two processes, both succeed with identical packs (item 3).
 * A temporary file left by a killed writer is removed by the next write to its path; a live writer's is kept
   (item 12).
+* An output that is also an input, two outputs on one file, or an output in a missing folder is refused in one line
+  before any work (items 10 and 11).
 """
 
 import dataclasses
@@ -172,3 +174,34 @@ def test_two_writers_of_one_cache_entry_interleaved_both_succeed(tmp_path, monke
     loaded, problem = kb._load_stage(path)
     assert nested and problem is None and np.array_equal(loaded.tables["x/y"], result.tables["x/y"])
     assert [p.name for p in tmp_path.iterdir()] == ["stage-key.npz"]
+
+
+def test_an_output_that_is_an_input_or_in_a_missing_folder_is_refused_before_any_work(tmp_path):
+    """Item 10: `simulate m.h5 -o m.h5` replaced the mesh, `fibers -o a.h5 --preview a.h5` left only the PNG; item 11:
+    `reference -o nodir/r.exr` traced the whole image first, `fibers -o ok.bcc --preview nodir/x.png` kept ok.bcc."""
+    from click.testing import CliRunner
+
+    from cli.knitbake_cli import main as knitbake
+    from cli.knitrun_cli import main as knitrun
+
+    runner = CliRunner()
+    mesh = tmp_path / "m.h5"
+    made = runner.invoke(knitrun, ["pattern", "stockinette", "--rows", "2", "--cols", "2", "-o", str(mesh)])
+    assert made.exit_code == 0
+    before = mesh.read_bytes()
+    cases = [(knitrun, ["simulate", str(mesh), "-o", str(mesh)], "both an input and an output"),
+             (knitbake, ["fibers", "cotton1", "-o", str(tmp_path / "a.h5"), "--preview", str(tmp_path / "a.h5")],
+              "two outputs"),
+             (knitbake, ["reference", "examples/scenes/straight_yarn_directional.toml", "-o",
+                         str(tmp_path / "nodir" / "r.exr"), "--spp", "64"], "does not exist"),
+             (knitbake, ["fibers", "cotton1", "-o", str(tmp_path / "ok.bcc"), "--preview",
+                         str(tmp_path / "nodir" / "x.png")], "does not exist"),
+             (knitrun, ["convert", str(tmp_path / "c.h5"), str(tmp_path / "c.h5")], "both an input and an output")]
+    write_yarn_curves(tmp_path / "c.h5", make_yarn_curves(np.zeros((1, 2, 3)) + [[[0, 0, 0], [1, 0, 0]]],
+                                                          np.array([0, 2]), yarn_types=["cotton1"]))
+    for program, args, message in cases:
+        result = runner.invoke(program, args)
+        assert result.exit_code == 1 and message in result.output and len(result.output.strip().splitlines()) == 1, \
+            (args, result.output)
+    assert mesh.read_bytes() == before
+    assert not (tmp_path / "a.h5").exists() and not (tmp_path / "ok.bcc").exists()
