@@ -9,7 +9,7 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
 
 * **Shadowing** Ψ^Fiber_G(v; θ_i, φ): the camera looks along −n (θ_o = 0, φ_o = 0); the light comes from θ_i,
   φ_i = −φ. For every camera sample that hits a fiber, visibility of the light from the far side of that fiber
-  (``path_tracer.leave_points``, the tracer's own rule) through the other fibers: 1 or 0. Ψ^Fiber_G of a v-bin = mean
+  (``TracerScene.leave_points``, the tracer's own rule) through the other fibers: 1 or 0. Ψ^Fiber_G of a v-bin = mean
   visibility of the hits in it.
 * **Correction** ξ(v; θ_d, φ) = Ψ_*/Ψ_DS: the camera looks from θ_o = θ_d, the light comes from θ_i = −θ_d,
   φ_i = −φ (so (θ_o − θ_i)/2 = θ_d). Ψ_* is the path-traced radiance of the hits in the bin (multiple scattering
@@ -37,9 +37,8 @@ from data_formats.conventions import PHI_RANGE, THETA_RANGE, cell_centres
 from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.fibers.fiber_set import KIND_REGULAR
 from knitbake.fibers.procedural_yarn import generate_fibers
-from knitbake.fibers.tessellate import tessellate_fibers
 from knitbake.stages.stage_result import StageResult
-from knitbake.trace.path_tracer import TracerScene, camera_rays, leave_points, render
+from knitbake.trace.path_tracer import TracerScene, camera_rays, render
 from knitrun.render.camera import Camera, tan_half_fov
 from knitrun.shading.dual_scattering import evaluate_ds, fiber_counts
 from knitrun.shading.fiber_bcsdf import params_from_optics
@@ -74,8 +73,8 @@ def _build_yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
     period = spec.geometry.ply_pitch
     fibers = generate_fibers(spec, length=3 * period, z_start=-period, seed=seed, flyaways=False)
     fibers = fibers.select(fibers.kind == KIND_REGULAR)
-    mesh = tessellate_fibers(fibers, sides=6)
-    return TracerScene(mesh, np.zeros(fibers.n_fibers, np.int32), params_from_optics(spec.optics)[None])
+    return TracerScene(None, np.zeros(fibers.n_fibers, np.int32), params_from_optics(spec.optics)[None],
+                       fibers=fibers)
 
 
 def strip_camera(spec: YarnSpec, theta_o: float, rows: int) -> Camera:
@@ -191,7 +190,7 @@ def primary_hits(tracer, cam, seed, sample):
     org, dirs = np.empty((h * w, 3)), np.empty((h * w, 3))
     camera_rays(np.asarray(cam.position, float), fwd, right, up, w, h, tan_half_fov(cam),
                  float(cam.ortho_height), seed, sample, 1, org, dirs)
-    hits = tracer.ray_scene.intersect(org, dirs)
+    hits = tracer.intersect(org, dirs)
     idx = np.flatnonzero(hits.hit)
     return hits.hit.reshape(h, w), org[idx] + hits.t[idx, None] * dirs[idx], hits.prim[idx].astype(np.int64), idx
 
@@ -199,16 +198,14 @@ def primary_hits(tracer, cam, seed, sample):
 def _visibility_image(tracer, cam, light, spp, seed):
     """Per pixel: summed visibility of the light over the pixel's fiber hits, and the number of hits (spp samples).
     Shadow rays leave each hit fiber by the tracer's own rule (``leave_points``)."""
-    mesh = tracer.mesh
     vis = np.zeros((cam.height, cam.width))
     hits_n = np.zeros((cam.height, cam.width))
     for sample in range(spp):
         mask, points, prims, idx = primary_hits(tracer, cam, seed, sample)
         dirs = np.tile(light, (prims.size, 1))
-        start = np.empty_like(points)
-        leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
+        start = tracer.leave_points(prims, points, dirs)
         v = np.zeros(mask.size)
-        v[idx] = ~tracer.ray_scene.occluded(start, dirs, np.inf)
+        v[idx] = ~tracer.occluded(start, dirs, np.inf)
         vis += v.reshape(mask.shape)
         hits_n += mask
     return vis, hits_n
@@ -216,32 +213,24 @@ def _visibility_image(tracer, cam, light, spp, seed):
 
 def fibers_toward(tracer, prims, points, light, max_fibers=256):
     """Number of fibers a ray from each hit (leaving its own fiber) toward ``light`` crosses before escaping."""
-    mesh = tracer.mesh
     dirs = np.tile(light, (prims.size, 1))
-    start = np.empty_like(points)
-    leave_points(prims, points, dirs, mesh.tri_fiber, mesh.tri_segment, mesh.axis_points, mesh.tube_radius, start)
+    start = tracer.leave_points(prims, points, dirs)
     count = np.zeros(prims.size, np.int64)
     live = np.arange(prims.size)
     for _ in range(max_fibers):
         if live.size == 0:
             break
-        hits = tracer.ray_scene.intersect(start[live], dirs[live])
+        hits = tracer.intersect(start[live], dirs[live])
         live, start_live = live[hits.hit], start[live][hits.hit]
         count[live] += 1
         p = start_live + hits.t[hits.hit, None] * dirs[live]
-        nxt = np.empty_like(p)
-        leave_points(hits.prim[hits.hit].astype(np.int64), p, dirs[live], mesh.tri_fiber, mesh.tri_segment,
-                     mesh.axis_points, mesh.tube_radius, nxt)
-        start[live] = nxt
+        start[live] = tracer.leave_points(hits.prim[hits.hit], p, dirs[live])
     return count
 
 
 def fiber_frames(tracer, prims):
-    """Unit fiber tangents at hit triangles (from their axis segments)."""
-    mesh = tracer.mesh
-    seg = mesh.tri_segment[prims]
-    t = mesh.axis_points[seg + 1] - mesh.axis_points[seg]
-    return t / np.linalg.norm(t, axis=1, keepdims=True)
+    """Unit fiber tangents at hit segments (``TracerScene.fiber_tangents``)."""
+    return tracer.fiber_tangents(prims)
 
 
 def _ds_image(tracer, cam, light, spp, seed, ds_tables, params, n_occluded=None):
@@ -284,8 +273,7 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
             cam = strip_camera(spec, th_d, rows)
             for m, ph in enumerate(phis):
                 light = yarn_direction(-th_d, -ph)
-                lit = TracerScene(geometry.mesh, geometry.fiber_type, geometry.params, light_dirs=light[None],
-                                  light_irradiance=np.ones((1, 3)), ray_scene=geometry.ray_scene)
+                lit = geometry.with_lights(light[None], np.ones((1, 3)))
                 s = seed + 1000 * b + 37 * k + m
                 traced, _ = render(lit, cam, spp, seed=s, max_depth=max_depth)
                 ds = _ds_image(geometry, cam, light, spp, s, ds_tables, params, n_occluded)

@@ -31,6 +31,7 @@ Units: lengths in scene units; radiance in the lights' units. Images are (H, W, 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -40,9 +41,9 @@ from numba import njit, prange
 
 from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.tessellate import TubeMesh
-from knitbake.trace.embree_curves import TFAR, CurveScene, intersect, occluded, ray_buffer
+from knitbake.trace.embree_curves import TFAR, CurveScene, any_hits, closest_hits, intersect, occluded, ray_buffer
 from knitbake.trace.env_light import EnvLight, env_pdf, env_pixel, env_sample
-from knitbake.trace.ray_scene import RayScene
+from knitbake.trace.ray_scene import RayHits, RayScene
 from knitrun.render.camera import Camera, tan_half_fov
 from knitrun.shading.fiber_bcsdf import N_PARAMS, context, evaluate, pdf, sample
 
@@ -80,6 +81,50 @@ class TracerScene:
             raise ValueError("a directional light has a zero direction")
         self.light_dirs = self.light_dirs / norms
         self.light_irradiance = np.asarray(self.light_irradiance, float).reshape(-1, 3)
+
+    def with_lights(self, light_dirs, light_irradiance) -> "TracerScene":
+        """The same geometry (not rebuilt) and materials under other directional lights."""
+        return dataclasses.replace(self, light_dirs=light_dirs, light_irradiance=light_irradiance)
+
+    # geometry queries for the bake stages, the same for curves and tubes; "prim" is a curve segment or a triangle
+
+    def intersect(self, origins, directions) -> RayHits:
+        """First hits of N rays (``ray_scene.RayHits``; for curves ``prim`` is the segment, ``v`` = 0)."""
+        if self.curves is None:
+            return self.ray_scene.intersect(origins, directions)
+        t, prim, normal, u = closest_hits(self.curves, origins, directions)
+        hit = prim >= 0
+        fiber = np.where(hit, self.curves.segment_fiber[np.maximum(prim, 0)], -1).astype(np.int32)
+        return RayHits(t, prim.astype(np.int32), fiber, normal, u, np.zeros_like(u))
+
+    def occluded(self, origins, directions, tmax=np.inf) -> np.ndarray:
+        """Whether a fiber lies on each ray within ``tmax`` (bool (N,))."""
+        if self.curves is None:
+            return self.ray_scene.occluded(origins, directions, tmax)
+        return any_hits(self.curves, origins, directions, tmax)
+
+    def leave_points(self, prims, hits, dirs) -> np.ndarray:
+        """Where a ray in each direction leaves the fiber hit at ``hits`` on ``prims`` (the tracer's own rule)."""
+        out = np.empty_like(np.asarray(hits, float))
+        prims = np.asarray(prims, np.int64)
+        if self.curves is None:
+            m = self.mesh
+            leave_points(prims, hits, dirs, m.tri_fiber, m.tri_segment, m.axis_points, m.tube_radius, out)
+        else:
+            _leave_points_curves(prims, np.asarray(hits, float), np.asarray(dirs, float), self.curves.segment_start,
+                                 self.curves.vertices, out)
+        return out
+
+    def fiber_tangents(self, prims) -> np.ndarray:
+        """Unit fiber tangents of the hit segments (N, 3)."""
+        prims = np.asarray(prims, np.int64)
+        if self.curves is None:
+            seg = self.mesh.tri_segment[prims]
+            t = self.mesh.axis_points[seg + 1] - self.mesh.axis_points[seg]
+        else:
+            v = self.curves.segment_start[prims].astype(np.int64)
+            t = self.curves.vertices[v + 1, :3].astype(np.float64) - self.curves.vertices[v, :3]
+        return t / np.linalg.norm(t, axis=1, keepdims=True)
 
 
 @dataclass
@@ -275,6 +320,17 @@ def _scatter(seed, pid, depth, hit, d, a, t, rad, p, light_dirs, light_irr, has_
         new_dir[k] = wi_l[0] * t[k] + wi_l[1] * e1[k] + wi_l[2] * e2[k]
     _leave_point(a, t, rad, hit, new_dir, new_org)
     return pb
+
+
+@njit(parallel=True, cache=True)
+def _leave_points_curves(prims, hits, dirs, segment_start, vertices, out):
+    """``leave_points`` for fibers as curves: the segment's axis from its two vertices, its radius from the first."""
+    for n in prange(prims.shape[0]):
+        v = segment_start[prims[n]]
+        a = vertices[v, :3].astype(np.float64)
+        t = vertices[v + 1, :3].astype(np.float64) - a
+        t /= math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+        _leave_point(a, t, float(vertices[v, 3]) * 1.0001, hits[n], dirs[n], out[n])
 
 
 @njit(parallel=True, cache=True)
