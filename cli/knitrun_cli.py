@@ -194,9 +194,12 @@ def relax(output, as_json):
     if as_json:
         echo_json({"output": path, **document})
         return
-    for name, result in document["stitch_types"].items():
+    others = ", ".join(name for name in document["stitch_types"] if name != "knit")
+    pattern, rows, cols = document["context"]["chart"]
+    for label, result in (("knit (periodic tile)", document["stitch_types"]["knit"]),
+                          (f"{others} (in a {rows}×{cols} {pattern} chart)", document["context"])):
         before, after = result["contact_before"], result["contact_after"]
-        click.echo(f"{name}: tile contact p5 {before['p5']:.3f} → {after['p5']:.3f}, median {before['p50']:.3f} → "
+        click.echo(f"{label}: contact p5 {before['p5']:.3f} → {after['p5']:.3f}, median {before['p50']:.3f} → "
                    f"{after['p50']:.3f}; energy {result['energy_before']:.4g} → {result['energy_after']:.4g}; "
                    f"{result['rounds']} rounds, {result['seconds']:.1f} s")
     click.echo(f"wrote {path}")

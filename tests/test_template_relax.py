@@ -124,3 +124,14 @@ def test_cli_relax_writes_the_document(tmp_path, document):
         document["stitch_types"]["knit"]["contact_after"]
     assert st.load_relaxed(out)["knit"]["knots"] == st.load_relaxed()["knit"]["knots"]
     assert CliRunner().invoke(knitrun, ["templates", "relax", "-o", str(tmp_path / "t.txt")]).exit_code != 0
+
+
+def test_cli_relax_prints_the_tile_and_the_context(tmp_path, document, monkeypatch):
+    """Without --json: one line for the knit tile and one for the stitch types relaxed in their chart (the patch
+    types carry no tile figures of their own: printing them per type failed)."""
+    monkeypatch.setattr(tr, "relax_templates", lambda progress=None: document)
+    result = CliRunner().invoke(knitrun, ["templates", "relax", "-o", str(tmp_path / "t.json")])
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.strip().splitlines()
+    assert lines[0].startswith("knit (periodic tile): contact p5")
+    assert lines[1].startswith("yarn_over, k2tog, ssk (in a 8×8 eyelet chart): contact p5") and "wrote" in lines[2]

@@ -304,9 +304,19 @@ def relax_knit(pieces, knots, roles, progress=None):
 
 def relax_templates(progress=None) -> dict:
     """The relaxed-template document (``relaxed_templates.json``): format, version, the tile and energy parameters
-    and, per relaxed stitch type, its knot points' (a, c, s) by piece role, with the before/after figures."""
-    from knitrun.sim import stitch_templates as st
+    and, per relaxed stitch type, its knot points' (a, c, s) by piece role, with the before/after figures.
 
+    Reproducible: BLAS runs on one thread meanwhile (threadpoolctl). The solver's matrix products otherwise sum in
+    an order that depends on BLAS's thread count, and ~60 trust-region steps per round carry that rounding into the
+    decreases' points by up to 2e-3 (measured): the shipped file could not be regenerated bit for bit."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _relax_templates(progress)
+
+
+def _relax_templates(progress):
+    from knitrun.sim import stitch_templates as st
     from knitrun.sim.patch_relax import relax_in_patch
 
     pieces = st.template_pieces(st.KNIT, relaxed=False)
