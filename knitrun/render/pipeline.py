@@ -1,6 +1,8 @@
 """The strip renderer (Huang et al. 2025 §5.2): a scene file's yarn curves and asset packs → a linear HDR image.
 
-Passes, each timed (``RenderResult.timings``, seconds):
+A ``Renderer`` does the set-up once (packs, every frame of the curves, the environment fit) and then draws any
+frame; ``render(scene)`` is one frame of a renderer used once. Passes, each timed (``RenderResult.timings``,
+seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` the rest):
 
 1. ``load``: the scene's curves at ``render.frame`` (a stitch mesh is simulated at rest by ``knitrun.sim.simulate``
    with the entry's radius, and a radius more than 5 % off the templates' sizing gives a warning; curves that carry
