@@ -21,7 +21,13 @@ _UMASK_LOCK = threading.Lock()
 
 
 def _umask() -> int:
-    """The process's umask (read by setting and restoring it, under a lock)."""
+    """The process's umask: from /proc/self/status where Linux gives it (read-only), else by setting and restoring
+    it under a lock (a file another thread creates in that instant would get 0022)."""
+    with contextlib.suppress(OSError, ValueError):
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
     with _UMASK_LOCK:
         mask = os.umask(0o022)
         os.umask(mask)
