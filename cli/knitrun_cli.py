@@ -205,18 +205,6 @@ def relax(output, as_json):
     click.echo(f"wrote {path}")
 
 
-def _scene_files(scene_path):
-    """The files a scene reads (its yarns' curves, stitch meshes and packs), for ``check_outputs``; none when the
-    scene cannot be read (loading it reports why)."""
-    from data_formats.scene import load_scene
-
-    try:
-        scene = load_scene(scene_path)
-    except FormatError:
-        return []
-    return [p for e in scene.yarns for p in (e.curves, e.stitch_mesh, e.pack) if p]
-
-
 def _labels(path):
     """The ``.labels`` sidecar of an OBJ stitch mesh (None for other files)."""
     return str(Path(path).with_suffix(".labels")) if str(path).lower().endswith(".obj") else None
@@ -273,9 +261,9 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
     from knitrun.render.pipeline import Renderer
     from knitrun.render.pipeline import render as render_scene
 
-    check_outputs({"--output": output, "--exr": exr_path, "--gif": gif_path},
-                  [scene_path] + [e for e in _scene_files(scene_path) if e])
     scene = load_scene(scene_path)
+    check_outputs({"--output": output, "--exr": exr_path, "--gif": gif_path},
+                  [scene_path] + [p for e in scene.yarns for p in (e.curves, e.stitch_mesh, e.pack) if p])
     if msaa is not None:
         scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, msaa=int(msaa)))
     if gif_path is not None and frame_range is None:
