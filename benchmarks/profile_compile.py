@@ -1,0 +1,57 @@
+"""Where a cold first frame's compile time goes (issue 15, item 4): render an example scene in this process with an
+empty kernel cache (``KNIT_CACHE_DIR`` on a fresh folder) and print the passes' times and the 25 longest Numba
+compilations (Numba's compile events; nested: a kernel's time includes the callees it compiles).
+
+    .venv/bin/python benchmarks/profile_compile.py --pack out/bench/cotton1_standard.h5 \\
+        [--scene examples/scenes/knit_patch_directional.toml]
+"""
+
+import os
+import sys
+import tempfile
+
+if __name__ == "__main__":  # before the toolchain picks its cache folder
+    os.environ["KNIT_CACHE_DIR"] = tempfile.mkdtemp(prefix="knit_cold_")
+    os.environ.pop("NUMBA_CACHE_DIR", None)
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+
+from numba.core import event  # noqa: E402
+
+from data_formats.scene import load_scene  # noqa: E402
+from knitrun.render.pipeline import render  # noqa: E402
+
+
+class CompileTimes(event.Listener):
+    """Seconds of every ``numba:compile`` event, by the compiled function's qualified name."""
+
+    def __init__(self):
+        self.started, self.seconds = {}, {}
+
+    def on_start(self, ev):
+        self.started[id(ev.data["dispatcher"])] = time.perf_counter()
+
+    def on_end(self, ev):
+        dispatcher = ev.data["dispatcher"]
+        name = dispatcher.py_func.__qualname__
+        self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - self.started.pop(id(dispatcher))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pack", required=True)
+    parser.add_argument("--scene", default="examples/scenes/knit_patch_directional.toml")
+    args = parser.parse_args()
+    times = CompileTimes()
+    event.register("numba:compile", times)
+    start = time.perf_counter()
+    result = render(load_scene(args.scene), {"cotton1": args.pack})
+    print(f"{args.scene}, empty cache: {time.perf_counter() - start:.1f} s; passes: " +
+          ", ".join(f"{k} {v:.1f} s" for k, v in result.timings.items()))
+    for name, seconds in sorted(times.seconds.items(), key=lambda kv: -kv[1])[:25]:
+        print(f"{seconds:6.2f} s  {name}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

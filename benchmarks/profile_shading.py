@@ -1,0 +1,107 @@
+"""Where the strip renderer's shading time goes (issue 15: profile before optimising).
+
+1. The `shade_regular` call of the bench_render frame (1280×960, 60,540 control points, MSAA 4) is captured from
+   the pipeline and timed alone (best of 3 after a warm-up), with all lights, with none (frames and texture
+   lookups), and with one kind of light at a time (directional; SRBF lobes' I_M terms; multiple-scattering
+   clusters).
+2. Per-call costs on 1M random inputs, 2 threads: one DS evaluation (``dual_scattering._ds_batch``, D inside
+   (0, 1), D = 0, D = 1) and one I_M evaluation (view context + table + R rule, ``im_lookup._im_batch``) at the
+   sky's sun-sized λ and at wide ones.
+
+    .venv/bin/python benchmarks/profile_shading.py --pack out/bench/cotton1_standard.h5 [--light directional|sky16]
+"""
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_render  # noqa: E402
+
+from data_formats.scene import load_scene  # noqa: E402
+from data_formats.yarn_curves import write_yarn_curves  # noqa: E402
+from knitrun.render import pipeline  # noqa: E402
+from knitrun.render.shading_inputs import Lights, Lobes  # noqa: E402
+from knitrun.render.strip_shading import shade_regular  # noqa: E402
+from knitrun.shading.dual_scattering import D_B, D_F, _ds_batch  # noqa: E402
+from knitrun.shading.im_lookup import _im_batch  # noqa: E402
+from knitrun.sim.crane_stockinette import stockinette_curves  # noqa: E402
+
+
+def captured_call(pack, light):
+    """The arguments of the frame's (single-yarn) ``shade_regular`` call."""
+    captured = {}
+
+    def capture(*args):
+        captured["args"] = args
+        return shade_regular(*args)
+
+    folder = Path(tempfile.mkdtemp(prefix="knit_profile_"))
+    write_yarn_curves(folder / "patch.h5", stockinette_curves(60, 21))
+    (folder / "scene.toml").write_text(bench_render.SCENE.format(width=1280, height=960,
+                                                                 light=bench_render.LIGHTS[light]))
+    original, pipeline.shade_regular = pipeline.shade_regular, capture
+    try:
+        pipeline.render(load_scene(folder / "scene.toml"), {"cotton1": str(pack)})
+    finally:
+        pipeline.shade_regular = original
+    return list(captured["args"])
+
+
+def best_ms(args, repeats=3):
+    shade_regular(*args)
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        shade_regular(*args)
+        times.append(time.perf_counter() - start)
+    return 1e3 * min(times)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pack", required=True)
+    parser.add_argument("--light", choices=sorted(bench_render.LIGHTS), default=None)
+    args = parser.parse_args()
+    for light in [args.light] if args.light else sorted(bench_render.LIGHTS):
+        call = captured_call(args.pack, light)
+        idx, points, look, corrections, tangent, coverage, lights, lobes, ms, im, rgb, alpha = call
+        n = len(points.view_dir)
+        off = Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
+        no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)))
+        print(f"## {light}: shade_regular on {len(idx)} shading points ({len(lights.direction)} directional, "
+              f"{len(lobes.direction)} SRBF lobes, {len(ms.direction)} multiple-scattering clusters)")
+        base = call[:6]
+        rows = [("all lights", call), ("no light (frames, textures)", base + [off, no_lobes, off] + call[9:])]
+        if len(lights.direction):
+            rows.append(("directional only", base + [lights, no_lobes, off] + call[9:]))
+        if len(lobes.direction):
+            rows.append(("SRBF lobes only (I_M)", base + [off, lobes, off] + call[9:]))
+            rows.append(("multiple-scattering clusters only", base + [off, no_lobes, ms] + call[9:]))
+        for label, variant in rows:
+            print(f"  {label}: {best_ms(variant):.0f} ms", flush=True)
+    rng = np.random.default_rng(0)
+    m = 1_000_000
+    theta_i, theta_o, phi = rng.uniform(-1.2, 1.2, m), rng.uniform(-1.2, 1.2, m), rng.uniform(-3.1, 3.1, m)
+    n_front = rng.uniform(0, 10, m)
+    print(f"## per call, {m} random inputs, wall time on the machine's threads")
+    for label, direct in (("D in (0, 1)", rng.uniform(0.05, 0.95, m)), ("D = 0", np.zeros(m)), ("D = 1", np.ones(m))):
+        _ds_batch(look.params, look.ds, theta_i, theta_o, phi, n_front, direct, D_F, D_B)
+        start = time.perf_counter()
+        _ds_batch(look.params, look.ds, theta_i, theta_o, phi, n_front, direct, D_F, D_B)
+        print(f"  DS evaluation, {label}: {(time.perf_counter() - start) / m * 1e9:.0f} ns")
+    for lam in (6600.0, 10.0, 0.7):
+        lams = np.full(m, lam)
+        _im_batch(im, look.params, theta_o, theta_i, phi, lams)
+        start = time.perf_counter()
+        _im_batch(im, look.params, theta_o, theta_i, phi, lams)
+        print(f"  I_M evaluation (view context + table + R rule), λ = {lam:g}: "
+              f"{(time.perf_counter() - start) / m * 1e9:.0f} ns")
+
+
+if __name__ == "__main__":
+    main()
