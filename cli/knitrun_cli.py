@@ -177,7 +177,7 @@ def templates():
 def relax(output, as_json):
     """Relax the stitch templates: knit (and so purl) on a periodic tile, then yarn-over, k2tog and ssk in an
     eyelet context: yarns as elastic rods with bending, stretching and contact at 2r (knitrun/sim/template_relax.py,
-    patch_relax.py; about 30 s). Prints each round and the tile's contact before
+    patch_relax.py; about 45 s on 2 cores). Prints each round and the tile's contact before
     and after. The simulator reads the package's file at import, so a new file takes effect in a new process.
 
     Example: knitrun templates relax -o my_templates.json --json
@@ -202,6 +202,9 @@ def relax(output, as_json):
         click.echo(f"{label}: contact p5 {before['p5']:.3f} → {after['p5']:.3f}, median {before['p50']:.3f} → "
                    f"{after['p50']:.3f}; energy {result['energy_before']:.4g} → {result['energy_after']:.4g}; "
                    f"{result['rounds']} rounds, {result['seconds']:.1f} s")
+        if not result["converged"]:
+            click.echo(f"warning: {label} stopped after {result['rounds']} rounds without converging: the file "
+                       "depends on this machine's rounding", err=True)
     click.echo(f"wrote {path}")
 
 

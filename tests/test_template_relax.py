@@ -22,15 +22,32 @@ def document():
     return tr.relax_templates()
 
 
+# How far two machines' relaxations of the same inputs may differ: knots in face widths, points' (a, c, s) in l and r.
+# Converged (``template_relax.SOLVER_TOL``), the solve lands on the minimum up to its conditioning: measured spread
+# between this machine's default build and one with another OpenBLAS kernel (Haswell), generic Numba code and numpy's
+# AVX-512 paths off, 1.8e-5 (ssk's points; knit 0). Any change to the energy, its weights or the seed moves points
+# by 1e-2 or more. (Stopped at scipy's default ftol 1e-8 instead, another CPU's rounding moved the knit knots 2.4e-6
+# and the ssk points 7e-4: the shipped file could not be regenerated elsewhere.)
+MACHINE_SPREAD = 5e-4
+
+
 def test_the_shipped_file_is_what_the_relaxation_gives(document):
     """``relaxed_templates.json`` in the package must be regenerated (``knitrun templates relax``) whenever the
-    relaxation or the hand-drawn seed changes."""
+    relaxation or the hand-drawn seed changes; what may differ is rounding on another machine (``MACHINE_SPREAD``)."""
     shipped = st.load_relaxed()
     assert sorted(shipped) == sorted(document["stitch_types"]) == ["k2tog", "knit", "ssk", "yarn_over"]
     for name, entry in document["stitch_types"].items():
-        np.testing.assert_allclose(np.array(shipped[name]["knots"]).reshape(2, 4), entry["knots"], atol=1e-6)
+        np.testing.assert_allclose(np.array(shipped[name]["knots"]).reshape(2, 4), entry["knots"], rtol=0,
+                                   atol=MACHINE_SPREAD)
         for role, points in entry["points"].items():
-            np.testing.assert_allclose(shipped[name]["points"][int(role)], points, atol=1e-6)
+            np.testing.assert_allclose(shipped[name]["points"][int(role)], points, rtol=0, atol=MACHINE_SPREAD)
+
+
+def test_both_relaxations_converge(document):
+    """Each relaxation ends on scipy's ftol/xtol/gtol (status 1–4), not on its step or round limit: a truncated
+    descent ends where rounding steered it, which is what made the shipped file machine-dependent."""
+    for result in (document["stitch_types"]["knit"], document["context"]):
+        assert result["converged"] and result["solver_status"] > 0 and result["rounds"] < tr.MAX_ROUNDS
 
 
 def test_yarn_overs_and_decreases_relaxed_in_their_context(document):

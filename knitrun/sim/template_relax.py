@@ -43,8 +43,11 @@ shear 0.3 then leaves a 5th percentile of 0.77 where 0.5 would give 0.80.
 The contact pairs are those closer than ``PAIR_RADII`` r at the start of a round; a round is one scipy
 ``least_squares`` solve (trust region reflective, finite-difference Jacobian) with that fixed set; rounds repeat
 until the set no longer changes or ``MAX_ROUNDS`` is reached (convergence criterion: the set is stable and the solver
-reports its ftol/xtol met). ``check_crossings`` then refuses a result in which a yarn passed through another (the
-order along the normal at a crossing swapped). Purl is the knit template mirrored through the fabric plane
+reports its ftol/xtol/gtol met at ``SOLVER_TOL``; the result says ``converged``). The tight tolerance is what makes the
+shipped file reproducible on another machine: stopped at scipy's default 1e-8, the solve ends where rounding steered
+it along the energy's flat directions (another CPU moved the decreases' points by up to 7e-4); converged, the spread is
+2e-5 (``tests/test_template_relax.py``). ``check_crossings`` then refuses a result in which a yarn passed through
+another (the order along the normal at a crossing swapped). Purl is the knit template mirrored through the fabric plane
 (``stitch_templates``), so it is relaxed with it. Yarn-over, k2tog and ssk are relaxed next, in
 an eyelet context around the relaxed knit (``patch_relax``); ``relax_templates`` runs both.
 
@@ -75,6 +78,7 @@ W_CONTACT, W_BEND, W_LENGTH, W_ANCHOR = 100.0, 1.0, 100.0, 0.01
 W_DEFORMED = 0.1  # weight of each sheared tile's contact term, relative to the rest tile's (see the module docstring)
 ANCHOR_SCALE = np.array([WIDTH, ASPECT * WIDTH, WIDTH, ASPECT * WIDTH] + [RADIUS] * 6) / RADIUS  # unknowns → radii
 MAX_ROUNDS = 8
+SOLVER_TOL = 1e-10  # least_squares' ftol, xtol and gtol (see the module docstring)
 IDENTITY = np.eye(2)
 # The tile is relaxed at rest and, for its contact term only, under these affine deformations of the face plane
 # (knot interpolation of the runtime: ``template_positions``), each with its weight; the rest tile comes first.
@@ -271,14 +275,16 @@ def relax_knit(pieces, knots, roles, progress=None):
     polygon0 = _polygon(seed, pieces, roles)
     length0 = _arc(dense_period(polygon0))[1]
     y = seed.copy()
-    rounds, pairs_prev, status = 0, None, None
+    rounds, pairs_prev, status, converged = 0, None, None, False
     for rounds in range(1, MAX_ROUNDS + 1):
         pairs = _all_pairs(y, pieces, roles)
         if pairs_prev is not None and all(np.array_equal(a, b) for a, b in zip(pairs, pairs_prev)) \
                 and status is not None and status > 0:
+            converged = True
             break
         result = least_squares(_residuals, y, args=(pieces, roles, pairs, seed, length0), method="trf",
-                               x_scale=1.0 / ANCHOR_SCALE, max_nfev=400)
+                               x_scale=1.0 / ANCHOR_SCALE, max_nfev=400,
+                               ftol=SOLVER_TOL, xtol=SOLVER_TOL, gtol=SOLVER_TOL)
         y, status, pairs_prev = result.x, int(result.status), pairs
         if progress is not None:
             progress(rounds, float(result.cost), sum(len(p) for p in pairs))
@@ -299,16 +305,16 @@ def relax_knit(pieces, knots, roles, progress=None):
             "energy_before": energy(seed, _all_pairs(seed, pieces, roles)),
             "energy_after": energy(y, _all_pairs(y, pieces, roles)),
             "length_before": length0, "length_after": _arc(dense_period(relaxed))[1], "rounds": rounds,
-            "solver_status": status, "seconds": time.perf_counter() - t0}
+            "solver_status": status, "converged": converged, "seconds": time.perf_counter() - t0}
 
 
 def relax_templates(progress=None) -> dict:
     """The relaxed-template document (``relaxed_templates.json``): format, version, the tile and energy parameters
     and, per relaxed stitch type, its knot points' (a, c, s) by piece role, with the before/after figures.
 
-    Reproducible: BLAS runs on one thread meanwhile (threadpoolctl). The solver's matrix products otherwise sum in
-    an order that depends on BLAS's thread count, and ~60 trust-region steps per round carry that rounding into the
-    decreases' points by up to 2e-3 (measured): the shipped file could not be regenerated bit for bit."""
+    Reproducible: BLAS runs on one thread meanwhile (threadpoolctl), so this machine regenerates the file bit for
+    bit (the solver's matrix products otherwise sum in an order that depends on BLAS's thread count), and both solves
+    converge tightly (``SOLVER_TOL``), so another machine's rounding moves no point by more than ~2e-5."""
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
