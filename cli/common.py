@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import click
 
 from data_formats import FormatError, asset_pack, bcc, scene, stitch_mesh, yarn_curves, yarn_spec
-from data_formats.hdf5_fields import HDF5_MAGIC
+from data_formats.input_files import HDF5_MAGIC, read_head, regular_file
 from data_formats.jsonable import jsonable
 
 # An OBJ stitch mesh (+ its .labels sidecar) through the same three calls as the other kinds.
@@ -93,14 +93,12 @@ def _same_file(a, b) -> bool:
 
 def file_kind(path):
     """(kind, module) of a file the toolchain reads, recognised by its content; FormatError if none."""
-    if not os.path.isfile(path):
-        raise FormatError(f"{path}: no such file")
+    regular_file(path, "a file the toolchain reads")
     for kind, module in FILE_KINDS:
         if module.sniff(path):
             return kind, module
-    with open(path, "rb") as fh:
-        if fh.read(8) == HDF5_MAGIC:
-            raise FormatError(f"{path}: an HDF5 file that cannot be opened or is none of ours (truncated or corrupt?)")
+    if read_head(path, 8) == HDF5_MAGIC:
+        raise FormatError(f"{path}: an HDF5 file that cannot be opened or is none of ours (truncated or corrupt?)")
     raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5 or BCC, stitch mesh HDF5 "
                       f"or OBJ, scene or yarn spec TOML)")
 

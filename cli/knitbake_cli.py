@@ -13,6 +13,7 @@ import click
 
 from cli.common import CONTEXT, FriendlyGroup, SuffixPath, check_outputs, echo_json, echo_tree, file_kind
 from data_formats import FormatError
+from data_formats.input_files import regular_file
 from data_formats.yarn_spec import FIELDS, SECTIONS, describe_spec, dumps_spec, load_preset, preset_names, resolve_yarn
 
 
@@ -147,8 +148,7 @@ def validate(path):
 
     Example: knitbake validate cotton1.h5
     """
-    if not Path(path).is_file():
-        raise FormatError(f"{path}: no such file")
+    regular_file(path, "a file the toolchain reads")
     try:
         kind, module = file_kind(path)
         problems = module.validate(path)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
 
 from cli.common import CONTEXT, FriendlyGroup, SuffixPath, check_outputs, echo_json, file_kind
 from data_formats import FormatError
+from data_formats.input_files import regular_file
 from knitrun.render.ablations import ABLATION_LABELS, ABLATIONS
 
 
@@ -79,10 +81,10 @@ def pattern(source, rows, cols, output, as_json):
 
     check_outputs({"--output": output, "labels": _labels(output)}, [source])
     suffix = Path(output).suffix.lower()
-    if Path(source).is_file():
+    if os.path.lexists(source):  # a chart file (a FIFO or folder is refused, not read)
         if rows is not None or cols is not None:
             raise FormatError(f"--rows/--cols size a named pattern, but {source} is a chart file")
-        mesh = chart_to_mesh(Path(source).read_text(encoding="utf-8"), where=source)
+        mesh = chart_to_mesh(regular_file(source, "a knit chart").read_text(encoding="utf-8"), where=source)
     elif source in PATTERNS:
         mesh = chart_to_mesh(pattern_chart(source, rows or 12, cols or 12), where=f"pattern {source}")
     else:

@@ -13,12 +13,12 @@ time: ``read_bcc`` returns one frame, every curve of yarn type 0 named ``"unknow
 """
 
 import struct
-from pathlib import Path
 
 import numpy as np
 
 from .atomic import atomic_path
 from .errors import FormatError
+from .input_files import read_head, regular_file
 from .yarn_curves import CURVE_TYPES, make_yarn_curves, summary, to_float32, validate_curves
 
 HEADER = struct.Struct("<3sB2sBBQQ40s")  # 64 bytes, no padding
@@ -83,7 +83,7 @@ def _read(path, units):
     """The parsed header (dict) and the ``YarnCurves`` of a BCC file."""
     where = str(path)
     try:
-        data = Path(path).read_bytes()
+        data = regular_file(path, "a BCC file").read_bytes()
     except OSError as e:
         raise FormatError(f"{where}: cannot read ({type(e).__name__}: {' '.join(str(e).split())})") from e
     head = _parse_header(data, where)
@@ -126,11 +126,7 @@ def write_bcc(path, yc, frame=0, up_axis="y"):
 
 def sniff(path):
     """True if ``path`` starts with the BCC magic ``b"BCC"``; never raises."""
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(3) == MAGIC
-    except Exception:
-        return False
+    return read_head(path, 3) == MAGIC
 
 
 def describe(path):

@@ -7,8 +7,9 @@ import h5py
 import numpy as np
 
 from .errors import FormatError
+from .input_files import HDF5_MAGIC, read_head
 
-HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+__all__ = ["HDF5_MAGIC", "check_format_attrs", "dataset", "one_line", "sniff_hdf5", "str_attr", "string_dataset"]
 
 
 def one_line(e) -> str:
@@ -63,10 +64,9 @@ def string_dataset(f, name, where):
 
 def sniff_hdf5(path, format_name) -> bool:
     """True if ``path`` is an HDF5 file whose root attribute ``format`` is ``format_name``; never raises."""
+    if read_head(path, 8) != HDF5_MAGIC:
+        return False
     try:
-        with open(path, "rb") as fh:
-            if fh.read(8) != HDF5_MAGIC:
-                return False
         with h5py.File(path, "r") as f:
             fmt = f.attrs.get("format")
         return (fmt.decode() if isinstance(fmt, bytes) else fmt) == format_name

@@ -9,12 +9,14 @@ Writers refuse NaN/Inf and write atomically.
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 
 from .atomic import atomic_path
 from .errors import FormatError
+from .input_files import read_head, regular_file
+
+EXR_MAGIC = b"\x76\x2f\x31\x01"
 
 
 def _check_image(img, where):
@@ -39,6 +41,7 @@ def write_exr(path, img) -> None:
 def read_exr(path) -> np.ndarray:
     import OpenEXR
 
+    regular_file(path, "an OpenEXR image")
     try:
         with OpenEXR.File(str(path)) as f:
             channels = f.channels()
@@ -58,7 +61,7 @@ def read_exr(path) -> np.ndarray:
 def read_hdr(path) -> np.ndarray:
     """Radiance RGBE (flat or new-style run-length encoded scanlines), ``-Y H +X W`` orientation."""
     try:
-        data = Path(path).read_bytes()
+        data = regular_file(path, "a Radiance HDR image").read_bytes()
     except OSError as exc:
         raise FormatError(f"{path}: cannot read ({exc.strerror})") from None
     if not (data.startswith(b"#?RADIANCE") or data.startswith(b"#?RGBE")):
@@ -96,10 +99,14 @@ def read_hdr(path) -> np.ndarray:
 
 def read_image(path) -> np.ndarray:
     """An HDR image by content: EXR or Radiance RGBE."""
-    with open(path, "rb") as fh:
-        magic = fh.read(10)
-    if magic[:4] == b"\x76\x2f\x31\x01":
+    magic = read_head(regular_file(path, "an OpenEXR or Radiance HDR image"), 10)
+    if not magic:
+        raise FormatError(f"{path}: {'empty file' if magic == b'' else 'cannot read'}, expected an OpenEXR or "
+                          f"Radiance HDR image")
+    if magic[:4] == EXR_MAGIC:
         return read_exr(path)
+    if str(path).lower().endswith(".exr"):
+        raise FormatError(f"{path}: not an OpenEXR file (first bytes {magic[:4]!r})")
     return read_hdr(path)
 
 

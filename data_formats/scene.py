@@ -23,13 +23,13 @@ import os
 import sys
 from pathlib import Path
 
-import h5py
 import tomli_w
 
 from . import bcc, yarn_curves
 from .atomic import atomic_path
 from .conventions import CM_PER_UNIT, LENGTH_UNITS
 from .errors import FormatError
+from .input_files import open_hdf5, read_head, regular_file
 from .yarn_spec import YarnSpec, load_preset, load_spec, preset_names
 
 if sys.version_info >= (3, 11):
@@ -185,9 +185,12 @@ def _known_keys(table, known, where, lenient):
 
 def _file(value, where, base):
     path = (base / _string(value, where)).resolve()
-    if not path.is_file():
+    if not path.exists():
         raise FormatError(f"{where} = {value!r}: file not found ({path})")
-    return path
+    try:
+        return regular_file(path, "a file")
+    except FormatError as e:
+        raise FormatError(f"{where} = {value!r}: {e}") from None
 
 
 def _exactly_one(table, keys, where):
@@ -278,7 +281,7 @@ def curve_file_facts(path, where):
     """(yarn_types, units, frames) of a knit-yarn-curves or BCC file, read without loading its points."""
     if yarn_curves.sniff(path):
         try:
-            with h5py.File(path, "r") as f:
+            with open_hdf5(path, "a knit-yarn-curves file") as f:
                 units = f.attrs["units"]
                 units = units.decode() if isinstance(units, bytes) else str(units)
                 return [str(s) for s in f["yarn_types"].asstr()[()]], units, int(f["points"].shape[0])
@@ -402,7 +405,7 @@ def load_scene(path) -> Scene:
     """Read and validate a scene file; raise ``FormatError`` (one line) on any problem, including a missing
     curve, stitch-mesh, yarn-spec or environment file. A missing ``pack`` is not an error here (``validate``
     reports it): a scene may name the pack it is baked for."""
-    path = Path(path)
+    path = regular_file(path, "a scene file (.toml)")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
@@ -467,9 +470,11 @@ def save_scene(path, scene: Scene) -> None:
 
 def sniff(path) -> bool:
     """True if ``path`` is a TOML file whose top-level ``format`` is ``"knit-scene"``; never raises."""
+    head = read_head(path, 1 << 20)
+    if head is None:
+        return False
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.loads(fh.read(1 << 20).decode("utf-8"))
+        data = tomllib.loads(head.decode("utf-8"))
         return data.get("format") == FORMAT_NAME
     except Exception:
         return False

@@ -29,6 +29,7 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import FormatError
 from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
+from .input_files import open_hdf5, read_head, regular_file
 
 FORMAT_NAME = "knit-stitch-mesh"
 FORMAT_VERSION = "1.0"
@@ -416,11 +417,7 @@ def write_stitch_mesh(path, m):
 def read_stitch_mesh(path):
     """Read and fully validate a knit-stitch-mesh HDF5 file; raise ``FormatError`` on any problem."""
     where = str(path)
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, ValueError) as e:
-        raise FormatError(f"{where}: not a readable HDF5 file ({one_line(e)}), expected a {FORMAT_NAME} file")
-    with f:
+    with open_hdf5(path, f"a {FORMAT_NAME} file") as f:
         check_format_attrs(f, where, FORMAT_NAME, FORMAT_VERSION)
         names = string_dataset(f, "stitch_types", where)
         unknown = [n for n in names if n not in STITCH_TYPES]
@@ -465,7 +462,7 @@ def sniff(path):
 def describe(path):
     """JSON-serializable summary of a knit-stitch-mesh file; raises ``FormatError`` if the file is invalid."""
     m = read_stitch_mesh(path)
-    with h5py.File(path, "r") as f:
+    with open_hdf5(path, f"a {FORMAT_NAME} file") as f:
         version = str_attr(f, "version", str(path))
     return {"kind": "stitch-mesh", "version": version, **summary(m)}
 
@@ -529,7 +526,7 @@ def _resolve_labels(obj_path, labels_path):
 
 def _read_text(path, where):
     try:
-        return Path(path).read_text(encoding="utf-8")
+        return regular_file(path, "an OBJ stitch mesh").read_text(encoding="utf-8")
     except UnicodeDecodeError as e:
         raise FormatError(f"{where}: not UTF-8 text (byte {e.start}), expected a text file")
     except OSError as e:
@@ -617,9 +614,10 @@ def write_obj_stitch_mesh(obj_path, m, labels_path=None):
 def sniff_obj(path):
     """True if ``path`` looks like Wavefront OBJ text: its first MiB is UTF-8, every complete line is blank, a
     comment or an OBJ statement, it has a ``v`` line, and an ``f`` line unless the file is longer; never raises."""
+    head = read_head(path, SNIFF_BYTES + 1)
+    if head is None:
+        return False
     try:
-        with open(path, "rb") as fh:
-            head = fh.read(SNIFF_BYTES + 1)
         whole = len(head) <= SNIFF_BYTES
         text = head[:SNIFF_BYTES].decode("utf-8", errors="strict" if whole else "ignore")
         lines = text.splitlines() if whole else text.splitlines()[:-1]

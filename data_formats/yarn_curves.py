@@ -23,6 +23,7 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import FormatError
 from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
+from .input_files import open_hdf5
 
 FORMAT_NAME = "knit-yarn-curves"
 FORMAT_VERSION = "1.1"  # 1.1 adds the optional ``radius`` attribute
@@ -217,11 +218,7 @@ def write_yarn_curves(path, yc):
 def read_yarn_curves(path):
     """Read and fully validate a knit-yarn-curves HDF5 file; raise ``FormatError`` on any problem."""
     where = str(path)
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, ValueError) as e:
-        raise FormatError(f"{where}: not a readable HDF5 file ({one_line(e)}), expected a knit-yarn-curves file")
-    with f:
+    with open_hdf5(path, "a knit-yarn-curves file") as f:
         check_format_attrs(f, where, FORMAT_NAME, FORMAT_VERSION)
         points = dataset(f, "points", "f", where)
         if points.dtype not in (np.float32, np.float64):
@@ -263,7 +260,7 @@ def sniff(path):
 def describe(path):
     """JSON-serializable summary of a knit-yarn-curves file; raises ``FormatError`` if the file is invalid."""
     yc = read_yarn_curves(path)
-    with h5py.File(path, "r") as f:
+    with open_hdf5(path, "a knit-yarn-curves file") as f:
         version, points_dtype = str_attr(f, "version", str(path)), str(f["points"].dtype)
     return {"kind": "yarn-curves", "version": version, "points_dtype": points_dtype, **summary(yc)}
 

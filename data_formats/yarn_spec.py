@@ -36,6 +36,7 @@ import tomli_w
 from .atomic import atomic_path
 from .conventions import LENGTH_UNITS
 from .errors import FormatError
+from .input_files import read_head, regular_file
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -304,7 +305,7 @@ def dumps_spec(spec: YarnSpec) -> str:
 
 
 def load_spec(path) -> YarnSpec:
-    path = Path(path)
+    path = regular_file(path, "a yarn spec (.toml)")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
@@ -344,11 +345,12 @@ def resolve_yarn(name_or_path: str) -> YarnSpec:
 def sniff(path) -> bool:
     """True if ``path`` is a TOML file that declares itself a yarn spec (format key), or has [geometry] and
     [optics] tables."""
+    head = read_head(path, 1 << 16)
+    if head is None:
+        return False
     try:
-        with open(path, "rb") as fh:
-            head = fh.read(1 << 16)
         data = tomllib.loads(head.decode("utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError):
         return False
     return data.get("format") == FORMAT_NAME or ("geometry" in data and "optics" in data)
 

@@ -155,4 +155,4 @@ def test_sniff_by_content_never_raises(tmp_path):
 
 
 def test_missing_file_is_a_format_error(tmp_path):
-    assert_rejected(tmp_path / "nope.bcc", "cannot read (FileNotFoundError")
+    assert_rejected(tmp_path / "nope.bcc", "no such file, expected a BCC file")

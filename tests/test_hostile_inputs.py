@@ -205,3 +205,161 @@ def test_an_output_that_is_an_input_or_in_a_missing_folder_is_refused_before_any
             (args, result.output)
     assert mesh.read_bytes() == before
     assert not (tmp_path / "a.h5").exists() and not (tmp_path / "ok.bcc").exists()
+
+
+def _within(seconds, call, unblock):
+    """``call()`` run in a thread; if it is still running after ``seconds`` (blocked on a FIFO), ``unblock()`` frees
+    it and the test fails: a read that blocks is the defect."""
+    import threading
+
+    out = {}
+    thread = threading.Thread(target=lambda: out.setdefault("result", call()), daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if thread.is_alive():
+        unblock()
+        thread.join(10)
+        pytest.fail(f"blocked for {seconds} s")
+    return out["result"]
+
+
+def _writer_of(fifo):
+    def unblock():
+        fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        os.close(fd)
+    return unblock
+
+
+@pytest.mark.parametrize("command", [["validate"], ["inspect"], ["render", "-o", "x.png"]])
+def test_a_fifo_is_refused_without_blocking(tmp_path, command):
+    """Item 6: a FIFO given as a pack, a scene or any input blocked `validate` and `render` forever."""
+    from click.testing import CliRunner
+
+    from cli.knitbake_cli import main as knitbake
+    from cli.knitrun_cli import main as knitrun
+
+    fifo = tmp_path / "scene.toml"
+    os.mkfifo(fifo)
+    program = knitrun if command[0] == "render" else knitbake
+    args = [command[0], str(fifo), *[str(tmp_path / a) if a.endswith(".png") else a for a in command[1:]]]
+    result = _within(30, lambda: CliRunner().invoke(program, args), _writer_of(fifo))
+    assert result.exit_code == 1 and "is a FIFO, not a regular file" in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def _curves_file(path):
+    write_yarn_curves(path, make_yarn_curves(np.array([[[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]]), np.array([0, 3]),
+                                             yarn_types=["cotton1"]))
+    return path
+
+
+def _external_storage(f):
+    f.create_dataset("extra", shape=(16,), dtype="u1", external=[("/etc/passwd", 0, 16)])
+
+
+def _external_fifo(f):
+    fifo = os.path.join(os.path.dirname(f.filename), "pipe")
+    os.mkfifo(fifo)
+    del f["points"]
+    f.create_dataset("points", shape=(3, 3), dtype="f4", external=[(fifo, 0, 36)])
+
+
+def _external_link(f):
+    f["extra"] = __import__("h5py").ExternalLink("/etc/other.h5", "/points")
+
+
+def _virtual(f):
+    import h5py
+
+    layout = h5py.VirtualLayout(shape=(3, 3), dtype="f4")
+    layout[:] = h5py.VirtualSource("/etc/other.h5", "points", shape=(3, 3))
+    f.create_virtual_dataset("extra", layout)
+
+
+@pytest.mark.parametrize("damage, message", [(_external_storage, "keeps its data in another file"),
+                                             (_external_fifo, "keeps its data in another file"),
+                                             (_external_link, "is an external link"),
+                                             (_virtual, "is a virtual dataset")])
+def test_hdf5_files_that_point_outside_themselves_are_refused(tmp_path, damage, message):
+    """Item 6: a dataset with external storage was followed (it read /etc/passwd, or blocked on a FIFO)."""
+    import h5py
+    from click.testing import CliRunner
+
+    from cli.knitbake_cli import main as knitbake
+
+    path = _curves_file(tmp_path / "c.h5")
+    with h5py.File(path, "a") as f:
+        damage(f)
+    fifo = tmp_path / "pipe"
+    for command in ("validate", "inspect"):
+        result = _within(30, lambda: CliRunner().invoke(knitbake, [command, str(path)]),
+                         _writer_of(fifo) if fifo.exists() else (lambda: None))
+        assert result.exit_code == 1 and message in result.output, result.output
+
+
+@pytest.mark.parametrize("shape, message", [((1 << 16, 1 << 16), "more than the 8 GiB"),
+                                            ((40000, 40000), "never written")])
+def test_a_pack_that_declares_a_huge_table_is_refused_before_reading(tmp_path, shape, message):
+    """Item 5: a ~1 MB pack declared a 5 GiB chunked table that was never written; `validate` read it all (6.8 GB
+    RSS) and called it valid, `render` and `export` died with MemoryError."""
+    import h5py
+    from click.testing import CliRunner
+
+    from cli.knitbake_cli import main as knitbake
+    from tests.helpers import write_full
+
+    path = tmp_path / "p.h5"
+    tables = write_full(path)[0]
+    name = next(n for n in tables if n.startswith("textures/ao/mip0"))
+    with h5py.File(path, "a") as f:
+        attrs = dict(f[name].attrs)
+        del f[name]
+        ds = f.create_dataset(name, shape=shape, dtype="f4", chunks=(256, 256))
+        ds.attrs.update(attrs)
+    assert path.stat().st_size < 4 << 20
+    for command in (["validate", str(path)], ["inspect", str(path)], ["export", str(path), str(tmp_path / "x")]):
+        result = CliRunner().invoke(knitbake, command)
+        assert result.exit_code == 1 and message in result.output and name in result.output, result.output
+        assert len(result.output.strip().splitlines()) == (2 if command[0] == "validate" else 1)  # INVALID + why
+
+
+def test_a_folder_or_device_given_as_a_file_says_what_it_is(tmp_path):
+    """Item 13: a directory or a device given as a scene's `curves` was reported as "file not found"; an empty .exr
+    environment as "not a Radiance HDR file"."""
+    from data_formats import FormatError
+    from data_formats.images import read_image
+    from data_formats.scene import load_scene
+    from data_formats.yarn_curves import read_yarn_curves
+
+    (tmp_path / "folder.h5").mkdir()
+    with pytest.raises(FormatError, match="is a directory, not a regular file"):
+        read_yarn_curves(tmp_path / "folder.h5")
+    with pytest.raises(FormatError, match="is a character device"):
+        read_image("/dev/zero")
+    (tmp_path / "empty.exr").write_bytes(b"")
+    with pytest.raises(FormatError, match="empty file, expected an OpenEXR or Radiance HDR image"):
+        read_image(tmp_path / "empty.exr")
+    (tmp_path / "text.exr").write_bytes(b"#?RADIANCE\n")
+    with pytest.raises(FormatError, match="not an OpenEXR file"):
+        read_image(tmp_path / "text.exr")
+    toml = tmp_path / "s.toml"
+    toml.write_text(textwrap.dedent("""\
+        format = "knit-scene"
+        version = "1.0"
+        units = "cm"
+        [[yarns]]
+        curves = "folder.h5"
+        yarn = "cotton1"
+        [camera]
+        position = [0, 0, 5]
+        look_at = [0, 0, 0]
+        fov_deg = 30
+        width = 8
+        height = 8
+        [[lights]]
+        type = "directional"
+        direction = [0, 0, 1]
+        irradiance = [1, 1, 1]
+        """))
+    with pytest.raises(FormatError, match=r"yarns\[0\]\.curves = 'folder.h5': .* is a directory"):
+        load_scene(toml)

@@ -201,7 +201,7 @@ def test_units_mismatch_and_newer_minor_version(folder):
 def test_not_toml_and_unreadable(folder):
     (folder / "bad.toml").write_text("format = [", encoding="utf-8")
     assert "not valid TOML" in sc.validate(folder / "bad.toml")[0]
-    assert "cannot read scene" in sc.validate(folder / "missing.toml")[0]
+    assert "no such file, expected a scene file" in sc.validate(folder / "missing.toml")[0]
 
 
 def test_validate_reports_missing_pack_and_broken_curve_file(folder):

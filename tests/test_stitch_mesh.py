@@ -280,8 +280,9 @@ def test_truncated_and_non_hdf5_files_rejected(tmp_path):
     data = good.read_bytes()
     (tmp_path / "cut.h5").write_bytes(data[: len(data) // 2])
     (tmp_path / "text.h5").write_text("hello")
-    for name in ("cut.h5", "text.h5", "missing.h5"):
-        assert_rejected(tmp_path / name, "not a readable HDF5 file")
+    for name, reason in (("cut.h5", "unreadable HDF5 (truncated or corrupt"), ("text.h5", "not an HDF5 file"),
+                         ("missing.h5", "no such file")):
+        assert_rejected(tmp_path / name, reason, "expected a knit-stitch-mesh file")
 
 
 def test_writers_refuse_bad_meshes_and_leave_no_files(tmp_path):

@@ -174,7 +174,7 @@ def test_truncated_and_non_hdf5_files_rejected(tmp_path):
         read_yarn_curves(cut)
     text = tmp_path / "text.h5"
     text.write_text("hello")
-    assert_rejected(text, "not a readable HDF5 file")
+    assert_rejected(text, "not an HDF5 file", "expected a knit-yarn-curves file")
 
 
 def test_writer_refuses_nan_and_leaves_no_file(tmp_path):

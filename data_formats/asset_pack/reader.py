@@ -3,13 +3,12 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import h5py
 import numpy as np
 
 from ..errors import FormatError
-from ..hdf5_fields import HDF5_MAGIC
+from ..input_files import HDF5_MAGIC, open_hdf5, read_head
 from ..jsonable import jsonable
 from .checks import (attr_problem, is_real, numeric_problems, py, raise_problems, shape_problems, short,
                      stderr_problems, table_meta_problems)
@@ -137,20 +136,7 @@ def _load(name, spec, ds, stderr_ds, info, probs):
 
 
 def _open(path):
-    path = Path(path)
-    if not path.is_file():
-        raise FormatError(f"{path}: no such file, expected an asset pack (.h5)")
-    try:
-        with open(path, "rb") as fh:
-            magic = fh.read(8)
-    except OSError as exc:
-        raise FormatError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
-    if magic != HDF5_MAGIC:
-        raise FormatError(f"{path}: not an HDF5 file (first bytes {magic!r}), expected an asset pack")
-    try:
-        return h5py.File(path, "r")
-    except OSError as exc:
-        raise FormatError(f"{path}: unreadable HDF5 (truncated or corrupt: {' '.join(str(exc).split())})") from None
+    return open_hdf5(path, "an asset pack (.h5)")
 
 
 def _read(path, tables, probs):
@@ -218,10 +204,9 @@ def validate(path) -> list[str]:
 
 def sniff(path) -> bool:
     """True if ``path`` is an HDF5 file whose root attr ``format`` is "knit-asset-pack". Never raises."""
+    if read_head(path, 8) != HDF5_MAGIC:
+        return False
     try:
-        with open(path, "rb") as fh:
-            if fh.read(8) != HDF5_MAGIC:
-                return False
         with h5py.File(path, "r") as f:
             return py(f.attrs.get("format")) == FORMAT_NAME
     except Exception:  # noqa: BLE001
