@@ -82,9 +82,10 @@ QUALITY = {
 # correction 2: weighted ξ factorization; 3, shadowing 2: the unfactorized tables are stored too;
 # correction 4: ξ divides by the DS the renderer evaluates (n_occluded for shadowed hits);
 # environment 2: the table holds the TT and D lobes (schema 2.0), finer grids, measured lookup error; 3: scalar
-# quadrature error; correction 5, shadowing 3, interreflection 2: the fibers traced as Embree curves, not tubes
+# quadrature error; correction 5, shadowing 3, interreflection 2, textures 2, flyaway 2: the fibers traced as Embree
+# curves, not tubes
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 5, "shadowing": 3, "environment": 3,
-                 "interreflection": 2}
+                 "interreflection": 2, "textures": 2, "flyaway": 2}
 
 
 def cache_dir() -> Path:

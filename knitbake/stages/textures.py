@@ -12,20 +12,28 @@ Conventions
   (column j); its S × S sub-sample rays sit at the centres of an S × S grid of sub-cells (``texel_rays``).
   Every texture covers z ∈ [0, P] and is cast against fibers of z ∈ [−P, 2P] (regular fibers are P-periodic,
   ``generate_fibers``), so fibers and occluders of the neighbouring periods are present at the seam.
+* Fibers are traced as Embree's round linear curves (``knitbake.trace.embree_curves``): each fiber polyline swept by
+  a sphere of the fiber radius r (cones, here cylinders, between spheres at the points), its exact shape with no
+  polygon, so a fiber's projected width is exactly 2r. Vertices and rays are float32 inside Embree (hit distances
+  and normals come back as float64 of float32 precision); everything computed from them is float64.
 * h (``half_width``): the yarn radius ``spec.radius`` for the regular textures; for the flyaway textures the
-  farthest tube vertex of any drawn flyaway from the yarn axis (≥ the yarn radius).
-* Fibers are tessellated as ``TUBE_SIDES``-sided tubes (perimeter fit: unbiased projected width, hence coverage).
-* ``normal``: the outward normal of the first fiber hit, from the ray's intersection with the true cylinder
-  (radius = fiber radius) around the hit segment's axis, so it does not depend on the polygon (facet normal on end
-  caps). ``tangent``: the unit direction of the hit segment, signed so that its t-component is ≥ 0. Both are
+  farthest point of any drawn flyaway's swept spheres from the yarn axis (max over its points of hypot(x, y) + r,
+  ≥ the yarn radius).
+* ``normal``: the outward unit normal of the first fiber hit, Embree's geometric normal of the swept-sphere surface
+  (radial from the segment's axis on a cylinder, from the point on a joint's or an end's sphere). Camera rays start
+  outside every fiber, so it faces the camera (normal · ray direction < 0). ``tangent``: the unit direction of the
+  hit segment (from its two float32 vertices), signed so that its t-component is ≥ 0. Both are
   coverage-premultiplied: a texel holds the mean over its sub-samples with misses counted as 0 (length ≤ coverage).
 * ``coverage``: fraction of sub-samples that hit a regular fiber.
 * ``ao``: ambient visibility of the visible fiber points: from each hit, ``ao_rays`` rays cosine-distributed about
-  its cylinder normal, starting on the tube's circumscribed cylinder (so none re-enters its own tube), counted
-  visible when they leave without hitting any regular fiber of the same yarn (no distance limit; flyaways do not
-  occlude). A texel holds the mean over its covered sub-samples, 1 where none is covered. The random numbers of a
-  sub-sample depend only on (seed, its texel column in the period), so a bake of a shifted window sees the same
-  rays.
+  its normal, starting at the hit moved off the surface along the normal by ``AO_OFFSET`` × the scene extent E
+  (the largest |coordinate| + r of its vertices): 2^−18 E is 64 float32 ulps of the largest coordinate, far above
+  the error of Embree's hit points (float32 vertices and rays; measured ≤ 1.6e-4 r ≈ 4 ulps on cotton1, where the
+  offset is 0.004 r), so no ray starts inside its own fiber (Embree reports the exit of a curve from inside).
+  Counted visible when they leave without hitting any regular fiber of the same yarn (no distance limit; flyaways
+  do not occlude). A texel holds the mean over its covered sub-samples, 1 where none is covered. The random numbers
+  of a sub-sample depend only on (seed, its texel column in the period), so a bake of a shifted window sees the
+  same rays.
 * ``flyaway`` (3, H, W, 4): RGB the coverage-premultiplied flyaway tangent (as ``tangent``), A the fraction of
   sub-samples that see a flyaway nearer than every regular fiber (depth test at bake time: a flyaway hidden by
   the regular fibers of the same yarn is removed).
@@ -35,21 +43,24 @@ Conventions
 
 Regular seam
 ------------
-The regular fibers are exactly P-periodic and the margins hold the neighbouring periods, so the texture is the
-view of an endless yarn: u = 1 continues into u = 0. The tubes are not exactly periodic: a tube's polygon turns
-along the fiber (rotation-minimising frame), so at the seam the polygons of the two sides are turned against
-each other and sub-samples within the tessellation error r·(1 − cos(π/sides)) of a silhouette, or of two
-crossing fibers, may see another fiber. ``regular_seam_error`` measures this;
-``tests/test_texture_bake.py::test_regular_textures_are_seamless`` holds cotton1 at 64 × 16, S = 2 to a mean coverage
-difference ≤ 0.005 and a mean |Δ normal| ≤ 0.02 (and bounds tangent and AO), and the error at the standard quality's
+The regular fibers are P-periodic and the margins hold the neighbouring periods, so the texture is the view of an
+endless yarn: u = 1 continues into u = 0. The curves are the fibers' exact swept spheres, with no polygon turning
+along a tube, so what is left is float32 rounding inside Embree: a fiber point and its copy one period on round
+differently (their z differ by P; half an ulp of 2P is 3e-8 for cotton1, 4e-5 r), as do the ray origins, and
+Embree's hit arithmetic is float32. Only a sub-sample within a few ulps of a silhouette, or of the crossing of two
+fibers, could see another fiber across the seam (none does on cotton1 at 256 × 64, S = 4); elsewhere normals and
+tangents differ by rounding (and where a ray passes from a segment to the next at a joint) and AO only by the odd
+grazing AO ray (the same random numbers, from points a few ulps apart). ``regular_seam_error`` measures this;
+``tests/test_texture_bake.py::test_regular_textures_are_seamless`` holds cotton1 at 64 × 16, S = 2 to at most one
+sub-sample changing fiber and four AO rays flipping, plus rounding, and the error at the standard quality's
 256 × 64, S = 4 is measured in BENCHMARKS.md, section "Texture seam".
 
 Flyaway seam design (three variants that tile in any order)
 -----------------------------------------------------------
-Flyaways are generated for one long yarn (``generate_fibers``, one seed). Each flyaway has the z-range
-[a, b] of its tube. A **band** of half-width δ (``band`` mip-0 columns, δ = band·P/W) surrounds every period
-boundary mP. A flyaway is a *boundary* flyaway if its tube meets some band; its *first* band is the leftmost one it
-meets. Variant k (k = 0, 1, 2) draws
+Flyaways are generated for one long yarn (``generate_fibers``, one seed). Each flyaway has the z-range [a, b] of
+its swept spheres (min z − r, max z + r over its points). A **band** of half-width δ (``band`` mip-0 columns,
+δ = band·P/W) surrounds every period boundary mP. A flyaway is a *boundary* flyaway if its z-range meets some band;
+its *first* band is the leftmost one it meets. Variant k (k = 0, 1, 2) draws
 
 * the flyaways lying inside (kP + δ, (k + 1)P − δ), moved by −kP (private to variant k), and
 * every boundary flyaway whose first band is the one at z = 0, copied to every shift mP (m integer) where the copy
@@ -75,11 +86,10 @@ import numpy as np
 from data_formats.yarn_spec import YarnSpec
 from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
 from knitbake.fibers.procedural_yarn import generate_fibers
-from knitbake.fibers.tessellate import TubeMesh, ring_radius_factor, tessellate_fibers
 from knitbake.stages.stage_result import StageResult
-from knitbake.trace.ray_scene import RayScene
+from knitbake.trace.embree_curves import CurveScene, any_hits, closest_hits
 
-TUBE_SIDES = 8
+AO_OFFSET = 2.0 ** -18  # AO rays start this fraction of the scene extent off the surface: 64 float32 ulps
 FLYAWAY_BAND_TEXELS = 2  # default half-width of the shared band around each period boundary, in mip-0 columns
 VARIANTS = 3
 _AO_RAYS_PER_BLOCK = 1 << 20  # occlusion rays per batch (memory bound)
@@ -120,10 +130,9 @@ def regular_fibers(spec: YarnSpec, seed: int = 0) -> FiberSet:
     return generate_fibers(spec, length=3 * period, z_start=-period, seed=seed, flyaways=False)
 
 
-def regular_scene(spec: YarnSpec, seed: int = 0) -> tuple[TubeMesh, RayScene]:
-    """Tubes and Embree scene of ``regular_fibers``: the camera-ray target and the AO / depth-test occluders."""
-    mesh = tessellate_fibers(regular_fibers(spec, seed), sides=TUBE_SIDES)
-    return mesh, RayScene(mesh)
+def regular_scene(spec: YarnSpec, seed: int = 0) -> CurveScene:
+    """Embree curves of ``regular_fibers``: the camera-ray target and the AO / depth-test occluders."""
+    return CurveScene(regular_fibers(spec, seed))
 
 
 def _texel_sum(grid: np.ndarray, height: int, width: int, samples: int) -> np.ndarray:
@@ -131,44 +140,19 @@ def _texel_sum(grid: np.ndarray, height: int, width: int, samples: int) -> np.nd
     return grid.reshape(height, samples, width, samples, *grid.shape[1:]).sum(axis=(1, 3))
 
 
-def _segment_directions(mesh: TubeMesh, prim: np.ndarray) -> np.ndarray:
-    """Unit axis direction (yarn space) of the segment each triangle in ``prim`` belongs to, signed with z ≥ 0."""
-    seg = mesh.tri_segment[prim]
-    d = mesh.axis_points[seg + 1] - mesh.axis_points[seg]
+def _segment_directions(scene: CurveScene, segment: np.ndarray) -> np.ndarray:
+    """Unit direction (yarn space) of each curve segment in ``segment``, from its two vertices, signed with z ≥ 0."""
+    v = scene.segment_start[segment].astype(np.int64)
+    d = scene.vertices[v + 1, :3].astype(np.float64) - scene.vertices[v, :3]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     return np.where(d[:, 2:3] < 0, -d, d)
 
 
-def _fiber_surface(mesh: TubeMesh, prim: np.ndarray, origins: np.ndarray, dirs: np.ndarray, points: np.ndarray,
-                   facet: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Outward unit normals and AO ray origins for rays (``origins``, unit ``dirs``) that hit triangles ``prim`` at
-    ``points`` with facet normals ``facet``. On a wall, the ray is intersected with the fiber's true cylinder (radius
-    r = ring radius / ``ring_radius_factor``) around the hit segment's axis: the normal there (the silhouette normal
-    where the ray passes the polygon but misses the cylinder), and the AO origin on the tube's circumscribed
-    cylinder (ring radius) along that normal, which contains the tube, so a ray leaving into the normal's
-    hemisphere does not re-enter it. Neither depends on how the polygon is turned. On an end cap (facet within 60°
-    of the axis): the facet normal, and the hit moved ``eps`` along it."""
-    seg = mesh.tri_segment[prim]
-    a = mesh.axis_points[seg]
-    d = mesh.axis_points[seg + 1] - a
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    ring = mesh.tube_radius[mesh.tri_fiber[prim]][:, None]
-    radius = ring / ring_radius_factor(TUBE_SIDES, "perimeter")
-    rel = origins - a
-    rel_p = rel - np.sum(rel * d, axis=1, keepdims=True) * d  # ray and axis projected across the axis
-    dir_p = dirs - np.sum(dirs * d, axis=1, keepdims=True) * d
-    dd = np.sum(dir_p * dir_p, axis=1, keepdims=True)
-    cap = (np.abs(np.sum(facet * d, axis=1, keepdims=True)) > 0.5) | (dd < 1e-12)
-    dd = np.where(cap, 1.0, dd)
-    t0 = -np.sum(rel_p * dir_p, axis=1, keepdims=True) / dd  # closest approach to the axis
-    closest = rel_p + t0 * dir_p
-    t = t0 - np.sqrt(np.maximum(radius * radius - np.sum(closest * closest, axis=1, keepdims=True), 0.0) / dd)
-    radial = rel_p + t * dir_p
-    length = np.linalg.norm(radial, axis=1, keepdims=True)
-    cap |= length == 0
-    normal = np.where(cap, facet, radial / np.where(cap, 1.0, length))
-    axial = np.sum((rel + t * dirs) * d, axis=1, keepdims=True)
-    return normal, np.where(cap, points + eps * facet, a + axial * d + ring * normal)
+def surface_offset(scene: CurveScene) -> float:
+    """How far AO rays start off the surface: ``AO_OFFSET`` × the scene extent (largest |coordinate| + radius of its
+    vertices), 64 float32 ulps of the largest coordinate (module docstring, ``ao``)."""
+    v = scene.vertices.astype(np.float64)
+    return AO_OFFSET * float(np.abs(v[:, :3]).max() + v[:, 3].max())
 
 
 def _cosine_directions(normals: np.ndarray, xi: np.ndarray) -> np.ndarray:
@@ -185,7 +169,7 @@ def _cosine_directions(normals: np.ndarray, xi: np.ndarray) -> np.ndarray:
     return r * np.cos(phi) * e1 + r * np.sin(phi) * e2 + np.sqrt(1.0 - xi[..., 0:1]) * normals[:, None, :]
 
 
-def _ao_visible_counts(scene: RayScene, origins, normals, hit_grid, width, samples, ao_rays, seed, column_offset,
+def _ao_visible_counts(scene: CurveScene, origins, normals, hit_grid, width, samples, ao_rays, seed, column_offset,
                        progress) -> np.ndarray:
     """Visible AO rays per sub-sample (H·S, W·S) int: ``ao_rays`` cosine rays about ``normals`` from ``origins``
     (one per hit sub-sample, in grid order), in blocks of columns; the uniform numbers of texture column j come
@@ -204,7 +188,7 @@ def _ao_visible_counts(scene: RayScene, origins, normals, hit_grid, width, sampl
         if sel.size:
             dirs = _cosine_directions(normals[sel], xi[hit_grid[:, cols]])
             org = np.broadcast_to(origins[sel][:, None, :], dirs.shape)
-            blocked = scene.occluded(org.reshape(-1, 3), dirs.reshape(-1, 3), np.inf)
+            blocked = any_hits(scene, org.reshape(-1, 3), dirs.reshape(-1, 3), np.inf)
             block_view = visible[:, cols]  # a view: writes go to ``visible``
             block_view[hit_grid[:, cols]] = ao_rays - blocked.reshape(-1, ao_rays).sum(axis=1)
         if progress is not None:
@@ -237,20 +221,19 @@ def _check_size(width: int, height: int, samples: int, ao_rays: int = 1) -> None
             raise ValueError(f"{name} must be an integer ≥ 1, got {n!r}")
 
 
-def _regular_level0(spec, mesh, scene, width, height, samples, ao_rays, seed, column_offset=0, progress=None):
+def _regular_level0(spec, scene, width, height, samples, ao_rays, seed, column_offset=0, progress=None):
     """Mip-0 sums of the regular textures: dict of per-texel covered sub-sample counts ``covered`` (H, W), summed
     strip normals / tangents (H, W, 3) and visible AO rays ``visible`` (H, W)."""
     h = spec.radius
     org, dirs = texel_rays(width, height, samples, spec.geometry.ply_pitch, h, 4.0 * h, column_offset)
-    hits = scene.intersect(org, dirs)
-    hit = hits.hit
-    points = org[hit] + hits.t[hit, None] * dirs[hit]
-    prim = hits.prim[hit]
-    normal_yarn, ao_origins = _fiber_surface(mesh, prim, org[hit], dirs[hit], points, hits.normal[hit], scene.eps)
+    t, segment, normal_all, _ = closest_hits(scene, org, dirs)
+    hit = segment >= 0
+    normal_yarn = normal_all[hit]
+    ao_origins = org[hit] + t[hit, None] * dirs[hit] + surface_offset(scene) * normal_yarn
     normal = np.zeros(org.shape)
     tangent = np.zeros(org.shape)
     normal[hit] = to_strip(normal_yarn)
-    tangent[hit] = to_strip(_segment_directions(mesh, prim))
+    tangent[hit] = to_strip(_segment_directions(scene, segment[hit]))
     hit_grid = hit.reshape(height * samples, width * samples)
     visible = _ao_visible_counts(scene, ao_origins, normal_yarn, hit_grid, width, samples, ao_rays, seed,
                                  column_offset, progress)
@@ -274,8 +257,8 @@ def bake_regular_textures(spec: YarnSpec, width: int = 256, height: int = 64, sa
     attrs) (see module docstring). ``progress(done, total)`` is called per block of AO columns; ``scene``: a
     prebuilt ``regular_scene(spec, seed)``."""
     _check_size(width, height, samples, ao_rays)
-    mesh, rays = scene or regular_scene(spec, seed)
-    sums = _regular_level0(spec, mesh, rays, width, height, samples, ao_rays, seed, progress=progress)
+    sums = _regular_level0(spec, scene or regular_scene(spec, seed), width, height, samples, ao_rays, seed,
+                           progress=progress)
     maps = _regular_maps(sums, samples, ao_rays)
     covered = mip_levels(sums["covered"], reduce=np.sum)
     visible = mip_levels(sums["visible"], reduce=np.sum)
@@ -300,18 +283,18 @@ def bake_regular_textures(spec: YarnSpec, width: int = 256, height: int = 64, sa
 
 def regular_seam_error(spec: YarnSpec, textures: dict, seed: int = 0, scene=None) -> dict:
     """Seam check of the regular textures: re-bake mip 0 over the window shifted by half a period (W/2 columns),
-    whose middle holds the seam u = 1 → 0 of ``textures`` on continuous fiber tubes, and compare it with the baked
-    mip 0 rolled by W/2. Returns {texture: {"mean": mean |difference|, "max": max |difference|}} for normal,
-    tangent, ao, coverage. The fibers are exactly P-periodic, but their tubes are not: a tube's polygon turns
-    along it (rotation-minimising frame), so the tube of a period is the previous one's turned by a fixed angle.
-    The seam therefore carries the tessellation error (a sub-sample within r (1 − cos(π/sides)) of a silhouette,
-    or of a crossing of two fibers, may see another fiber), and AO differs by its Monte Carlo error where a hit
-    moved to another fiber."""
+    whose middle holds the seam u = 1 → 0 of ``textures`` on continuous fibers, and compare it with the baked mip 0
+    rolled by W/2. Returns {texture: {"mean": mean |difference|, "max": max |difference|}} for normal, tangent, ao,
+    coverage. The curves are the fibers themselves, so only float32 rounding inside Embree limits it (module
+    docstring, "Regular seam"): a fiber point and its copy one period on round differently, as do the ray origins,
+    so a sub-sample within a few ulps of a silhouette or of a crossing of two fibers may see another fiber (its AO
+    then differs by its Monte Carlo error), a ray may pass to the neighbouring segment at a joint (tangent), and an
+    AO ray grazing a fiber may flip; elsewhere normals and tangents differ by rounding."""
     ao0 = textures["textures/ao/mip0"]
     height, width = ao0[0].shape
     samples, ao_rays = ao0[2]["samples_per_axis"], ao0[2]["ao_rays"]
-    mesh, rays = scene or regular_scene(spec, seed)
-    sums = _regular_level0(spec, mesh, rays, width, height, samples, ao_rays, seed, width // 2)
+    sums = _regular_level0(spec, scene or regular_scene(spec, seed), width, height, samples, ao_rays, seed,
+                           width // 2)
     shifted = _regular_maps(sums, samples, ao_rays)
     out = {}
     for name in _REGULAR:
@@ -320,14 +303,14 @@ def regular_seam_error(spec: YarnSpec, textures: dict, seed: int = 0, scene=None
     return out
 
 
-def _tube_z_range(mesh: TubeMesh, n_fibers: int) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) z of the tube vertices of each fiber: the exact z-extent of its drawn tube."""
-    z = mesh.vertices[:, 2].astype(np.float64)[mesh.triangles]
-    lo = np.full(n_fibers, np.inf)
-    hi = np.full(n_fibers, -np.inf)
-    np.minimum.at(lo, mesh.tri_fiber, z.min(axis=1))
-    np.maximum.at(hi, mesh.tri_fiber, z.max(axis=1))
-    return lo, hi
+def _z_extent(fibers: FiberSet) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) z of each fiber's swept spheres: min z − r and max z + r over its points, the exact z-extent of the
+    curves Embree draws."""
+    if fibers.n_fibers == 0:
+        return np.zeros(0), np.zeros(0)
+    z = fibers.points[:, 2]
+    return (np.minimum.reduceat(z, fibers.offsets[:-1]) - fibers.radius,
+            np.maximum.reduceat(z, fibers.offsets[:-1]) + fibers.radius)
 
 
 def _shifted(fibers: FiberSet, idx: np.ndarray, shift: np.ndarray, period: float) -> FiberSet:
@@ -355,7 +338,7 @@ def flyaway_variants(spec: YarnSpec, seed: int = 0, band: float = 0.0) -> tuple[
     n = max(VARIANTS, math.ceil(cycle / period) + 2)
     long = generate_fibers(spec, length=(n + 1) * period, z_start=-period, seed=seed)
     fly = long.select(long.kind != KIND_REGULAR)
-    lo, hi = _tube_z_range(tessellate_fibers(fly, sides=TUBE_SIDES), fly.n_fibers)
+    lo, hi = _z_extent(fly)
     if fly.n_fibers and np.max(hi - lo) > (n - 1) * period:
         raise ValueError(f"a flyaway spans {np.max(hi - lo):g} along the yarn, longer than the generation window "
                          f"allows ({(n - 1) * period:g})")
@@ -376,18 +359,20 @@ def flyaway_variants(spec: YarnSpec, seed: int = 0, band: float = 0.0) -> tuple[
     return variants, {"shared": int(shared.size), "copies": int(copy_idx.size), "private": private}
 
 
-def flyaway_texture(occluders: RayScene, mesh: TubeMesh | None, period: float, half_width: float, width: int,
+def flyaway_texture(occluders: CurveScene, fibers: FiberSet | None, period: float, half_width: float, width: int,
                     height: int, samples: int, column_offset: int = 0) -> np.ndarray:
-    """Mip 0 (H, W, 4) of one flyaway texture of the flyaway tubes ``mesh`` (None: no flyaways) with the depth test
-    against the regular fibers ``occluders``: RGB the coverage-premultiplied strip tangent of the nearest flyaway,
-    A the fraction of sub-samples where it is nearer than every regular fiber."""
+    """Mip 0 (H, W, 4) of one flyaway texture of the flyaway fibers ``fibers`` (None or empty: no flyaways) with the
+    depth test against the regular fibers ``occluders``: RGB the coverage-premultiplied strip tangent of the nearest
+    flyaway, A the fraction of sub-samples where it is nearer than every regular fiber."""
     org, dirs = texel_rays(width, height, samples, period, half_width, 4.0 * half_width, column_offset)
     rgba = np.zeros((org.shape[0], 4))
-    if mesh is not None:
-        hits = RayScene(mesh).intersect(org, dirs)
-        seen = hits.hit & (hits.t < occluders.intersect(org, dirs).t)
-        rgba[seen, :3] = to_strip(_segment_directions(mesh, hits.prim[seen]))
+    if fibers is not None and fibers.n_fibers:
+        scene = CurveScene(fibers)
+        t, segment, _, _ = closest_hits(scene, org, dirs)
+        seen = (segment >= 0) & (t < closest_hits(occluders, org, dirs)[0])
+        rgba[seen, :3] = to_strip(_segment_directions(scene, segment[seen]))
         rgba[seen, 3] = 1.0
+        scene.close()
     return _texel_sum(rgba, height, width, samples) / (samples * samples)
 
 
@@ -403,13 +388,13 @@ def bake_flyaway_textures(spec: YarnSpec, width: int = 256, height: int = 64, sa
     period = spec.geometry.ply_pitch
     band = min(band, width // 4)
     variants, counts = flyaway_variants(spec, seed, band * period / width)
-    meshes = [tessellate_fibers(f, sides=TUBE_SIDES) if f.n_fibers else None for f in variants]
-    vertices = [m.vertices.astype(np.float64) for m in meshes if m is not None]
-    half_width = max([spec.radius] + [float(np.hypot(v[:, 0], v[:, 1]).max()) for v in vertices])
-    regular = (scene or regular_scene(spec, seed))[1]
+    half_width = max([spec.radius] + [float(np.max(np.hypot(f.points[:, 0], f.points[:, 1])
+                                                    + np.repeat(f.radius, np.diff(f.offsets))))
+                                       for f in variants if f.n_fibers])
+    regular = scene or regular_scene(spec, seed)
     level0 = []
-    for k, mesh in enumerate(meshes):
-        level0.append(flyaway_texture(regular, mesh, period, half_width, width, height, samples))
+    for k, fibers in enumerate(variants):
+        level0.append(flyaway_texture(regular, fibers, period, half_width, width, height, samples))
         if progress is not None:
             progress(k + 1, VARIANTS)
     out = {}

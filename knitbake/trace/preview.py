@@ -3,8 +3,9 @@
 Left panel: the cross-section at z = z_start seen along −z — every fiber's centre where it crosses that plane,
 drawn as a disc of the fiber radius (regular fibers grey-blue by ply, flyaways orange), with the outer yarn
 radius as a circle. Right panel: an orthographic side view (camera on +x looking at −x, z to the right) ray cast
-with Embree against the tessellated fibers, shaded by |n·l| with l toward the camera and up. Both panels share the
-pixel scale ``pixels_per_unit``. Coordinates and lengths are in the spec's units.
+with Embree against the fibers as round linear curves (``embree_curves``: each polyline swept by a sphere of the
+fiber radius), shaded by |n·l| with l toward the camera and up. Both panels share the pixel scale
+``pixels_per_unit``. Coordinates and lengths are in the spec's units.
 """
 
 from __future__ import annotations
@@ -14,8 +15,7 @@ from PIL import Image, ImageDraw
 
 from data_formats.atomic import atomic_path
 from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
-from knitbake.fibers.tessellate import tessellate_fibers
-from knitbake.trace.ray_scene import RayScene
+from knitbake.trace.embree_curves import CurveScene, closest_hits
 
 PLY_COLOURS = np.array([[110, 140, 200], [120, 190, 150], [200, 150, 120], [170, 130, 200], [200, 200, 120]])
 FLYAWAY_COLOUR = (240, 140, 40)
@@ -53,10 +53,9 @@ def cross_section_image(fibers: FiberSet, yarn_radius: float, size: int) -> Imag
     return img
 
 
-def side_view_image(fibers: FiberSet, yarn_radius: float, height: int, sides: int = 6) -> tuple[Image.Image, dict]:
-    """Orthographic side view; returns the image and ray statistics."""
-    mesh = tessellate_fibers(fibers, sides=sides)
-    scene = RayScene(mesh)
+def side_view_image(fibers: FiberSet, yarn_radius: float, height: int) -> tuple[Image.Image, dict]:
+    """Orthographic side view; returns the image and ray statistics (rays, curve segments, covered fraction)."""
+    scene = CurveScene(fibers)
     extent_y = 1.6 * yarn_radius  # half height shown
     length = fibers.z_end - fibers.z_start
     width = max(1, int(round(height * length / (2 * extent_y))))
@@ -65,14 +64,17 @@ def side_view_image(fibers: FiberSet, yarn_radius: float, height: int, sides: in
     yy, zz = np.meshgrid(ys, zs, indexing="ij")
     origins = np.stack([np.full(yy.size, 10 * yarn_radius), yy.ravel(), zz.ravel()], axis=1)
     dirs = np.tile([-1.0, 0.0, 0.0], (yy.size, 1))
-    hits = scene.intersect(origins, dirs)
+    _, segment, normal, _ = closest_hits(scene, origins, dirs)
+    hit = segment >= 0
     light = np.array([1.0, 0.6, 0.3]) / np.linalg.norm([1.0, 0.6, 0.3])
-    shade = np.abs(hits.normal @ light)
-    kind = np.where(hits.hit, fibers.kind[np.maximum(hits.fiber, 0)], -1)
+    shade = np.abs(normal @ light)
+    kind = np.where(hit, fibers.kind[scene.segment_fiber[np.maximum(segment, 0)]], -1)
     base = np.where((kind == KIND_REGULAR)[:, None], [[200, 200, 215]], [FLYAWAY_COLOUR])
-    rgb = np.where(hits.hit[:, None], base * (0.25 + 0.75 * shade[:, None]), [BACKGROUND])
+    rgb = np.where(hit[:, None], base * (0.25 + 0.75 * shade[:, None]), [BACKGROUND])
     img = Image.fromarray(rgb.reshape(height, width, 3).clip(0, 255).astype(np.uint8))
-    return img, {"rays": int(yy.size), "triangles": int(mesh.triangles.shape[0]), "coverage": float(hits.hit.mean())}
+    stats = {"rays": int(yy.size), "segments": scene.n_segments, "coverage": float(hit.mean())}
+    scene.close()
+    return img, stats
 
 
 def preview(fibers: FiberSet, yarn_radius: float, path, height: int = 320) -> dict:
