@@ -36,11 +36,12 @@ from data_formats.atomic import atomic_path
 from data_formats.cache_folders import cache_root
 from data_formats.asset_pack import write_pack
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
+from knitbake.fibers.procedural_yarn import check_fiber_budget
 from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
 from knitbake.stages.ds_precompute import bake_dual_scattering_stage
 from knitbake.stages.im_table import bake_environment_stage
 from knitbake.stages.stage_result import StageResult
-from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage
+from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage, flyaway_periods
 from knitbake.stages.yarn_albedo import bake_yarn_albedo_stage
 from knitrun.render.camera import pixel_size, scene_camera
 
@@ -173,6 +174,15 @@ def scene_needs(scene, spec: YarnSpec) -> dict:
             "texture_height": height, "texture_width": width, "on_screen_width_px": max(widths or [0.0])}
 
 
+def _check_fiber_windows(spec: YarnSpec, stages) -> None:
+    """Refuse, before the first stage runs, a yarn whose fiber windows would not fit in memory: the traced stages
+    generate three periods of regular fibers, the flyaway stage ``flyaway_periods + 1`` periods with flyaways."""
+    if set(stages) - {"dual_scattering", "environment"}:
+        check_fiber_budget(spec, 3 * spec.geometry.ply_pitch, flyaways=False)
+    if "flyaway" in stages:
+        check_fiber_budget(spec, (flyaway_periods(spec) + 1) * spec.geometry.ply_pitch)
+
+
 def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, seed: int = 0, use_cache=True,
          on_stage=None, progress_factory=None, overrides=None) -> dict:
     """Bake ``spec`` into the asset pack ``output``; returns the summary (per stage: seconds, cached, error).
@@ -188,6 +198,7 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
             settings[stage]["height"] = needs["texture_height"]
             settings[stage]["width"] = needs["texture_width"]
     stages = stages_for(spec, only, needs)
+    _check_fiber_windows(spec, stages)
     tables, errors, attrs, counts, summary = {}, {}, {}, {}, {}
     for i, stage in enumerate(stages):
         if on_stage:

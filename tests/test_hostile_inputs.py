@@ -10,10 +10,13 @@ checks that it is gone.
   (item 12).
 * An output that is also an input, two outputs on one file, or an output in a missing folder is refused in one line
   before any work (items 10 and 11).
+* Legal but extreme yarn and scene values are refused in one line naming the fields before anything is allocated
+  (the memory budget), and the ranges that ran for minutes are closed (item 4).
 """
 
 import dataclasses
 import os
+import re
 import stat
 import subprocess
 import sys
@@ -363,3 +366,58 @@ def test_a_folder_or_device_given_as_a_file_says_what_it_is(tmp_path):
         """))
     with pytest.raises(FormatError, match=r"yarns\[0\]\.curves = 'folder.h5': .* is a directory"):
         load_scene(toml)
+
+
+def _with(spec, section, **values):
+    return dataclasses.replace(spec, **{section: dataclasses.replace(getattr(spec, section), **values)})
+
+
+@pytest.mark.parametrize("section, field, value, named", [
+    ("geometry", "fiber_pitch", 1e-6, "ply_pitch/fiber_pitch"),
+    ("geometry", "ply_pitch", 1e6, "ply_pitch 1e+06"),
+    ("flyaways", "hair_density", 1e6, "hair_density 1e+06"),
+    ("flyaways", "loop_density", 1e6, "loop_density 1e+06"),
+])
+def test_legal_extremes_of_a_yarn_are_refused_before_allocating(tmp_path, monkeypatch, section, field, value, named):
+    """Item 4: in-range values whose fibers need 50–330 GiB ended in MemoryError tracebacks (after the first stages of
+    a bake had run). Now the fiber generator and the bake refuse them in one line naming the field, before any
+    allocation or stage, against the memory budget (here 1 GiB)."""
+    from data_formats import FormatError
+    from knitbake.fibers.procedural_yarn import generate_fibers
+
+    monkeypatch.setenv("KNIT_MAX_MEMORY_BYTES", str(1 << 30))
+    spec = _with(load_preset("cotton1"), section, **{field: value})
+    refused = rf"would need ~[\d.]+ [GT]iB \(.*{re.escape(named)}.*more than the 1 GiB allowed"
+    with pytest.raises(FormatError, match=refused):
+        generate_fibers(spec, length=3 * spec.geometry.ply_pitch)
+    calls = []
+    with pytest.raises(FormatError, match=re.escape(named)):
+        bake(spec, tmp_path / "p.h5", quality="draft", on_stage=lambda *a: calls.append(a), use_cache=False)
+    assert calls == [] and not (tmp_path / "p.h5").exists()
+
+
+def test_a_curve_drawn_at_a_tiny_radius_names_the_curve_and_the_radius(monkeypatch):
+    """Item 4: a scene radius of 1e-9 scales every curve's length by 4e7 in yarn space (52.8 GiB of fibers); the
+    sweep now refuses it naming the curve and the radius."""
+    from data_formats import FormatError
+    from knitbake.fibers.fiber_sweep import sweep_curve
+
+    monkeypatch.setenv("KNIT_MAX_MEMORY_BYTES", str(1 << 30))
+    curves = make_yarn_curves(np.array([[0, 0, 0], [0, 0, 0.5], [0, 0, 1.0]], float), [0, 3], radius=0.04)
+    with pytest.raises(FormatError, match=r"curve 0 \(1 long\) drawn at radius 1e-09, [\d.e-]+ × the yarn's [\d.]+: "
+                                           r"the fibers of 'cotton1' .* would need"):
+        sweep_curve(curves, 0, 0, load_preset("cotton1"), 1e-9)
+
+
+def test_the_ranges_that_ran_for_minutes_are_closed():
+    """Item 4: fibers_per_ply = 5000 (> 180 s of period matching) and render.srbf_count = 256 (> 240 s of fitting)
+    are now outside the documented ranges."""
+    from data_formats import FormatError
+    from data_formats.scene import RENDER_FIELDS
+    from data_formats.yarn_spec import dumps_spec, loads_spec
+
+    text = dumps_spec(load_preset("cotton1")).replace("fibers_per_ply = 75", "fibers_per_ply = 5000")
+    assert "fibers_per_ply = 5000" in text
+    with pytest.raises(FormatError, match=r"fibers_per_ply.*5000.*\[1, 1000\]"):
+        loads_spec(text)
+    assert RENDER_FIELDS["srbf_count"][2] == 64

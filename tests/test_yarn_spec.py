@@ -135,7 +135,7 @@ BAD = [
     ("negative-std", _set("flyaways", "loop_radius_std", "-0.1"), ["[flyaways] loop_radius_std", "-0.1", "[0, 1e+06]"]),
     ("string-for-float", _set("geometry", "ply_pitch", '"abc"'), ["[geometry] ply_pitch", "'abc'", "not a number"]),
     ("float-for-int", _set("geometry", "fibers_per_ply", "40.0"),
-     ["[geometry] fibers_per_ply", "40.0", "integer", "[1, 5000]"]),
+     ["[geometry] fibers_per_ply", "40.0", "integer", "[1, 1000]"]),
     ("bool-for-float", _set("optics", "beta_r_deg", "true"), ["[optics] beta_r_deg", "true", "not a number"]),
     ("bool-for-int", _set("geometry", "plies", "true"), ["[geometry] plies", "true", "integer", "[1, 16]"]),
     ("number-for-bool", _set("geometry", "ply_clockwise", "1"), ["[geometry] ply_clockwise", "1", "true or false"]),

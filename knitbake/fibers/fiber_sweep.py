@@ -44,6 +44,7 @@ import math
 import numpy as np
 
 from data_formats.curve_eval import curve_frames, dense_curve, start_normal, tangents
+from data_formats.errors import FormatError
 from data_formats.yarn_curves import YarnCurves
 from data_formats.yarn_spec import YarnSpec
 from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
@@ -153,8 +154,12 @@ def sweep_curve(curves: YarnCurves, c: int, frame: int, spec: YarnSpec, radius: 
     else:
         gen_length, stretch = length / k, 1.0
         facts.update(axial_stretch=1.0)
-    fs = generate_fibers(spec, length=gen_length, z_start=0.0, seed=cseed, segments_per_period=segments_per_period,
-                         flyaways=flyaways)
+    try:
+        fs = generate_fibers(spec, length=gen_length, z_start=0.0, seed=cseed, segments_per_period=segments_per_period,
+                             flyaways=flyaways)
+    except FormatError as e:  # the budget: say that the drawn radius is what makes the yarn so long
+        raise FormatError(f"curve {c} ({length:.4g} long) drawn at radius {radius:g}, {k:.3g} × the yarn's "
+                          f"{spec.radius:g}: {e}") from None
     if not closed:
         fs = clip_axially(fs, 0.0, gen_length)
     yarn_pts = fs.points * np.array([k, k, k * stretch])

@@ -32,11 +32,16 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from data_formats.memory_budget import check_memory
 from data_formats.yarn_spec import YarnSpec
 from knitbake.fibers.fiber_set import KIND_HAIR, KIND_LOOP, KIND_REGULAR, FiberSet
 
 SEGMENTS_PER_TURN = 24  # default sampling: segments per full turn of a fiber around the yarn axis
 FLYAWAY_POINTS = 17  # points per loop or hair polyline
+# peak bytes of generate_fibers per item, bounds of what tracemalloc measured on cotton1 (48 B per regular point;
+# 5.4 KiB per hair, 3.0 KiB per loop): checked against the memory budget before anything is allocated
+REGULAR_POINT_BYTES = 64
+FLYAWAY_BYTES = 6144
 
 
 def density(r, eps, beta):
@@ -96,6 +101,35 @@ def match_period(r0, chi0, phase0, chi_turn, phase_turn, migration_amplitude):
     return succ, r0[succ] - r0, d_chi[rows, succ], _wrap(phase0[succ] - phase0 - phase_turn)
 
 
+def _segments(spec: YarnSpec, length: float, segments_per_period: int | None) -> int:
+    """Segments of each regular fiber over ``length`` (``generate_fibers`` explains the default sampling)."""
+    g = spec.geometry
+    if segments_per_period is None:
+        turns = g.ply_pitch / min(g.fiber_pitch, g.ply_pitch) + 1.0
+        segments_per_period = max(32, int(math.ceil(SEGMENTS_PER_TURN * turns)))
+    return max(1, int(math.ceil(length / g.ply_pitch * segments_per_period - 1e-9)))
+
+
+def check_fiber_budget(spec: YarnSpec, length: float, segments_per_period: int | None = None,
+                       flyaways: bool = True) -> None:
+    """Refuse (FormatError, one line naming the fields) a window whose fibers would not fit in memory
+    (``data_formats.memory_budget``); ``generate_fibers`` calls it before allocating, bakes before their first stage.
+    """
+    g, fl = spec.geometry, spec.flyaways
+    n_seg = _segments(spec, length, segments_per_period)
+    fibers = g.plies * g.fibers_per_ply
+    flyaway_count = (fl.hair_density + fl.loop_density) * length * g.plies if flyaways else 0.0
+    regular = float(fibers) * (n_seg + 1) * REGULAR_POINT_BYTES
+    causes = (f"{g.plies} plies × fibers_per_ply {g.fibers_per_ply} × {n_seg + 1} points: {length / g.ply_pitch:.3g} "
+              f"periods of ply_pitch {g.ply_pitch:g} at {n_seg / (length / g.ply_pitch):.3g} points per period from "
+              f"ply_pitch/fiber_pitch = {g.ply_pitch / g.fiber_pitch:.3g} turns")
+    if flyaway_count * FLYAWAY_BYTES > regular:
+        causes = (f"~{flyaway_count:.3g} flyaways: (hair_density {fl.hair_density:g} + loop_density "
+                  f"{fl.loop_density:g}) × {length:g} {spec.units} × {g.plies} plies")
+    check_memory(regular + flyaway_count * FLYAWAY_BYTES, f"the fibers of {spec.name!r} over {length:.4g} "
+                 f"{spec.units}", causes)
+
+
 @njit(cache=True)
 def _member_offset(zp, u, r0, chi0, phase0, d_r, d_chi, d_phase, e_b, e_n, fiber_rate, mig_rate, rho_min,
                    rho_max):
@@ -150,10 +184,8 @@ def generate_fibers(spec: YarnSpec, length: float | None = None, z_start: float 
     length = period if length is None else float(length)
     if not (math.isfinite(length) and length > 0 and math.isfinite(z_start)):
         raise ValueError(f"length = {length!r} must be positive and z_start = {z_start!r} finite")
-    if segments_per_period is None:
-        turns = period / min(g.fiber_pitch, g.ply_pitch) + 1.0
-        segments_per_period = max(32, int(math.ceil(SEGMENTS_PER_TURN * turns)))
-    n_seg = max(1, int(math.ceil(length / period * segments_per_period - 1e-9)))
+    check_fiber_budget(spec, length, segments_per_period, flyaways)
+    n_seg = _segments(spec, length, segments_per_period)
     z = z_start + length * np.arange(n_seg + 1) / n_seg
 
     rng = np.random.Generator(np.random.PCG64(seed))

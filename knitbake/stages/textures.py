@@ -325,6 +325,14 @@ def _shifted(fibers: FiberSet, idx: np.ndarray, shift: np.ndarray, period: float
                     period)
 
 
+def flyaway_periods(spec: YarnSpec) -> int:
+    """n: ``flyaway_variants`` draws the flyaways of n + 1 periods of yarn, n covering the variants and the longest
+    loop (one migration cycle)."""
+    g = spec.geometry
+    cycle = g.fiber_pitch / g.migration_frequency if g.migration_frequency > 0 else g.fiber_pitch  # loop length
+    return max(VARIANTS, math.ceil(cycle / g.ply_pitch) + 2)
+
+
 def flyaway_variants(spec: YarnSpec, seed: int = 0, band: float = 0.0) -> tuple[list[FiberSet], dict]:
     """The flyaway fibers of the three variants in period coordinates (z ∈ [0, P] is the texture; fibers reaching
     past it are kept whole) and counts: ``shared`` boundary flyaways, ``copies`` of them drawn per variant,
@@ -334,8 +342,7 @@ def flyaway_variants(spec: YarnSpec, seed: int = 0, band: float = 0.0) -> tuple[
     period = g.ply_pitch
     if not 0 <= band < period / 2:
         raise ValueError(f"band = {band!r} must be in [0, period/2) = [0, {period / 2:g})")
-    cycle = g.fiber_pitch / g.migration_frequency if g.migration_frequency > 0 else g.fiber_pitch  # loop length
-    n = max(VARIANTS, math.ceil(cycle / period) + 2)
+    n = flyaway_periods(spec)
     long = generate_fibers(spec, length=(n + 1) * period, z_start=-period, seed=seed)
     fly = long.select(long.kind != KIND_REGULAR)
     lo, hi = _z_extent(fly)
