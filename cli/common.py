@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import traceback
 from types import SimpleNamespace
 
 import click
@@ -23,7 +24,10 @@ _STITCH_MESH_OBJ = SimpleNamespace(sniff=stitch_mesh.sniff_obj, describe=stitch_
 # Recognised by content, most specific first: (kind, module with sniff/describe/validate).
 FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),
               ("scene", scene), ("yarn-spec", yarn_spec), ("stitch-mesh-obj", _STITCH_MESH_OBJ))
-USER_ERRORS = (FormatError, ValueError, OSError)
+# a user's mistake (bad file, field, argument; a file system refusing) is one line; any other exception is a bug of
+# ours and shows its traceback
+USER_ERRORS = (FormatError, OSError)
+SEED = click.IntRange(0, 2**63 - 1)  # every --seed: what numpy's and Numba's generators take (int64, non-negative)
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 110}  # both programs' click settings
 
 
@@ -63,6 +67,13 @@ class FriendlyGroup(click.Group):
         except KeyboardInterrupt:
             click.echo(f"{prog}: interrupted", err=True)
             sys.exit(130)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001  (not a user error: a bug, reported as one)
+            traceback.print_exc()
+            click.echo(f"{prog}: internal error (a bug of {prog}, not of your input; please report it with the "
+                       f"traceback above): {exc.__class__.__name__}: {' '.join(str(exc).split())}", err=True)
+            sys.exit(70)  # EX_SOFTWARE
 
 
 def check_outputs(outputs: dict, inputs=()) -> None:

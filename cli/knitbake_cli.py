@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from cli.common import CONTEXT, FriendlyGroup, SuffixPath, check_outputs, echo_json, echo_tree, file_kind
+from cli.common import CONTEXT, SEED, FriendlyGroup, SuffixPath, check_outputs, echo_json, echo_tree, file_kind
 from data_formats import FormatError
 from data_formats.input_files import regular_file
 from data_formats.yarn_spec import FIELDS, SECTIONS, describe_spec, dumps_spec, load_preset, preset_names, resolve_yarn
@@ -168,7 +168,7 @@ def validate(path):
               help="Fiber curves: .h5 (our yarn-curve HDF5) or .bcc (polylines).")
 @click.option("--periods", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
               help="Length of yarn to generate, in ply-twist periods.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed → identical fibers).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed → identical fibers).")
 @click.option("--segments-per-period", type=click.IntRange(min=4), default=None,
               help="Polyline segments per period (default: 24 per turn).")
 @click.option("--no-flyaways", is_flag=True, help="Regular fibers only.")
@@ -219,8 +219,8 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
 @click.option("-o", "--output", type=SuffixPath(".exr"), required=True,
               help="Linear float32 EXR; a tone-mapped PNG preview and a JSON summary are written next to it.")
 @click.option("--spp", type=click.IntRange(min=1), default=None, help="Samples per pixel (default: the scene's).")
-@click.option("--seed", type=int, default=None, help="Random seed of the path sampling (default: the scene's).")
-@click.option("--fiber-seed", type=int, default=None,
+@click.option("--seed", type=SEED, default=None, help="Random seed of the path sampling (default: the scene's).")
+@click.option("--fiber-seed", type=SEED, default=None,
               help="Random seed of the fibers (default: --seed). Another fiber seed draws another instance of the "
                    "same yarns: the fiber-instance floor of knitrun compare.")
 @click.option("--max-depth", type=click.IntRange(min=1), default=None,
@@ -278,7 +278,7 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
 @click.option("--scene", "scene_path", type=click.Path(dir_okay=False), default=None,
               help="Bake only what this scene needs (no I_M without environment light; texture size from the "
                    "largest on-screen yarn width).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Same seed and settings → identical pack.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Same seed and settings → identical pack.")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Worker threads (default: all cores).")
 @click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
@@ -321,7 +321,7 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
         click.echo(f"[{index + 1}/{count}] {stage}", err=True)
 
     t0 = time.perf_counter()
-    only_list = [o.strip() for o in only.split(",")] if only else None
+    only_list = [o.strip() for o in only.split(",")] if only is not None else None
     summary = bake(spec, output, quality=quality, only=only_list, needs=needs, seed=seed, use_cache=not no_cache,
                    on_stage=on_stage, progress_factory=progress_factory)
     for bar in bars.values():

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import sys
+import time
 from pathlib import Path
 
 import click
@@ -11,6 +13,8 @@ from cli.common import CONTEXT, FriendlyGroup, SuffixPath, check_outputs, echo_j
 from data_formats import FormatError
 from data_formats.input_files import regular_file
 from knitrun.render.ablations import ABLATION_LABELS, ABLATIONS
+
+PROGRESS_FRAMES = 100  # simulate shows a progress bar from this many frames on
 
 
 @click.group(name="knitrun", cls=FriendlyGroup, context_settings=CONTEXT)
@@ -120,7 +124,8 @@ def pattern(source, rows, cols, output, as_json):
 def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, beta, as_json):
     """Knot simulation: yarn curves of a stitch mesh (.h5, or .obj + .labels) driven by deformations or OBJ frames.
 
-    Reports milliseconds per frame (median; Numba compile or cache load excluded), the final energy and the contact
+    Reports the whole run's seconds and where they went: milliseconds per frame (median; Numba compile or cache load
+    excluded, in "prepare"), building the curves, the contact statistic and writing; the final energy and the contact
     statistic (knitrun/sim/contact.py: how far each yarn stays from the others, over 2r; below 1 they interpenetrate).
 
     \b
@@ -136,6 +141,7 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     from knitrun.sim.deformations import deformation_frames, parse_deformation, read_obj_frames
     from knitrun.sim.simulate import simulate as run_simulation
 
+    started = time.perf_counter()
     check_outputs({"--output": output}, [mesh_path, _labels(mesh_path)])
     suffix = Path(output).suffix.lower()
     if obj_dir is not None and (deforms or frames is not None):
@@ -144,21 +150,34 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     mesh = stitch_mesh.load_stitch_mesh(mesh_path)
     vertex_frames = read_obj_frames(obj_dir, mesh) if obj_dir is not None else \
         deformation_frames(mesh.vertices, specs, frames or 1)
-    curves, report = run_simulation(mesh, vertex_frames, iterations=iterations, w_length=w_length, beta=beta)
+    count = len(vertex_frames)
+    with click.progressbar(length=count, label="simulating", file=sys.stderr, show_pos=True, show_eta=True,
+                           hidden=count < PROGRESS_FRAMES) as bar:
+        curves, report = run_simulation(mesh, vertex_frames, iterations=iterations, w_length=w_length, beta=beta,
+                                        progress=lambda done, total: bar.update(done - bar.pos))
+    t0 = time.perf_counter()
     report["contact"] = contact_over_frames(curves, report["yarn_radius"])
+    report["contact_s"] = time.perf_counter() - t0
     for warning in report["warnings"]:
         click.echo(f"warning: {warning}", err=True)
+    t0 = time.perf_counter()
     if suffix == ".bcc":
         write_bcc(output, curves, frame=curves.points.shape[0] - 1)
     else:
         write_yarn_curves(output, curves)
+    report["write_s"] = time.perf_counter() - t0
+    report["total_s"] = time.perf_counter() - started
     report = {"mesh": mesh_path, "output": output, **{k: v for k, v in report.items() if k != "ms_per_frame"}}
     if as_json:
         echo_json(report)
     else:
+        solve_s = report["seconds"] - report["prepare_s"] - report["curves_s"]
         click.echo(f"{mesh_path} → {output}: {report['faces']} faces, {report['frames']} frame(s), "
-                   f"{report['render_points']} points in {report['curves']} curves; "
-                   f"{report['ms_per_frame_median']:.2f} ms/frame (median, {report['threads']} threads); "
+                   f"{report['render_points']} points in {report['curves']} curves, {report['total_s']:.1f} s in all: "
+                   f"{report['ms_per_frame_median']:.2f} ms/frame (median, {report['threads']} threads; "
+                   f"{solve_s:.1f} s for all frames), prepare {report['prepare_s']:.1f} s, building the curves "
+                   f"{report['curves_s']:.1f} s, contact {report['contact_s']:.1f} s, "
+                   f"writing {report['write_s']:.1f} s; "
                    f"final energy {report['final_energy']:.6g}")
         worst = report["contact"]["worst"]
         click.echo(f"contact (distance to the nearest other yarn / 2r, r = {report['yarn_radius']:.4g}; 1 = touching), "
@@ -300,7 +319,6 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
 def _render_frames(renderer, scene_path, frame_range, output, exr_path, gif_path, fps, exposure, as_json):
     """``knitrun render --frames``: a progress bar over the frames, each frame's time, a summary."""
     import statistics
-    import sys
 
     from knitrun.render.sequence import parse_frames, render_sequence
 

@@ -4,6 +4,7 @@
 * The file gets the mode a plain ``open(path, "w")`` would give it: an existing file's mode when it replaces one,
   else 0666 less the process's umask (the temporary itself is created 0600 by ``mkstemp`` and changed just before
   the rename).
+* A destination that is a symbolic link is written through: the file it points to is replaced, the link kept.
 * Temporaries are named ``.<name>.<pid>.<random>.tmp``: writers of one path never share one (two bakes of a yarn
   may write the same cache entry at once; the last rename wins, both succeed), and a temporary left by a killed
   process (SIGKILL runs no cleanup) is removed by the next write to that path once its process is gone.
@@ -64,6 +65,8 @@ def atomic_path(path):
     """Yield a temporary path next to ``path``; on success give it ``new_file_mode(path)`` and rename it to
     ``path``, on failure delete it."""
     path = Path(path)
+    if path.is_symlink():  # write through the link, as open(path, "w") would, instead of replacing the link
+        path = Path(os.path.realpath(path))
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         from .errors import FormatError

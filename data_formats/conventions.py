@@ -21,6 +21,7 @@ THETA_RANGE = (-HALF_PI, HALF_PI)
 PHI_RANGE = (-math.pi, math.pi)
 CM_PER_UNIT = {"mm": 0.1, "cm": 1.0, "m": 100.0}
 LENGTH_UNITS = tuple(CM_PER_UNIT)
+MAX_COORD = 1e9  # bound of every position and direction in a file we read (in its units): keeps products finite
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 luminance weights of linear RGB
 
 

@@ -22,6 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
+from data_formats.errors import FormatError
 from data_formats.yarn_curves import YarnCurves
 
 
@@ -55,7 +56,7 @@ def evaluate(points: np.ndarray, closed: bool, curve_type: str, samples_per_segm
     points = np.asarray(points, dtype=float)
     n = len(points)
     if n < 2 or (curve_type == "BZ" and (n % 3 if closed else (n - 1) % 3)):
-        raise ValueError(f"{n} control points do not make a {'closed' if closed else 'open'} {curve_type} curve")
+        raise FormatError(f"{n} control points do not make a {'closed' if closed else 'open'} {curve_type} curve")
     padded = np.concatenate([2 * points[:1] - points[1:2], points, 2 * points[-1:] - points[-2:-1]])
     win = padded[_windows(n, closed, curve_type)]  # (S, 4, 3)
     u = np.arange(samples_per_segment + 1) / samples_per_segment
@@ -124,7 +125,7 @@ def tangents(xyz: np.ndarray, closed: bool) -> np.ndarray:
     norm = np.linalg.norm(d, axis=1)
     valid = norm > 1e-300
     if not valid.any():
-        raise ValueError("the curve has zero length (all its points coincide)")
+        raise FormatError("the curve has zero length (all its points coincide)")
     idx = np.maximum.accumulate(np.where(valid, np.arange(len(d)), -1))
     idx[idx < 0] = np.flatnonzero(valid)[0]
     return d[idx] / norm[idx, None]

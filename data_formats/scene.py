@@ -27,7 +27,7 @@ import tomli_w
 
 from . import bcc, yarn_curves
 from .atomic import atomic_path
-from .conventions import CM_PER_UNIT, LENGTH_UNITS
+from .conventions import CM_PER_UNIT, LENGTH_UNITS, MAX_COORD
 from .errors import FormatError
 from .input_files import open_hdf5, read_head, regular_file
 from .yarn_spec import YarnSpec, load_preset, load_spec, preset_names
@@ -44,7 +44,6 @@ BUILTIN_ENVIRONMENTS = ("sky",)
 MSAA_LEVELS = (1, 2, 4, 8, 16)
 MAX_IMAGE_SIZE = 16384
 MAX_RGB = 1e6  # irradiance, environment scale and background upper bound
-MAX_COORD = 1e9  # bound of positions and directions (keeps products finite)
 # [render] key: (default, lo, hi, meaning); msaa must be in MSAA_LEVELS, shadow_map_size a power of two.
 RENDER_FIELDS = {
     "spp": (64, 1, 1_000_000, "samples per pixel of the reference path tracer"),

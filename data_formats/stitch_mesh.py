@@ -27,6 +27,7 @@ import h5py
 import numpy as np
 
 from .atomic import atomic_path
+from .conventions import MAX_COORD
 from .errors import FormatError
 from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
 from .input_files import open_hdf5, read_head, regular_file
@@ -211,6 +212,10 @@ def _check_vertices(vertices, where):
     if bad.size:
         raise FormatError(f"{where}: vertex {bad[0]}: coordinates {tuple(vertices[bad[0]].tolist())} are not "
                           f"finite, expected finite numbers")
+    bad = np.flatnonzero(np.abs(vertices).max(axis=1) > MAX_COORD)
+    if bad.size:
+        raise FormatError(f"{where}: vertex {bad[0]}: coordinates {tuple(vertices[bad[0]].tolist())}, expected "
+                          f"numbers in [{-MAX_COORD:g}, {MAX_COORD:g}]")
 
 
 def _check_faces(vertices, offsets, fv, stitch_type, where):
@@ -567,13 +572,13 @@ def parse_obj(path, where):
     if bad.size:
         raise FormatError(f"{where}: line {vertex_lines[bad[0]]}: vertex {bad[0]}: coordinates "
                           f"{tuple(vertices[bad[0]].tolist())} are not finite, expected finite numbers")
+    for f, face in enumerate(faces):  # Python ints: an index past int64 is named, not an OverflowError
+        bad = [i for i in face if not 0 <= i < len(vertices)]
+        if bad:
+            raise FormatError(f"{where}: line {face_lines[f]}: face {f}: vertex {bad[0] + 1} (1-based) does not exist, "
+                              f"expected 1..{len(vertices)}")
     fv = np.array([i for face in faces for i in face], np.int64)
     offsets = np.concatenate([[0], np.cumsum([len(face) for face in faces])]).astype(np.int64)
-    bad = np.flatnonzero((fv < 0) | (fv >= len(vertices)))
-    if bad.size:
-        f = int(np.searchsorted(offsets, bad[0], side="right") - 1)
-        raise FormatError(f"{where}: line {face_lines[f]}: face {f}: vertex {fv[bad[0]] + 1} (1-based) does not exist, "
-                          f"expected 1..{len(vertices)}")
     return vertices, offsets, fv, face_lines
 
 

@@ -32,9 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
+from data_formats.asset_pack import write_pack
 from data_formats.atomic import atomic_path
 from data_formats.cache_folders import cache_root
-from data_formats.asset_pack import write_pack
+from data_formats.errors import FormatError
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
 from knitbake.fibers.procedural_yarn import check_fiber_budget
 from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
@@ -87,6 +88,9 @@ QUALITY = {
 # curves, not tubes
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 5, "shadowing": 3, "environment": 3,
                  "interreflection": 2, "textures": 2, "flyaway": 2}
+
+
+MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64
 
 
 def cache_dir() -> Path:
@@ -153,10 +157,12 @@ def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None
     stages = [s for s in STAGE_ORDER if s != "flyaway" or spec.has_flyaways]
     if needs is not None and not needs["environment"]:
         stages.remove("environment")
-    if only:
+    if only is not None:
+        if not any(only):
+            raise FormatError(f"--only names no table group (known: {', '.join(STAGE_ORDER)})")
         unknown = [o for o in only if o not in STAGE_ORDER]
         if unknown:
-            raise ValueError(f"--only {','.join(unknown)}: unknown table group (known: {', '.join(STAGE_ORDER)})")
+            raise FormatError(f"--only {','.join(unknown)}: unknown table group (known: {', '.join(STAGE_ORDER)})")
         stages = [s for s in stages if s in only]
     return stages
 
@@ -190,8 +196,11 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
     ``overrides`` (stage → settings) replaces individual settings of the quality preset (tests, sweeps).
     ``on_stage(stage, index, count)`` is called as a stage starts; ``progress_factory(stage)`` returns the
     ``progress(done, total)`` callback for that stage (both optional, for the CLI)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
+        raise FormatError(f"seed = {seed!r}: expected an integer in [0, 2^62 - 1] (the stages derive int64 batch "
+                          f"seeds from it)")
     if quality not in QUALITY:
-        raise ValueError(f"quality {quality!r} is not one of {', '.join(QUALITY)}")
+        raise FormatError(f"quality {quality!r} is not one of {', '.join(QUALITY)}")
     settings = {k: {**v, **(overrides or {}).get(k, {})} for k, v in QUALITY[quality].items()}
     if needs is not None:
         for stage in ("textures", "flyaway"):

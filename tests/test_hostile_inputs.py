@@ -12,6 +12,12 @@ checks that it is gone.
   before any work (items 10 and 11).
 * Legal but extreme yarn and scene values are refused in one line naming the fields before anything is allocated
   (the memory budget), and the ranges that ran for minutes are closed (item 4).
+* A pack that declares a huge table, HDF5 files that point outside themselves, FIFOs, folders and devices given as
+  files are refused without reading or blocking (items 5, 6, 13).
+* Arguments past int64 (an OBJ face index, a seed) are named, not tracebacks (item 8); our own errors are one line,
+  any other exception is reported as a bug (item 9).
+* The smaller defects: an unknown ``--pack`` name, ``--only ''``, coordinates of 1e300, a symlinked output, and the
+  time report of a long simulation (item 13).
 """
 
 import dataclasses
@@ -421,3 +427,178 @@ def test_the_ranges_that_ran_for_minutes_are_closed():
     with pytest.raises(FormatError, match=r"fibers_per_ply.*5000.*\[1, 1000\]"):
         loads_spec(text)
     assert RENDER_FIELDS["srbf_count"][2] == 64
+
+
+def test_arguments_past_int64_are_named_not_tracebacks(tmp_path):
+    """Item 8: an OBJ face index above 2^63 raised OverflowError; `bake --seed` >= 2^64 a Numba TypingError after the
+    first stage; `--seed -1` a message naming neither option nor value."""
+    from click.testing import CliRunner
+
+    from cli.knitbake_cli import main as knitbake
+    from data_formats import FormatError
+    from data_formats.stitch_mesh import read_obj_stitch_mesh
+
+    obj = tmp_path / "m.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 99999999999999999999999 4\n")
+    (tmp_path / "m.labels").write_text("knit\n")
+    with pytest.raises(FormatError, match=r"line 5: face 0: vertex 99999999999999999999999 \(1-based\) does not exist"):
+        read_obj_stitch_mesh(obj)
+    for seed in ("18446744073709551616", "-1"):
+        result = CliRunner().invoke(knitbake, ["bake", "cotton1", "-o", str(tmp_path / "p.h5"), "--seed", seed])
+        assert result.exit_code == 2 and "'--seed'" in result.output and seed in result.output, result.output
+    with pytest.raises(FormatError, match=r"seed = 9223372036854775807: expected an integer in \[0, 2\^62 - 1\]"):
+        bake(_small_yarn(), tmp_path / "p.h5", seed=2**63 - 1, on_stage=pytest.fail)
+    assert not (tmp_path / "p.h5").exists()
+
+
+def _group_raising(exc):
+    import click
+
+    from cli.common import FriendlyGroup
+
+    @click.group(cls=FriendlyGroup)
+    def program():
+        pass
+
+    @program.command()
+    def run():
+        raise exc
+    return program
+
+
+def test_library_errors_show_as_bugs_and_user_errors_as_one_line():
+    """Item 9: every ValueError printed as a tidy user error, so a library failure read as the user's mistake. Our
+    FormatError (and the file system's OSError) is one line, exit 1; anything else is reported as a bug with its
+    traceback, exit 70."""
+    from click.testing import CliRunner
+
+    from data_formats import FormatError
+
+    result = CliRunner().invoke(_group_raising(FormatError("a.h5: attr units is 3, expected 'cm'")), ["run"])
+    assert result.exit_code == 1 and result.output.strip().endswith("error: a.h5: attr units is 3, expected 'cm'")
+    assert len(result.output.strip().splitlines()) == 1
+    result = CliRunner().invoke(_group_raising(ValueError("Each lower bound must be strictly less")), ["run"])
+    assert result.exit_code == 70, result.output
+    assert "Traceback" in result.output and "internal error (a bug of" in result.output
+    assert "ValueError: Each lower bound must be strictly less" in result.output.splitlines()[-1]
+
+
+def test_the_two_library_errors_of_the_probe_are_gone(tmp_path):
+    """Item 9's examples: a legal one-row environment map reached scipy's "Each lower bound must be strictly less"
+    in the SRBF fit; a pack whose `format` (or a table's `units`) attribute is an array reached numpy's "truth value
+    is ambiguous" in `validate`, which never raises, and in read_pack."""
+    import h5py
+
+    from data_formats import FormatError
+    from data_formats.asset_pack.reader import describe, sniff, validate
+    from knitrun.shading.srbf_fit import fit_srbf
+    from tests.helpers import write_full
+
+    fit = fit_srbf(np.full((1, 8, 3), 2.0), n_lobes=4)
+    assert np.all(np.isfinite(fit.weights)) and fit.relative_l2_error < 1e-3
+    for where, key in (("/", "format"), ("dual_scattering/a_b", "units")):
+        path = tmp_path / f"{key}.h5"
+        write_full(path)
+        with h5py.File(path, "a") as f:
+            f[where].attrs[key] = np.array([1, 2])
+        problems = validate(path)
+        assert problems and not any("ambiguous" in p or "unreadable content" in p for p in problems), problems
+        assert any(f"{key} is [1, 2]" in p for p in problems), problems
+        with pytest.raises(FormatError):
+            read_pack(path)
+        with pytest.raises(FormatError):
+            describe(path)
+        assert sniff(path) is (key != "format")
+
+
+def test_the_smaller_defects(tmp_path):
+    """Item 13: `--pack NAME=FILE` with a name no yarn has was ignored; `--only ''` baked everything; a mesh scaled
+    by 1e300 printed a numpy RuntimeWarning before failing; an output that is a symlink was replaced by a file."""
+    import warnings
+
+    from click.testing import CliRunner
+
+    from cli.knitrun_cli import main as knitrun
+    from data_formats import FormatError
+    from data_formats.stitch_mesh import read_obj_stitch_mesh
+    from knitbake.bake import stages_for
+
+    result = CliRunner().invoke(knitrun, ["render", "examples/scenes/straight_yarn_directional.toml", "--pack",
+                                          f"cottn1={tmp_path / 'p.h5'}", "-o", str(tmp_path / "x.png")])
+    assert result.exit_code == 1 and "the scene has no yarn 'cottn1' (its yarns: cotton1" in result.output
+    with pytest.raises(FormatError, match="--only names no table group"):
+        stages_for(_small_yarn(), only=[""])
+    obj = tmp_path / "huge.obj"
+    obj.write_text("v 0 0 0\nv 1e300 0 0\nv 1e300 1e300 0\nv 0 1e300 0\nf 1 2 3 4\n")
+    (tmp_path / "huge.labels").write_text("knit\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(FormatError, match=r"vertex 1: coordinates \(1e\+300, 0.0, 0.0\), expected numbers in "
+                                              r"\[-1e\+09, 1e\+09\]"):
+            read_obj_stitch_mesh(obj)
+    with pytest.raises(FormatError, match=r"frame 0, curve 0, point 1: .* expected numbers in \[-1e\+09, 1e\+09\]"):
+        make_yarn_curves(np.array([[0, 0, 0], [2e9, 0, 0]], float), [0, 2])
+    target = tmp_path / "real.png"
+    target.write_bytes(b"old")
+    link = tmp_path / "link.png"
+    link.symlink_to(target.name)
+    with atomic_path(link) as tmp:
+        tmp.write_bytes(b"new")
+    assert link.is_symlink() and target.read_bytes() == b"new"
+
+
+def test_simulate_says_where_a_long_run_spent_its_time(tmp_path):
+    """Item 13: `simulate --frames 20000` reported 0.14 ms/frame (the median solve) for a 92 s run. The report now
+    holds the whole run's seconds and its parts, and the parts add up to no more than the whole."""
+    import json
+
+    from click.testing import CliRunner
+
+    from cli.knitrun_cli import main as knitrun
+
+    mesh, out = tmp_path / "m.h5", tmp_path / "y.h5"
+    assert CliRunner().invoke(knitrun, ["pattern", "stockinette", "--rows", "2", "--cols", "2", "-o",
+                                        str(mesh)]).exit_code == 0
+    result = CliRunner().invoke(knitrun, ["simulate", str(mesh), "--deform", "stretch-x=1.2", "--frames", "150",
+                                          "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output[result.output.index("{"):])
+    parts = report["seconds"] + report["contact_s"] + report["write_s"]
+    assert 0 < report["prepare_s"] + report["curves_s"] <= report["seconds"] <= parts <= report["total_s"]
+
+
+def test_no_attribute_of_a_pack_given_as_an_array_reaches_a_library_error(tmp_path):
+    """Item 9, every attribute: each attribute of a pack (root, groups, tables) replaced by a two-element array is
+    reported by `validate` as a problem, never as "unreadable content" (a numpy or h5py error), or accepted where
+    the schema leaves it free; read_pack agrees and raises only FormatError (855 such calls failed before)."""
+    import shutil
+
+    import h5py
+
+    from data_formats import FormatError
+    from data_formats.asset_pack.reader import validate
+    from tests.helpers import write_full
+
+    source = tmp_path / "source.h5"
+    write_full(source)
+    places = []
+    with h5py.File(source, "r") as f:
+        places.append(("/", list(f.attrs)))
+        f.visititems(lambda name, obj: places.append((name, list(obj.attrs))))
+    path = tmp_path / "pack.h5"
+    checked = refused = 0
+    for where, keys in places:
+        for key in keys:
+            shutil.copy(source, path)
+            with h5py.File(path, "a") as f:
+                f[where].attrs[key] = np.array([1, 2])
+            problems = validate(path)
+            assert not any("unreadable content" in p for p in problems), (where, key, problems)
+            if problems:
+                with pytest.raises(FormatError):
+                    read_pack(path)
+            else:  # an attribute the schema leaves free (a description, a baker's note)
+                read_pack(path)
+            refused += bool(problems)
+            checked += 1
+    assert checked > 100 and refused > checked / 2, (checked, refused)

@@ -20,7 +20,7 @@ from .schema import (ATTRS, AXES, FORMAT_NAME, GROUPS, SCHEMA_MAJOR, SCHEMA_MINO
 def _version(f, path, probs):
     """(major, minor) of an open pack, or None after recording why the file is not readable as a pack."""
     fmt = py(f.attrs.get("format"))
-    if fmt != FORMAT_NAME:
+    if not (isinstance(fmt, str) and fmt == FORMAT_NAME):  # an array attribute compares elementwise
         probs.append(f"root attr format is {'missing' if fmt is None else short(fmt)}, expected {FORMAT_NAME!r}")
         return None
     spec = next(a for a in ATTRS if a.name == "schema_version")
@@ -208,7 +208,8 @@ def sniff(path) -> bool:
         return False
     try:
         with h5py.File(path, "r") as f:
-            return py(f.attrs.get("format")) == FORMAT_NAME
+            fmt = py(f.attrs.get("format"))
+            return isinstance(fmt, str) and fmt == FORMAT_NAME
     except Exception:  # noqa: BLE001
         return False
 

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from data_formats.atomic import atomic_path
+from data_formats.errors import FormatError
 from data_formats.images import read_exr, write_exr, write_png
 from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import compare_images, flip_error, yarn_filter, yarn_scale_metrics
@@ -78,7 +79,7 @@ def _reference_image(scene, path, spp, seed, fiber_seed, say, what):
     if path is not None:
         image = read_exr(path)
         if image.shape[:2] != (scene.camera.height, scene.camera.width):
-            raise ValueError(f"{path}: {image.shape[1]}x{image.shape[0]} image, the scene renders "
+            raise FormatError(f"{path}: {image.shape[1]}x{image.shape[0]} image, the scene renders "
                              f"{scene.camera.width}x{scene.camera.height}")
         summary = read_summary(path)
         return image, {"file": str(path), **({"spp": summary.get("spp")} if summary else {})}, \

@@ -136,11 +136,11 @@ def sweep_curve(curves: YarnCurves, c: int, frame: int, spec: YarnSpec, radius: 
     """Fibers of curve c at ``frame`` with yarn ``spec`` drawn at ``radius`` (curve units); their ``info`` holds the
     curve's facts (``info["curves"][c]`` of ``sweep_fibers`` without the fiber range)."""
     if not (math.isfinite(radius) and radius > 0):
-        raise ValueError(f"curve {c}: radius = {radius!r}, expected a positive finite number")
+        raise FormatError(f"curve {c}: radius = {radius!r}, expected a positive finite number")
     xyz, sigma = dense_curve(curves, c, frame, samples_per_segment)
     length = float(sigma[-1])
     if not length > 0:
-        raise ValueError(f"curve {c}: rest length {length!r}, expected > 0")
+        raise FormatError(f"curve {c}: rest length {length!r}, expected > 0")
     closed = bool(curves.closed[c])
     k = radius / spec.radius
     cseed = curve_seed(seed, c)
@@ -184,12 +184,12 @@ def sweep_fibers(curves: YarnCurves, frame: int, specs: dict[int, YarnSpec], rad
     ``segments_per_period`` and ``flyaways`` go to ``generate_fibers``; ``samples_per_segment`` to
     ``curve_eval.dense_curve``."""
     if not 0 <= frame < curves.points.shape[0]:
-        raise ValueError(f"frame = {frame}, expected 0 <= frame < {curves.points.shape[0]}")
+        raise FormatError(f"frame = {frame}, expected 0 <= frame < {curves.points.shape[0]}")
     parts = []
     for c in range(len(curves.offsets) - 1):
         ytype = int(curves.yarn_type[c])
         if ytype not in specs or ytype not in radii:
-            raise ValueError(f"curve {c}: no yarn spec or radius for yarn type {ytype} "
+            raise FormatError(f"curve {c}: no yarn spec or radius for yarn type {ytype} "
                              f"({curves.yarn_types[ytype]!r}); specs cover {sorted(specs)}, radii {sorted(radii)}")
         parts.append(sweep_curve(curves, c, frame, specs[ytype], radii[ytype], seed, segments_per_period, flyaways,
                                  samples_per_segment))

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from data_formats.atomic import atomic_path
+from data_formats.errors import FormatError
 from data_formats.images import write_exr, write_png
 from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitbake.fibers.fiber_set import FiberSet
@@ -48,12 +49,12 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves") -> Re
     """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``; ``seed`` draws the fibers;
     ``geometry``: ``GEOMETRIES``."""
     if geometry not in GEOMETRIES:
-        raise ValueError(f"geometry {geometry!r}: expected one of {', '.join(GEOMETRIES)}")
+        raise FormatError(f"geometry {geometry!r}: expected one of {', '.join(GEOMETRIES)}")
     t0 = time.perf_counter()
     parts, types = [], []
     for k, entry in enumerate(scene.yarns):
         if entry.curves is None:
-            raise ValueError(f"yarns[{k}] gives a stitch mesh: simulate it to yarn curves first (knitrun simulate)")
+            raise FormatError(f"yarns[{k}] gives a stitch mesh: simulate it to yarn curves first (knitrun simulate)")
         curves = read_curves(entry.curves, scene.units)
         keep = np.isin(curves.yarn_type, entry.yarn_type_indices)
         specs = {i: entry.spec for i in entry.yarn_type_indices}

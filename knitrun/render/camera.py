@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from data_formats.errors import FormatError
+
 
 @dataclass
 class Camera:
@@ -39,7 +41,7 @@ class Camera:
         fwd /= np.linalg.norm(fwd)
         right = np.cross(fwd, self.up)
         if np.linalg.norm(right) < 1e-12:
-            raise ValueError("camera up is parallel to the viewing direction")
+            raise FormatError("camera up is parallel to the viewing direction")
         right /= np.linalg.norm(right)
         return fwd, right, np.cross(right, fwd)
 

@@ -49,13 +49,14 @@ import numpy as np
 
 from data_formats.conventions import LUMINANCE
 from data_formats.curve_eval import yarn_frame
+from data_formats.errors import FormatError
 from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitrun.render.ablations import Features
 from knitrun.render.camera import scene_camera
 from knitrun.render.interreflection import interreflected_visibility
+from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
-from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
 from knitrun.render.yarn_look import load_look, no_full_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
@@ -182,16 +183,26 @@ def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MER
             [np.array(v, np.float64) if v else np.zeros((0, m)) for v, m in zip(vis, n)])
 
 
+def _check_pack_keys(scene: Scene, packs: dict) -> None:
+    """Refuse a pack override that names no yarn entry of the scene (a typo would otherwise be ignored)."""
+    known = {key for k, e in enumerate(scene.yarns) for key in (str(k), e.yarn, e.spec.name)}
+    unknown = sorted(set(packs) - known)
+    if unknown:
+        raise FormatError(f"--pack {unknown[0]}={packs[unknown[0]]}: the scene has no yarn {unknown[0]!r} (its yarns: "
+                          f"{', '.join(sorted({e.spec.name for e in scene.yarns}))}; or an entry index 0.."
+                          f"{len(scene.yarns) - 1})")
+
+
 def _pack_path(k, entry, packs):
     """The pack of yarn entry k: ``packs`` by the entry's index, its ``yarn`` as written or its spec's name, else
     the scene's ``pack``."""
     path = next((packs[key] for key in (str(k), entry.yarn, entry.spec.name) if key in packs), entry.pack)
     if path is None:
         name = entry.spec.name
-        raise ValueError(f"yarns[{k}] ({name}) has no asset pack: bake one (knitbake bake {entry.yarn} -o "
+        raise FormatError(f"yarns[{k}] ({name}) has no asset pack: bake one (knitbake bake {entry.yarn} -o "
                          f"{name}.h5) and name it in the scene (pack = ...) or with --pack {name}=FILE")
     if not Path(path).is_file():
-        raise ValueError(f"yarns[{k}] ({entry.yarn}): pack {path} does not exist")
+        raise FormatError(f"yarns[{k}] ({entry.yarn}): pack {path} does not exist")
     return path
 
 
@@ -223,12 +234,14 @@ class Renderer:
 
     ``packs`` maps an entry index (as a string), a yarn as written in the scene or a yarn spec's name to a pack path,
     overriding the scene's ``pack``; ``use_cache`` False fits the environment again instead of reading the fit cache
-    (``knitrun.shading.srbf_cache``). ValueError (one line) for a scene the renderer cannot draw (a missing pack, a
-    pack for another yarn). ``setup_timings`` holds the seconds of ``load`` and ``srbf_fit`` spent here."""
+    (``knitrun.shading.srbf_cache``). FormatError (one line) for a scene the renderer cannot draw (a missing pack, a
+    pack for another yarn, a ``packs`` key that names no yarn). ``setup_timings`` holds the seconds of ``load`` and
+    ``srbf_fit`` spent here."""
 
     def __init__(self, scene: Scene, packs: dict | None = None, features: Features = Features(),
                  samples_per_segment: int = 4, use_cache: bool = True, progress=None):
         packs = packs or {}
+        _check_pack_keys(scene, packs)
         self.scene, self.features, self.samples_per_segment = scene, features, samples_per_segment
         self.setup_timings, self.setup_facts = {}, {}
         start = time.perf_counter()
@@ -278,7 +291,7 @@ class Renderer:
         scene, features, looks, fit = self.scene, self.features, self.looks, self.fit
         frame = scene.render.frame if frame is None else int(frame)
         if not 0 <= frame < self.frame_count:
-            raise ValueError(f"frame {frame} is out of range: the scene's curves have {self.frame_count} frame(s)")
+            raise FormatError(f"frame {frame} is out of range: the scene's curves have {self.frame_count} frame(s)")
         timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
         clock = [time.perf_counter()]
 

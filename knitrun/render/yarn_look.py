@@ -25,6 +25,7 @@ import numpy as np
 
 from data_formats.asset_pack import read_pack
 from data_formats.conventions import CM_PER_UNIT, LUMINANCE
+from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
 from knitrun.render.shading_inputs import Corrections, Look
 from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
@@ -94,7 +95,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
-        raise ValueError(f"{pack_path}: pack baked for yarn {spec.name!r}, the scene draws {entry.spec.name!r}")
+        raise FormatError(f"{pack_path}: pack baked for yarn {spec.name!r}, the scene draws {entry.spec.name!r}")
     flyaways = flyaways and spec.has_flyaways  # a yarn without flyaways has no flyaway textures to draw
     names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
     if corrections:
@@ -110,7 +111,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     if corrections and full_tables:
         names += [n for n in FULL_TABLES if n in stored]
     if missing:
-        raise ValueError(f"{pack_path}: pack lacks {', '.join(missing)} "
+        raise FormatError(f"{pack_path}: pack lacks {', '.join(missing)} "
                          f"(bake the yarn again without --only or --scene)")
     pack = read_pack(pack_path, tables=[k for k in stored if any(k == n or k.startswith(n + "/mip") for n in names)])
     colour = np.asarray(entry.color, np.float64)

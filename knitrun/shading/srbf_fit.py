@@ -2,7 +2,8 @@
 
 Model: L(ω) ≈ Σ_j W_j G(ω; ω_j, λ_j), G the SRBF of ``knitrun.shading.im_lookup.sg`` (G(ω_j) = 1, unnormalised), ω_j
 unit directions in the world frame of ``knitrun.shading.equirect`` (+y up), λ_j ∈ [0.5, λ_max], W_j linear RGB radiance
-(same units as the image), W_j ≥ 0. λ_max = min(1e4, 4/Δ²), Δ = π/H the texel's angular height: a lobe's angular
+(same units as the image), W_j ≥ 0. λ_max = min(1e4, 4/Δ²), Δ = π/H the texel's angular height (0.5 for H = 1,
+where the joint refinement is skipped: λ has no range): a lobe's angular
 standard deviation 1/√λ stays ≥ Δ/2, so the texel samples integrate it to < 1 % (a narrower lobe could match a sun
 texel's radiance at its centre while carrying a fraction of its energy; 1e4 is the top of the I_M table's λ range).
 
@@ -92,7 +93,7 @@ def fit_srbf(image, n_lobes: int = 16, max_iterations: int = 30, seed: int = 0,
 
     centres, lam = _greedy(sdirs, somega, sradiance, int(n_lobes), lam_max)
     active = len(lam)
-    if active and max_iterations:
+    if active and max_iterations and lam_max > LAMBDA_MIN:  # a one-row map leaves λ no range: keep the greedy fit
         centres, lam = _refine(sdirs, somega, sradiance, centres, lam, int(max_iterations), lam_max)
     weights = (_nnls_weights(sg(dirs[:, None, :], centres[None], lam[None]), omega, radiance) if active
                else np.zeros((0, 3)))  # scipy's NNLS aborts on an empty matrix
@@ -163,7 +164,7 @@ def _nnls_weights(g, weight, radiance):
 
 def lambda_max(height: int) -> float:
     """The largest λ fitted to an equirectangular image of ``height`` rows (module docstring)."""
-    return min(LAMBDA_MAX, 4.0 / (np.pi / height) ** 2)
+    return max(LAMBDA_MIN, min(LAMBDA_MAX, 4.0 / (np.pi / height) ** 2))  # one row (4/π² < 0.5): λ_min
 
 
 def _greedy(dirs, weight, radiance, n_lobes, lam_max):

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from data_formats.errors import FormatError
 from data_formats.yarn_curves import YarnCurves, make_yarn_curves, write_yarn_curves
 
 CRANE_RADIUS = 0.8  # the tube radius of Crane's constants, in curve parameter units
@@ -44,10 +45,10 @@ def stockinette_curves(rows: int, cols: int, radius: float = 0.03, samples_per_s
     ``units``): one open PL curve per row (row r at y offset r·w·s), ``samples_per_stitch`` points per stitch
     uniform in t, rest arc length = control-polygon length. Shape constants in Crane's units (module docstring)."""
     if rows < 1 or cols < 1 or samples_per_stitch < 4:
-        raise ValueError(f"rows = {rows}, cols = {cols}, samples_per_stitch = {samples_per_stitch}: expected "
+        raise FormatError(f"rows = {rows}, cols = {cols}, samples_per_stitch = {samples_per_stitch}: expected "
                          f"rows, cols >= 1 and samples_per_stitch >= 4")
     if not (np.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius = {radius!r}, expected a positive finite number")
+        raise FormatError(f"radius = {radius!r}, expected a positive finite number")
     s = radius / CRANE_RADIUS
     t = -np.pi / 2 + 2 * np.pi * np.arange(cols * samples_per_stitch + 1) / samples_per_stitch
     row = np.stack([t + roundness * np.sin(2 * t), loop_height * np.cos(t), -loop_depth * np.cos(2 * t)], axis=1)

@@ -167,12 +167,13 @@ def yarn_points(model, face_points, out=None):
     return out
 
 
-def simulate(mesh, frames, radius=None, frame_time=None, **options):
+def simulate(mesh, frames, radius=None, frame_time=None, progress=None, **options):
     """Simulate every frame of ``frames`` ((T, V, 3) vertex positions, or a list of (V, 3)) on ``mesh``; ``options``
-    as in ``prepare``.
+    as in ``prepare``; ``progress(done, total)`` is called after each frame.
 
     Returns (``YarnCurves``, report): report holds ``ms_per_frame`` (each frame's solve + assembly), its median,
-    ``prepare_s`` (rest data, yarn order and the rest solve, which pays Numba compile or cache load), the total
+    ``prepare_s`` (rest data, yarn order and the rest solve, which pays Numba compile or cache load), ``curves_s``
+    (building and validating the yarn curves of all frames), ``seconds`` (the whole call), the total
     energy of each frame after the last iteration (``frame_energy``), of the last frame after each iteration
     (``energy_history``), ``final_energy`` (the last frame's, after the last iteration) and counts."""
     t0 = time.perf_counter()
@@ -188,14 +189,19 @@ def simulate(mesh, frames, radius=None, frame_time=None, **options):
         yarn_points(model, solution.points, out=out[t])
         times.append((time.perf_counter() - t1) * 1e3)
         frame_energy.append(float(solution.energy[:, -1].sum()))
+        if progress is not None:
+            progress(t + 1, len(frames))
+    t1 = time.perf_counter()
     curves = make_yarn_curves(out, model.plan.offsets, yarn_type=model.layout.yarn_type,
                               yarn_types=mesh.yarn_types, rest_arclength=model.rest_arclength,
                               curve_type="PL" if model.plan.samples > 1 else "C0", units=mesh.units,
                               frame_time=frame_time, radius=model.radius)
+    curves_s = time.perf_counter() - t1
     history = solution.energy.sum(axis=0)
     report = {"faces": len(mesh.stitch_type), "frames": len(out), "curves": len(model.plan.offsets) - 1,
               "control_points": len(model.layout.index), "render_points": int(model.plan.offsets[-1]),
-              "threads": numba.get_num_threads(), "prepare_s": prepare_s, "ms_per_frame": times,
+              "threads": numba.get_num_threads(), "prepare_s": prepare_s, "curves_s": curves_s,
+              "seconds": time.perf_counter() - t0, "ms_per_frame": times,
               "ms_per_frame_median": float(np.median(times)), "frame_energy": frame_energy,
               "energy_history": history.tolist(), "final_energy": float(history[-1]), "yarn_radius": model.radius,
               "length_scale": model.length_scale, "warnings": template_size_warnings(model)}

@@ -106,18 +106,18 @@ def load_relaxed(path=RELAXED_PATH):
     try:
         document = json.loads(Path(path).read_text())
         if document.get("format") != "knit-relaxed-templates" or str(document.get("version", "")).split(".")[0] != "1":
-            raise ValueError("not a knit-relaxed-templates 1.x document")
+            raise FormatError("not a knit-relaxed-templates 1.x document")
         out = {}
         for name, entry in document["stitch_types"].items():
             knots = tuple(((float(k[0]), float(k[1])), (float(k[2]), float(k[3]))) for k in entry["knots"])
             points = {int(role): [tuple(float(x) for x in abc) for abc in spec]
                       for role, spec in entry["points"].items()}
             if len(knots) != N_KNOTS or not all(len(abc) == 3 for spec in points.values() for abc in spec):
-                raise ValueError(f"stitch type {name!r}: expected {N_KNOTS} knots and (a, c, s) triples")
+                raise FormatError(f"stitch type {name!r}: expected {N_KNOTS} knots and (a, c, s) triples")
             values = np.array([x for k in knots for pair in k for x in pair]
                               + [x for spec in points.values() for abc in spec for x in abc])
             if not np.isfinite(values).all():
-                raise ValueError(f"stitch type {name!r}: a value is not finite")
+                raise FormatError(f"stitch type {name!r}: a value is not finite")
             out[name] = {"knots": knots, "points": points}
     except (ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
         raise FormatError(f"{path}: {exc}, expected a knit-relaxed-templates file (knitrun templates relax)") from None
