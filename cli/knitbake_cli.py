@@ -5,6 +5,7 @@ Thin: parse, call ``data_formats``/``knitbake``, report. Errors are one line on 
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -340,6 +341,79 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
         click.echo(f"{stage:<18}{row['seconds']:>9.2f}  {'yes' if row['cached'] else 'no':<7}{row['tables']:>7}  "
                    f"{row['error_estimate']:.3g}")
     click.echo(f"{spec.name} → {output} ({quality}, {total:.1f} s)")
+
+
+@main.command("bake-library")
+@click.argument("yarn_names", metavar="YARN...", nargs=-1)
+@click.option("-o", "--output-dir", type=click.Path(file_okay=False), required=True,
+              help="Folder of the packs, one NAME.h5 per yarn (it must exist).")
+@click.option("--all", "all_presets", is_flag=True, help="Every built-in preset, besides the yarns named.")
+@click.option("--quality", type=click.Choice(["draft", "standard", "final"]), default="draft", show_default=True,
+              help="Resolution and sample counts of every table (as for bake).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Same seed and settings → identical packs.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="A running Dask scheduler (e.g. tcp://10.0.0.5:8786; or $KNIT_DASK_SCHEDULER). Default: an "
+                   "embedded cluster of worker processes on this machine.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes of the embedded cluster (default: one per 2 cores); each gets cores/workers "
+                   "Numba threads.")
+@click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, scheduler, workers, no_cache, as_json):
+    """Bake many yarn types at once on Dask: one task per stage of each yarn, the stage cache shared with bake.
+
+    Runs on an embedded cluster sized to this machine, or on a Dask cluster given by --scheduler (README, "Running
+    on a cluster"). One yarn's failure is reported and does not stop the others (exit code 1).
+
+    \b
+    Examples:
+      knitbake bake-library cotton1 silk1 -o packs/
+      knitbake bake-library --all -o packs/ --quality standard --scheduler tcp://scheduler:8786
+    """
+    from knitbake.scale_out import bake_library, dask_client
+
+    names = list(dict.fromkeys([*yarn_names, *(preset_names() if all_presets else [])]))
+    if not names:
+        raise click.UsageError("name at least one yarn, or --all")
+    if not os.path.isdir(output_dir):
+        raise FormatError(f"{output_dir}: output folder does not exist (--output-dir)")
+    specs = [resolve_yarn(name) for name in names]
+    seen = {}
+    for name, spec in zip(names, specs):
+        if spec.name in seen:
+            raise FormatError(f"{name} and {seen[spec.name]} are both yarn {spec.name!r}: their packs would share "
+                              f"{spec.name}.h5")
+        seen[spec.name] = name
+    jobs = [(spec, os.path.join(output_dir, f"{spec.name}.h5")) for spec in specs]
+    t0 = time.perf_counter()
+    with dask_client(scheduler, workers) as client:
+        with click.progressbar(length=1, label=f"baking {len(jobs)} yarn(s)", file=sys.stderr, show_pos=True,
+                               show_eta=True) as bar:
+            def on_task(done, total):
+                bar.length = total
+                bar.update(done - bar.pos)
+            results = bake_library(client, jobs, quality, seed, not no_cache, on_task)
+    total = time.perf_counter() - t0
+    failed = {name: exc for name, exc in results.items() if isinstance(exc, Exception)}
+    if as_json:
+        echo_json({"quality": quality, "seed": seed, "seconds": total, "scheduler": scheduler,
+                   "yarns": {spec.name: ({"output": out, "stages": results[spec.name]} if spec.name not in failed
+                                         else {"output": out, "error": str(failed[spec.name])})
+                             for spec, out in jobs}})
+    else:
+        click.echo(f"{'yarn':<14}{'stages':>7}{'seconds':>9}  {'cached':<7}{'error estimate (max)':>21}  pack")
+        for spec, out in jobs:
+            summary = results[spec.name]
+            if spec.name in failed:
+                click.echo(f"{spec.name:<14}  failed: {' '.join(str(summary).split())}")
+                continue
+            cached = sum(row["cached"] for row in summary.values())
+            click.echo(f"{spec.name:<14}{len(summary):>7}{sum(r['seconds'] for r in summary.values()):>9.1f}  "
+                       f"{f'{cached}/{len(summary)}':<7}{max(r['error_estimate'] for r in summary.values()):>21.3g}  "
+                       f"{out}")
+        click.echo(f"{len(jobs) - len(failed)} of {len(jobs)} pack(s) in {total:.1f} s ({quality})")
+    if failed:
+        sys.exit(1)
 
 
 @main.command("export")

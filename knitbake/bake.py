@@ -189,13 +189,10 @@ def _check_fiber_windows(spec: YarnSpec, stages) -> None:
         check_fiber_budget(spec, (flyaway_periods(spec) + 1) * spec.geometry.ply_pitch)
 
 
-def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, seed: int = 0, use_cache=True,
-         on_stage=None, progress_factory=None, overrides=None) -> dict:
-    """Bake ``spec`` into the asset pack ``output``; returns the summary (per stage: seconds, cached, error).
-
-    ``overrides`` (stage → settings) replaces individual settings of the quality preset (tests, sweeps).
-    ``on_stage(stage, index, count)`` is called as a stage starts; ``progress_factory(stage)`` returns the
-    ``progress(done, total)`` callback for that stage (both optional, for the CLI)."""
+def bake_plan(spec: YarnSpec, quality: str = "draft", only=None, needs=None, seed: int = 0,
+              overrides=None) -> tuple[dict, list[str]]:
+    """(settings per stage, stages to bake) of a bake (``bake`` explains the arguments), after checking the seed,
+    the quality and that the yarn's fiber windows fit in memory; nothing is baked."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
         raise FormatError(f"seed = {seed!r}: expected an integer in [0, 2^62 - 1] (the stages derive int64 batch "
                           f"seeds from it)")
@@ -208,29 +205,42 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
             settings[stage]["width"] = needs["texture_width"]
     stages = stages_for(spec, only, needs)
     _check_fiber_windows(spec, stages)
-    tables, errors, attrs, counts, summary = {}, {}, {}, {}, {}
-    for i, stage in enumerate(stages):
-        if on_stage:
-            on_stage(stage, i, len(stages))
-        key = stage_key(stage, spec, settings[stage], seed)
-        path = cache_dir() / f"{stage}-{key}.npz"
-        t0 = time.perf_counter()
-        result, damaged = _load_stage(path) if use_cache else (None, None)
-        cached = result is not None
-        if result is None:
-            progress = progress_factory(stage) if progress_factory else None
-            result = STAGES[stage](spec, settings[stage], seed, progress)
-            if use_cache:
-                _save_stage(path, result)
+    return settings, stages
+
+
+def run_stage(spec: YarnSpec, stage: str, settings: dict, seed: int, use_cache: bool = True,
+              progress=None) -> tuple[StageResult, dict]:
+    """(result, summary row) of one stage: from the stage cache when a valid entry exists, else baked and cached.
+    The row holds seconds, cached, tables, error_estimate (the largest of its tables) and, when an entry was
+    damaged, cache_warning. Deterministic for a seed whatever the thread count, so any process may run it."""
+    key = stage_key(stage, spec, settings, seed)
+    path = cache_dir() / f"{stage}-{key}.npz"
+    t0 = time.perf_counter()
+    result, damaged = _load_stage(path) if use_cache else (None, None)
+    cached = result is not None
+    if result is None:
+        result = STAGES[stage](spec, settings, seed, progress)
+        if use_cache:
+            _save_stage(path, result)
+    worst = max((float(np.max(e)) if np.ndim(e) else float(e)) for e in result.errors.values())
+    row = {"seconds": time.perf_counter() - t0, "cached": cached, "tables": len(result.tables), "error_estimate": worst}
+    if damaged:
+        row["cache_warning"] = damaged
+    return result, row
+
+
+def write_baked_pack(spec: YarnSpec, output, quality: str, settings: dict, stages: list[str], needs, seed: int,
+                     results: dict) -> dict:
+    """Write the pack of ``results`` (stage → ``run_stage``'s (result, row)) with its provenance; returns the
+    summary (stage → row)."""
+    tables, errors, attrs, counts = {}, {}, {}, {}
+    for stage in stages:
+        result = results[stage][0]
         tables.update(result.tables)
         errors.update(result.errors)
         attrs.update(result.attrs)
         counts[stage] = result.counts
-        worst = max((float(np.max(e)) if np.ndim(e) else float(e)) for e in result.errors.values())
-        summary[stage] = {"seconds": time.perf_counter() - t0, "cached": cached, "tables": len(result.tables),
-                          "error_estimate": worst}
-        if damaged:
-            summary[stage]["cache_warning"] = damaged
+    summary = {stage: results[stage][1] for stage in stages}
     yarn = {"name": spec.name, "units": spec.units, "radius": spec.radius, "period": spec.geometry.ply_pitch,
             "plies": spec.geometry.plies}
     provenance = {"yarn_spec_toml": dumps_spec(spec),
@@ -239,3 +249,33 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
                   "timings": {s: round(v["seconds"], 4) for s, v in summary.items()}, "sample_counts": counts}
     write_pack(output, yarn, provenance, fiber_bcsdf_attrs(spec.optics), tables, errors, attrs)
     return summary
+
+
+def _lazy_progress(progress_factory, stage):
+    """A progress callback that asks ``progress_factory`` for the stage's bar only once the stage reports (a cached
+    stage shows none)."""
+    made = []
+
+    def progress(done, total):
+        if not made:
+            made.append(progress_factory(stage))
+        made[0](done, total)
+    return progress
+
+
+def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, seed: int = 0, use_cache=True,
+         on_stage=None, progress_factory=None, overrides=None) -> dict:
+    """Bake ``spec`` into the asset pack ``output``; returns the summary (per stage: seconds, cached, error).
+
+    ``overrides`` (stage → settings) replaces individual settings of the quality preset (tests, sweeps).
+    ``on_stage(stage, index, count)`` is called as a stage starts; ``progress_factory(stage)`` returns the
+    ``progress(done, total)`` callback for that stage (both optional, for the CLI). ``knitbake.scale_out`` runs the
+    same stages as Dask tasks."""
+    settings, stages = bake_plan(spec, quality, only, needs, seed, overrides)
+    results = {}
+    for i, stage in enumerate(stages):
+        if on_stage:
+            on_stage(stage, i, len(stages))
+        results[stage] = run_stage(spec, stage, settings[stage], seed, use_cache,
+                                   _lazy_progress(progress_factory, stage) if progress_factory else None)
+    return write_baked_pack(spec, output, quality, settings, stages, needs, seed, results)
