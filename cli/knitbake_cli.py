@@ -229,21 +229,66 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="PNG preview exposure in stops.")
 @click.option("--geometry", type=click.Choice(["curves", "tubes"]), default="curves", show_default=True,
               help="Fibers as Embree's round curves, or tessellated into 6-sided tubes (the former path, to validate).")
+@click.option("--batch-spp", type=click.IntRange(min=1), default=None,
+              help="Sum the samples in batches of this many (the image a distributed run gives bit for bit; with "
+                   "--scheduler/--workers each batch is a task). Default: one batch.")
+@click.option("--frames", "frame_range", default=None, metavar="A:B",
+              help="Frames A..B-1 of animated curves, each a reference; -o then needs a run of '#' for the frame "
+                   "number (out/ref_####.exr).")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the batches and frames on this Dask scheduler (or $KNIT_DASK_SCHEDULER).")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Run them on an embedded Dask cluster of this many worker processes.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
-def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, geometry, as_json):
+def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, geometry, batch_spp, frame_range,
+              scheduler, workers, as_json):
     """Path-trace a scene with explicit fibers: the ground truth every fast image is compared with.
 
-    Example: knitbake reference examples/scenes/straight_yarn_directional.toml -o ref.exr --spp 64
+    \b
+    Examples:
+      knitbake reference examples/scenes/straight_yarn_directional.toml -o ref.exr --spp 64
+      knitbake reference anim.toml --frames 0:4 -o out/ref_####.exr --batch-spp 16 --workers 2
     """
-    from data_formats.scene import load_scene
-    from knitbake.trace.reference import trace_reference, write_reference
+    import dataclasses
 
-    check_outputs({"--output": output, "PNG preview": str(Path(output).with_suffix(".png")),
-                   "JSON summary": str(Path(output).with_suffix(".json"))}, [scene_path])
+    from data_formats.scene import load_scene, read_curves
+    from knitbake.scale_out import SCHEDULER_ENV
+    from knitbake.trace.reference import trace_reference, write_reference
+    from knitrun.render.sequence import frame_path, parse_frames
+
     scene = load_scene(scene_path)
     spp = spp or scene.render.spp
     seed = scene.render.seed if seed is None else seed
     max_depth = max_depth or scene.render.max_depth
+    frames = [scene.render.frame]
+    if frame_range is not None:
+        entry = next(e for e in scene.yarns if e.curves is not None)
+        frames = list(parse_frames(frame_range, read_curves(entry.curves, scene.units).points.shape[0]))
+        if len(frames) > 1 and frame_path(output, 0) == Path(output):
+            raise FormatError(f"{output}: an output for {len(frames)} frames needs a run of '#' for the frame "
+                              f"number, e.g. out/ref_####.exr")
+    outputs = {f: str(frame_path(output, f)) for f in frames}
+    check_outputs({f"{label} of frame {f}": str(Path(o).with_suffix(suffix)) for f, o in outputs.items()
+                   for label, suffix in (("--output", ".exr"), ("PNG preview", ".png"), ("JSON summary", ".json"))},
+                  [scene_path])
+    if scheduler or workers or os.environ.get(SCHEDULER_ENV):
+        _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_seed, max_depth, geometry,
+                               batch_spp, scheduler, workers, exposure, as_json)
+        return
+    if len(frames) > 1:
+        summaries = []
+        for f in frames:
+            image, facts = trace_reference(dataclasses.replace(scene, render=dataclasses.replace(scene.render,
+                                                                                                frame=f)),
+                                           spp, seed, max_depth, fiber_seed=fiber_seed, geometry=geometry,
+                                           batch_spp=batch_spp)
+            summaries.append(write_reference(outputs[f], image, {"scene": scene_path, "frame": f, **facts},
+                                             exposure))
+            click.echo(f"{outputs[f]}: frame {f}, {facts['render_s']:.1f} s, {facts['rays_per_s'] / 1e6:.2f} M rays/s",
+                       err=True)
+        if as_json:
+            echo_json(summaries)
+        return
 
     def built(facts):
         shape = (f"{facts['triangles']} triangles, tessellate {facts['tessellate_s']:.1f} s"
@@ -260,13 +305,45 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
             last[0] = done
 
         image, facts = trace_reference(scene, spp, seed, max_depth, progress=progress, on_built=built,
-                                       fiber_seed=fiber_seed, geometry=geometry)
+                                       fiber_seed=fiber_seed, geometry=geometry, batch_spp=batch_spp)
+    output = outputs[frames[0]]
     summary = write_reference(output, image, {"scene": scene_path, **facts}, exposure)
     if as_json:
         echo_json(summary)
         return
     click.echo(f"{output}: {facts['render_s']:.1f} s, {facts['rays'] / 1e6:.1f} M rays, "
                f"{facts['rays_per_s'] / 1e6:.2f} M rays/s; preview {summary['preview']}")
+
+
+def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_seed, max_depth, geometry,
+                           batch_spp, scheduler, workers, exposure, as_json):
+    """``knitbake reference`` on Dask: every frame's sample batches as tasks; each frame written as it finishes."""
+    import dataclasses
+
+    from distributed import as_completed
+
+    from knitbake.scale_out import dask_client, submit_reference
+    from knitbake.trace.reference import write_reference
+
+    summaries = []
+    with dask_client(scheduler, workers) as client:
+        futures = {submit_reference(client, dataclasses.replace(scene, render=dataclasses.replace(scene.render,
+                                                                                                 frame=f)),
+                                    spp, seed, fiber_seed, max_depth, batch_spp, geometry): f for f in frames}
+        with click.progressbar(length=len(frames), label=f"{len(frames)} frame(s), {spp} spp", file=sys.stderr,
+                               show_pos=True, show_eta=True) as bar:
+            for future in as_completed(futures):
+                f = futures[future]
+                image, facts = future.result()
+                summaries.append(write_reference(outputs[f], image, {"scene": scene_path, **facts}, exposure))
+                bar.update(1)
+    summaries.sort(key=lambda s: s["frame"])
+    if as_json:
+        echo_json(summaries if len(summaries) > 1 else summaries[0])
+        return
+    for summary in summaries:
+        click.echo(f"{summary['output']}: frame {summary['frame']}, {summary['batches']} batch(es), "
+                   f"{summary['render_s']:.1f} s of rendering in all, {summary['rays'] / 1e6:.1f} M rays")
 
 
 @main.command("bake")

@@ -1,4 +1,5 @@
-"""Bakes of many yarn types on Dask distributed (issue 17): one task per stage of each yarn, one per pack.
+"""Work that outgrows one machine on Dask distributed (issue 17): bakes of many yarn types (one task per stage of
+each yarn, one per pack) and references split into sample batches and frames.
 
 Where the work runs
 -------------------
@@ -21,6 +22,12 @@ A stage is deterministic for its seed whatever the thread count, so a distribute
 errors and attributes as a serial one (the provenance's timings differ). A worker that dies mid-task loses
 nothing: Dask reruns its task on another worker (up to ``distributed.scheduler.allowed-failures`` times) and the
 result is the same.
+
+``submit_reference`` splits a reference frame into sample batches (``knitbake.trace.reference.sample_batches``):
+each task builds the scene's fibers where it runs (the sweep and Embree build, seconds for the example patches)
+and returns the sum of its samples; one task adds the sums in batch order. A sample's random numbers depend only on
+(seed, its index, its pixel), so the image equals ``trace_reference`` with the same ``batch_spp`` bit for bit. Frames
+of an animation are independent references (one ``submit_reference`` per frame).
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ import os
 
 from data_formats.yarn_spec import YarnSpec
 from knitbake.bake import bake_plan, run_stage, write_baked_pack
+from knitbake.trace.reference import reference_batch, sample_batches
 
 SCHEDULER_ENV = "KNIT_DASK_SCHEDULER"
 
@@ -96,3 +104,30 @@ def bake_library(client, jobs: list[tuple[YarnSpec, str]], quality: str = "draft
         if on_task:
             on_task(i, len(tasks))
     return out
+
+
+def submit_reference(client, scene, spp: int, seed: int = 0, fiber_seed: int | None = None, max_depth: int = 16,
+                     batch_spp: int | None = None, geometry: str = "curves"):
+    """Submit the reference of ``scene`` (at its ``render.frame``): one task per sample batch (each builds the
+    fibers where it runs and renders its samples, ``reference_batch``) and one that adds their sums in batch order
+    and divides by spp. A future of (image, facts): the image ``trace_reference`` gives with the same
+    ``batch_spp``, bit for bit."""
+    fiber_seed = seed if fiber_seed is None else fiber_seed
+    tag = os.urandom(4).hex()
+    parts = [client.submit(reference_batch, scene, first, count, seed, fiber_seed, max_depth, geometry, pure=False,
+                           key=f"reference-f{scene.render.frame}-s{first}-{tag}")
+             for first, count in sample_batches(spp, batch_spp)]
+    facts = {"width": scene.camera.width, "height": scene.camera.height, "spp": spp, "batch_spp": batch_spp,
+             "seed": seed, "fiber_seed": fiber_seed, "max_depth": max_depth, "frame": scene.render.frame}
+    return client.submit(_sum_batches, parts, spp, facts, pure=False, key=f"reference-f{scene.render.frame}-{tag}")
+
+
+def _sum_batches(parts, spp, facts):
+    total = None
+    for part, _ in parts:  # in batch order: the sum a serial reference makes
+        total = part if total is None else total + part
+    image = total / spp
+    seconds, rays = sum(f["render_s"] for _, f in parts), sum(f["rays"] for _, f in parts)
+    build = {k: v for k, v in parts[0][1].items() if k not in ("render_s", "rays")}
+    return image, {**facts, "render_s": seconds, "rays": rays, "rays_per_s": rays / seconds if seconds else 0.0,
+                   "batches": len(parts), **build, "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}

@@ -117,3 +117,57 @@ def test_the_bake_library_command(tmp_path):
                                       "--no-cache"])
     assert result.exit_code == 0, result.output
     assert "1 of 1 pack(s)" in result.output and (tmp_path / "silk1.h5").exists()
+
+
+def _small_scene():
+    from data_formats.scene import load_scene
+
+    scene = load_scene("examples/scenes/straight_yarn_directional.toml")
+    return dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, width=48, height=12))
+
+
+def test_a_distributed_reference_is_the_serial_one_in_the_same_batches(client):
+    """Sample batches on two workers, summed in batch order: the serial reference with the same batches, bit for
+    bit; one batch (the default) is the plain render."""
+    from knitbake.scale_out import submit_reference
+    from knitbake.trace.reference import sample_batches, trace_reference
+
+    assert sample_batches(10, 4) == [(0, 4), (4, 4), (8, 2)] and sample_batches(10, None) == [(0, 10)]
+    scene = _small_scene()
+    serial, facts = trace_reference(scene, 6, seed=3, batch_spp=2)
+    image, dist_facts = submit_reference(client, scene, 6, seed=3, batch_spp=2).result(timeout=300)
+    assert np.array_equal(serial, image) and dist_facts["batches"] == 3 and dist_facts["rays"] == facts["rays"]
+    whole, _ = trace_reference(scene, 6, seed=3)
+    np.testing.assert_allclose(whole, serial, rtol=1e-12, atol=1e-15)  # the same samples, summed in another order
+
+
+def test_a_reference_animation_split_on_dask_writes_the_serial_frames(tmp_path):
+    """`knitbake reference --frames 0:2 --batch-spp 1 --workers 2`: every frame's batches as tasks on an embedded
+    cluster; the EXR of each frame equals the serial command's with the same batches."""
+    from click.testing import CliRunner
+
+    from cli.knitbake_cli import main as knitbake
+    from cli.knitrun_cli import main as knitrun
+    from data_formats.images import read_image
+
+    runner = CliRunner()
+    assert runner.invoke(knitrun, ["pattern", "stockinette", "--rows", "2", "--cols", "2", "-o",
+                                   str(tmp_path / "m.h5")]).exit_code == 0
+    result = runner.invoke(knitrun, ["simulate", str(tmp_path / "m.h5"), "--deform", "stretch-x=1.3", "--frames",
+                                     "3", "-o", str(tmp_path / "anim.h5")])
+    assert result.exit_code == 0, result.output
+    (tmp_path / "anim.toml").write_text(
+        'format = "knit-scene"\nversion = "1.0"\nunits = "cm"\n[[yarns]]\ncurves = "anim.h5"\nyarn = "cotton1"\n'
+        '[camera]\nposition = [0.3, 0.3, 2.0]\nlook_at = [0.3, 0.3, 0.0]\northo_height = 1.0\nwidth = 24\n'
+        'height = 16\n[[lights]]\ntype = "directional"\ndirection = [0.0, 0.5, 1.0]\nirradiance = [2, 2, 2]\n')
+    args = ["reference", str(tmp_path / "anim.toml"), "--frames", "0:2", "--spp", "2", "--batch-spp", "1"]
+    serial = runner.invoke(knitbake, [*args, "-o", str(tmp_path / "serial_#.exr")])
+    assert serial.exit_code == 0, serial.output
+    dist = runner.invoke(knitbake, [*args, "-o", str(tmp_path / "dist_#.exr"), "--workers", "2"])
+    assert dist.exit_code == 0, dist.output
+    for f in (0, 1):
+        a, b = read_image(tmp_path / f"serial_{f}.exr"), read_image(tmp_path / f"dist_{f}.exr")
+        assert np.array_equal(a, b) and a.max() > 0, f
+    assert not np.array_equal(read_image(tmp_path / "serial_0.exr"), read_image(tmp_path / "serial_1.exr"))
+    bad = runner.invoke(knitbake, [*args, "-o", str(tmp_path / "no_pattern.exr")])
+    assert bad.exit_code == 1 and "needs a run of '#'" in bad.output

@@ -439,8 +439,20 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
            yarn_only_radius: float = 0.0, samples_per_pass: int | None = None, progress=None):
     """Render ``spp`` samples per pixel; returns (image (H, W, 3), RenderStats). ``progress(done, total)`` is
     called after every pass of ``samples_per_pass`` samples per pixel."""
-    if spp < 1 or max_depth < 1:
-        raise ValueError(f"spp = {spp} and max_depth = {max_depth} must be ≥ 1")
+    total, stats = render_samples(scene, camera, 0, spp, seed, max_depth, rr_depth, yarn_only_radius,
+                                  samples_per_pass, progress)
+    return total / spp, stats
+
+
+def render_samples(scene: TracerScene, camera: Camera, first_sample: int, spp: int, seed: int = 0,
+                   max_depth: int = 16, rr_depth: int = 3, yarn_only_radius: float = 0.0,
+                   samples_per_pass: int | None = None, progress=None):
+    """The sum (H, W, 3) float64 of samples ``first_sample`` … ``first_sample + spp − 1`` of every pixel, added in
+    sample order, and RenderStats: ``render`` is this over samples 0 … spp − 1, divided by spp. A sample's random
+    numbers depend only on (seed, its index, pixel), so batches of samples can run anywhere (``knitbake.scale_out``).
+    ``progress(done, spp)`` after every pass."""
+    if spp < 1 or max_depth < 1 or first_sample < 0:
+        raise ValueError(f"spp = {spp}, max_depth = {max_depth} must be ≥ 1, first_sample = {first_sample} ≥ 0")
     w, h = int(camera.width), int(camera.height)
     n_pix = w * h
     if samples_per_pass is None:
@@ -457,9 +469,9 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
     accum = np.zeros((n_pix, 3))
     stats = RenderStats()
     t_start = time.perf_counter()
-    done = 0
-    while done < spp:
-        n_s = min(samples_per_pass, spp - done)
+    done, end = int(first_sample), int(first_sample) + spp
+    while done < end:
+        n_s = min(samples_per_pass, end - done)
         n = n_s * n_pix
         if scene.curves is not None:
             radiance, rays = np.empty((n, 3)), np.empty(n, np.int64)
@@ -474,7 +486,7 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
                 accum += sample_image
             done += n_s
             if progress is not None:
-                progress(done, spp)
+                progress(done - first_sample, spp)
             continue
         org = np.empty((n, 3))
         dirs = np.empty((n, 3))
@@ -520,7 +532,7 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
             accum += sample_image
         done += n_s
         if progress is not None:
-            progress(done, spp)
+            progress(done - first_sample, spp)
     stats.seconds = time.perf_counter() - t_start
     stats.spp = spp
-    return (accum / spp).reshape(h, w, 3), stats
+    return accum.reshape(h, w, 3), stats

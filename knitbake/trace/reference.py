@@ -29,7 +29,7 @@ from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.fiber_sweep import sweep_fibers
 from knitbake.fibers.tessellate import tessellate_fibers
 from knitbake.trace.env_light import env_from_image
-from knitbake.trace.path_tracer import TracerScene, render
+from knitbake.trace.path_tracer import TracerScene, render_samples
 from knitrun.render.camera import Camera, scene_camera
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.fiber_bcsdf import params_from_optics, tinted
@@ -85,24 +85,50 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves") -> Re
     return ReferenceScene(tracer, camera, facts)
 
 
+def sample_batches(spp: int, batch_spp: int | None) -> list[tuple[int, int]]:
+    """(first sample, count) of each batch of a reference of ``spp`` samples in batches of ``batch_spp`` (None or
+    ≥ spp: one batch): the image is the sum of the batches' sums in this order, divided by spp."""
+    step = spp if not batch_spp or batch_spp >= spp else int(batch_spp)
+    return [(first, min(step, spp - first)) for first in range(0, spp, step)]
+
+
 def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None,
-                    fiber_seed: int | None = None, geometry: str = "curves"):
+                    fiber_seed: int | None = None, geometry: str = "curves", batch_spp: int | None = None):
     """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``seed`` drives the
     path sampling and, unless ``fiber_seed`` is given, the fibers too: another fiber seed draws another instance of
     the same yarns (the fiber-instance floor of a comparison), another sampling seed another estimate of the same
-    image (its Monte Carlo floor). ``on_built(facts)`` is called once the tracer scene exists (before rendering),
-    ``progress(done, total)`` per pass of samples. facts: width, height, spp, seed, fiber_seed, max_depth, render_s,
-    rays, rays_per_s, the build facts of ``build_reference`` (geometry, fibers, segments, triangles, sweep_s,
-    tessellate_s, embree_build_s) and mean_rgb."""
+    image (its Monte Carlo floor). ``batch_spp`` sums the samples in batches (``sample_batches``): the image a
+    distributed reference with the same batches gives bit for bit (``knitbake.scale_out``); None, one batch.
+    ``on_built(facts)`` is called once the tracer scene exists (before rendering), ``progress(done, total)`` per
+    pass of samples. facts: width, height, spp, batch_spp, seed, fiber_seed, max_depth, render_s, rays, rays_per_s,
+    the build facts of ``build_reference`` (geometry, fibers, segments, triangles, sweep_s, tessellate_s,
+    embree_build_s) and mean_rgb."""
     fiber_seed = seed if fiber_seed is None else fiber_seed
     built = build_reference(scene, seed=fiber_seed, geometry=geometry)
     if on_built is not None:
         on_built(built.facts)
-    image, stats = render(built.tracer, built.camera, spp, seed=seed, max_depth=max_depth, progress=progress)
-    facts = {"width": built.camera.width, "height": built.camera.height, "spp": spp, "seed": seed,
-             "fiber_seed": fiber_seed, "max_depth": max_depth, "render_s": stats.seconds, "rays": stats.rays,
-             "rays_per_s": stats.rays_per_second, **built.facts, "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
+    total, seconds, rays = None, 0.0, 0
+    for first, count in sample_batches(spp, batch_spp):
+        part, stats = render_samples(built.tracer, built.camera, first, count, seed=seed, max_depth=max_depth,
+                                     progress=None if progress is None else
+                                     (lambda done, _, first=first: progress(first + done, spp)))
+        total = part if total is None else total + part
+        seconds, rays = seconds + stats.seconds, rays + stats.rays
+    image = total / spp
+    facts = {"width": built.camera.width, "height": built.camera.height, "spp": spp, "batch_spp": batch_spp,
+             "seed": seed, "fiber_seed": fiber_seed, "max_depth": max_depth, "render_s": seconds, "rays": rays,
+             "rays_per_s": rays / seconds if seconds > 0 else 0.0, **built.facts,
+             "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
     return image, facts
+
+
+def reference_batch(scene: Scene, first: int, count: int, seed: int, fiber_seed: int, max_depth: int,
+                    geometry: str = "curves") -> tuple[np.ndarray, dict]:
+    """One batch of a distributed reference, built where it runs: (sum of samples first … first + count − 1 as
+    ``render_samples`` gives it, facts of the build and the render)."""
+    built = build_reference(scene, seed=fiber_seed, geometry=geometry)
+    part, stats = render_samples(built.tracer, built.camera, first, count, seed=seed, max_depth=max_depth)
+    return part, {**built.facts, "render_s": stats.seconds, "rays": stats.rays}
 
 
 def summary_path(exr) -> Path:
