@@ -239,9 +239,12 @@ def fibers(yarn_name, output, periods, seed, segments_per_period, no_flyaways, p
               help="Run the batches and frames on this Dask scheduler (or $KNIT_DASK_SCHEDULER).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Run them on an embedded Dask cluster of this many worker processes.")
+@click.option("--resume", is_flag=True,
+              help="Skip the frames whose EXR and JSON summary are already there from a run with the same settings "
+                   "(an interrupted --frames run goes on where it stopped).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
 def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, geometry, batch_spp, frame_range,
-              scheduler, workers, as_json):
+              scheduler, workers, resume, as_json):
     """Path-trace a scene with explicit fibers: the ground truth every fast image is compared with.
 
     \b
@@ -249,7 +252,6 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
       knitbake reference examples/scenes/straight_yarn_directional.toml -o ref.exr --spp 64
       knitbake reference anim.toml --frames 0:4 -o out/ref_####.exr --batch-spp 16 --workers 2
     """
-    import dataclasses
 
     from data_formats.scene import load_scene, read_curves
     from knitbake.scale_out import SCHEDULER_ENV
@@ -268,6 +270,16 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
             raise FormatError(f"{output}: an output for {len(frames)} frames needs a run of '#' for the frame "
                               f"number, e.g. out/ref_####.exr")
     outputs = {f: str(frame_path(output, f)) for f in frames}
+    if resume:
+        settings = {"spp": spp, "batch_spp": batch_spp, "seed": seed, "max_depth": max_depth, "geometry": geometry,
+                    "fiber_seed": seed if fiber_seed is None else fiber_seed}
+        done = [f for f in frames if _finished_reference(outputs[f], {**settings, "frame": f})]
+        if done:
+            click.echo(f"--resume: frame(s) {', '.join(map(str, done))} already traced with these settings", err=True)
+        frames = [f for f in frames if f not in done]
+        outputs = {f: outputs[f] for f in frames}
+        if not frames:
+            return
     check_outputs({f"{label} of frame {f}": str(Path(o).with_suffix(suffix)) for f, o in outputs.items()
                    for label, suffix in (("--output", ".exr"), ("PNG preview", ".png"), ("JSON summary", ".json"))},
                   [scene_path])
@@ -278,12 +290,9 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
     if len(frames) > 1:
         summaries = []
         for f in frames:
-            image, facts = trace_reference(dataclasses.replace(scene, render=dataclasses.replace(scene.render,
-                                                                                                frame=f)),
-                                           spp, seed, max_depth, fiber_seed=fiber_seed, geometry=geometry,
-                                           batch_spp=batch_spp)
-            summaries.append(write_reference(outputs[f], image, {"scene": scene_path, "frame": f, **facts},
-                                             exposure))
+            image, facts = trace_reference(_at_frame(scene, f), spp, seed, max_depth, fiber_seed=fiber_seed,
+                                           geometry=geometry, batch_spp=batch_spp)
+            summaries.append(write_reference(outputs[f], image, {"scene": scene_path, **facts}, exposure))
             click.echo(f"{outputs[f]}: frame {f}, {facts['render_s']:.1f} s, {facts['rays_per_s'] / 1e6:.2f} M rays/s",
                        err=True)
         if as_json:
@@ -304,7 +313,8 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
             bar.update(done - last[0])
             last[0] = done
 
-        image, facts = trace_reference(scene, spp, seed, max_depth, progress=progress, on_built=built,
+        image, facts = trace_reference(_at_frame(scene, frames[0]), spp, seed, max_depth, progress=progress,
+                                       on_built=built,
                                        fiber_seed=fiber_seed, geometry=geometry, batch_spp=batch_spp)
     output = outputs[frames[0]]
     summary = write_reference(output, image, {"scene": scene_path, **facts}, exposure)
@@ -315,10 +325,25 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
                f"{facts['rays_per_s'] / 1e6:.2f} M rays/s; preview {summary['preview']}")
 
 
+def _at_frame(scene, frame: int):
+    """``scene`` drawing ``frame`` of its curves."""
+    import dataclasses
+
+    return dataclasses.replace(scene, render=dataclasses.replace(scene.render, frame=frame))
+
+
+def _finished_reference(exr, settings: dict) -> bool:
+    """True when ``exr`` and the JSON summary beside it (written last) are there and the summary's ``settings``
+    keys match."""
+    from knitbake.trace.reference import read_summary
+
+    summary = read_summary(exr)
+    return summary is not None and Path(exr).is_file() and all(summary.get(k) == v for k, v in settings.items())
+
+
 def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_seed, max_depth, geometry,
                            batch_spp, scheduler, workers, exposure, as_json):
     """``knitbake reference`` on Dask: every frame's sample batches as tasks; each frame written as it finishes."""
-    import dataclasses
 
     from distributed import as_completed
 
@@ -327,9 +352,8 @@ def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_
 
     summaries = []
     with dask_client(scheduler, workers) as client:
-        futures = {submit_reference(client, dataclasses.replace(scene, render=dataclasses.replace(scene.render,
-                                                                                                 frame=f)),
-                                    spp, seed, fiber_seed, max_depth, batch_spp, geometry): f for f in frames}
+        futures = {submit_reference(client, _at_frame(scene, f), spp, seed, fiber_seed, max_depth, batch_spp,
+                                    geometry): f for f in frames}
         with click.progressbar(length=len(frames), label=f"{len(frames)} frame(s), {spp} spp", file=sys.stderr,
                                show_pos=True, show_eta=True) as bar:
             for future in as_completed(futures):

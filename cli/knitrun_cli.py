@@ -361,9 +361,15 @@ def _render_frames(renderer, scene_path, frame_range, output, exr_path, gif_path
               help="With --reference: the same fibers with another sampling seed (knitbake reference --seed S+1 "
                    "--fiber-seed S).")
 @click.option("--no-floors", is_flag=True, help="Do not path trace the two floor references (a third of the time).")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Trace the reference and its floors at once on an embedded Dask cluster of this many worker "
+                   "processes (the same images). The speed-ups then divide the tasks' summed times, each task on "
+                   "cores/workers threads.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Trace them on this Dask scheduler instead (or $KNIT_DASK_SCHEDULER).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def compare(scene_path, out_dir, reference, spp, pack_values, exposure, instance_floor, mc_floor, no_floors,
-            as_json):
+            workers, scheduler, as_json):
     """Compare the strip renderer (full model and its ablations) with the reference path tracer, next to the
     reference's own floors (another fiber instance; another sampling seed), per pixel and at the yarn scale.
 
@@ -377,9 +383,16 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, instance
     if reference is None and (instance_floor or mc_floor):
         raise FormatError("--instance-floor and --mc-floor go with --reference (without it the floors are traced)")
     floor_files = {k: v for k, v in (("instance", instance_floor), ("monte_carlo", mc_floor)) if v}
-    summary = compare_scene(scene_path, out_dir, reference=reference, spp=spp, packs=_pack_overrides(pack_values),
-                            exposure=exposure, floors=not no_floors, floor_references=floor_files,
-                            progress=lambda message: click.echo(message, err=True))
+    run = dict(reference=reference, spp=spp, packs=_pack_overrides(pack_values), exposure=exposure,
+               floors=not no_floors, floor_references=floor_files,
+               progress=lambda message: click.echo(message, err=True))
+    if workers or scheduler or os.environ.get("KNIT_DASK_SCHEDULER"):
+        from knitbake.scale_out import dask_client
+
+        with dask_client(scheduler, workers) as client:
+            summary = compare_scene(scene_path, out_dir, client=client, **run)
+    else:
+        summary = compare_scene(scene_path, out_dir, **run)
     if as_json:
         echo_json(summary)
         return

@@ -143,7 +143,8 @@ def test_a_distributed_reference_is_the_serial_one_in_the_same_batches(client):
 
 def test_a_reference_animation_split_on_dask_writes_the_serial_frames(tmp_path):
     """`knitbake reference --frames 0:2 --batch-spp 1 --workers 2`: every frame's batches as tasks on an embedded
-    cluster; the EXR of each frame equals the serial command's with the same batches."""
+    cluster; the EXR of each frame equals the serial command's with the same batches. `--resume` after an
+    interrupted run traces only the missing frames, and only with the same settings."""
     from click.testing import CliRunner
 
     from cli.knitbake_cli import main as knitbake
@@ -171,3 +172,38 @@ def test_a_reference_animation_split_on_dask_writes_the_serial_frames(tmp_path):
     assert not np.array_equal(read_image(tmp_path / "serial_0.exr"), read_image(tmp_path / "serial_1.exr"))
     bad = runner.invoke(knitbake, [*args, "-o", str(tmp_path / "no_pattern.exr")])
     assert bad.exit_code == 1 and "needs a run of '#'" in bad.output
+    # an interrupted run: frame 1 never written; --resume traces only it, and the same image
+    frame1 = read_image(tmp_path / "serial_1.exr")
+    for suffix in (".exr", ".png", ".json"):
+        (tmp_path / f"serial_1{suffix}").unlink()
+    before = (tmp_path / "serial_0.exr").stat().st_mtime_ns
+    resumed = runner.invoke(knitbake, [*args, "-o", str(tmp_path / "serial_#.exr"), "--resume"])
+    assert resumed.exit_code == 0 and "frame(s) 0 already traced" in resumed.output, resumed.output
+    assert (tmp_path / "serial_0.exr").stat().st_mtime_ns == before
+    assert np.array_equal(read_image(tmp_path / "serial_1.exr"), frame1)
+    other = runner.invoke(knitbake, [*args[:-1], "2", "-o", str(tmp_path / "serial_#.exr"), "--resume"])
+    assert other.exit_code == 0 and "already traced" not in other.output  # other settings: nothing skipped
+
+
+def test_compare_traces_its_references_on_dask_with_the_same_images(tmp_path, pack):
+    """`knitrun compare --workers 2`: the reference and both floors as tasks at once; the images equal the serial
+    command's, so the report's figures do too."""
+    import json
+
+    from click.testing import CliRunner
+
+    from cli.knitrun_cli import main as knitrun
+    from data_formats.images import read_image
+    from tests.helpers import FRONT, SUN, straight, write_scene
+
+    scene = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    reports = {}
+    for name, extra in (("serial", []), ("dask", ["--workers", "2"])):
+        result = CliRunner().invoke(knitrun, ["compare", str(scene), "--spp", "1", "--pack", f"cotton1={pack}",
+                                              "-o", str(tmp_path / name), "--json", *extra])
+        assert result.exit_code == 0, result.output
+        reports[name] = json.loads(result.stdout)
+    for image in ("reference.exr", "floor_instance.exr", "floor_monte_carlo.exr"):
+        assert np.array_equal(read_image(tmp_path / "serial" / image), read_image(tmp_path / "dask" / image)), image
+    for name, row in reports["serial"]["ablations"].items():
+        assert row["yarn"] == reports["dask"]["ablations"][name]["yarn"], name

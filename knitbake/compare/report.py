@@ -74,8 +74,9 @@ def _to_floor(row, floor):
     return {k: (a / b if b > 0 else None) for k, (a, b) in pairs.items()}
 
 
-def _reference_image(scene, path, spp, seed, fiber_seed, say, what):
-    """A reference: read from ``path`` (checked against the scene's size; its cost from its summary) or traced."""
+def _reference_image(scene, path, spp, seed, fiber_seed, say, what, future=None):
+    """A reference: read from ``path`` (checked against the scene's size; its cost from its summary), the result of
+    ``future`` (``knitbake.scale_out.submit_reference``, the same image) or traced here."""
     if path is not None:
         image = read_exr(path)
         if image.shape[:2] != (scene.camera.height, scene.camera.width):
@@ -85,13 +86,14 @@ def _reference_image(scene, path, spp, seed, fiber_seed, say, what):
         return image, {"file": str(path), **({"spp": summary.get("spp")} if summary else {})}, \
             (reference_seconds(summary) if summary else None)
     say(f"{what}: path tracing {scene.camera.width}x{scene.camera.height} at {spp} spp (seed {seed}, fiber seed "
-        f"{fiber_seed})")
-    image, facts = trace_reference(scene, spp, seed, scene.render.max_depth, fiber_seed=fiber_seed)
+        f"{fiber_seed}){' on the cluster' if future is not None else ''}")
+    image, facts = future.result() if future is not None else \
+        trace_reference(scene, spp, seed, scene.render.max_depth, fiber_seed=fiber_seed)
     return image, facts, reference_seconds(facts)
 
 
 def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exposure=0.0, ablations=ABLATION_ORDER,
-                  floors=True, floor_references=None, progress=None) -> dict:
+                  floors=True, floor_references=None, progress=None, client=None) -> dict:
     """Compare the strip renderer with the reference on ``scene_path``; write the report into ``out_dir``; return the
     summary.
 
@@ -100,14 +102,26 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     scene's); ``packs``: yarn → pack overrides for the strip renderer. ``floor_references``: floor name (``FLOORS``)
     → an EXR of that floor image, rendered at the reference's spp with the seeds ``FLOORS`` gives; a floor not given
     is path traced when ``floors`` is true and the reference is traced here too (a given reference's seeds are not
-    known), else not reported."""
+    known), else not reported. ``client``: a Dask client (``knitbake.scale_out.dask_client``) that traces the
+    reference and the floors at once, as tasks (the same images)."""
     scene = load_scene(scene_path)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda message: None)
     spp = spp or scene.render.spp
     seed = scene.render.seed
-    ref, ref_facts, ref_seconds = _reference_image(scene, reference, spp, seed, seed, say, "reference")
+    traced = {name: (seed + d_sample, seed + d_fiber) for name, ((d_sample, d_fiber), _) in FLOORS.items()
+              if (floor_references or {}).get(name) is None and floors and reference is None}
+    if reference is None:
+        traced["reference"] = (seed, seed)
+    futures = {}
+    if client is not None:
+        from knitbake.scale_out import submit_reference
+
+        futures = {name: submit_reference(client, scene, spp, s, f, scene.render.max_depth)
+                   for name, (s, f) in traced.items()}
+    ref, ref_facts, ref_seconds = _reference_image(scene, reference, spp, seed, seed, say, "reference",
+                                                   futures.get("reference"))
     write_exr(out / "reference.exr", ref)
     write_png(out / "reference.png", ref, exposure)
     diameter = yarn_diameter_px(scene)
@@ -116,7 +130,8 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         given = (floor_references or {}).get(name)
         if given is None and not (floors and reference is None):
             continue
-        image, facts, _ = _reference_image(scene, given, spp, seed + d_sample, seed + d_fiber, say, f"{name} floor")
+        image, facts, _ = _reference_image(scene, given, spp, seed + d_sample, seed + d_fiber, say, f"{name} floor",
+                                           futures.get(name))
         write_exr(out / f"floor_{name}.exr", image)
         write_png(out / f"floor_{name}.png", image, exposure)
         floor_rows[name], _ = _metrics(image, ref, diameter, exposure)

@@ -100,9 +100,9 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
     image (its Monte Carlo floor). ``batch_spp`` sums the samples in batches (``sample_batches``): the image a
     distributed reference with the same batches gives bit for bit (``knitbake.scale_out``); None, one batch.
     ``on_built(facts)`` is called once the tracer scene exists (before rendering), ``progress(done, total)`` per
-    pass of samples. facts: width, height, spp, batch_spp, seed, fiber_seed, max_depth, render_s, rays, rays_per_s,
-    the build facts of ``build_reference`` (geometry, fibers, segments, triangles, sweep_s, tessellate_s,
-    embree_build_s) and mean_rgb."""
+    pass of samples. facts: width, height, frame, spp, batch_spp, seed, fiber_seed, max_depth, render_s, rays,
+    rays_per_s, the build facts of ``build_reference`` (geometry, fibers, segments, triangles, sweep_s,
+    tessellate_s, embree_build_s) and mean_rgb."""
     fiber_seed = seed if fiber_seed is None else fiber_seed
     built = build_reference(scene, seed=fiber_seed, geometry=geometry)
     if on_built is not None:
@@ -115,8 +115,9 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
         total = part if total is None else total + part
         seconds, rays = seconds + stats.seconds, rays + stats.rays
     image = total / spp
-    facts = {"width": built.camera.width, "height": built.camera.height, "spp": spp, "batch_spp": batch_spp,
-             "seed": seed, "fiber_seed": fiber_seed, "max_depth": max_depth, "render_s": seconds, "rays": rays,
+    facts = {"width": built.camera.width, "height": built.camera.height, "frame": scene.render.frame, "spp": spp,
+             "batch_spp": batch_spp, "seed": seed, "fiber_seed": fiber_seed, "max_depth": max_depth,
+             "render_s": seconds, "rays": rays,
              "rays_per_s": rays / seconds if seconds > 0 else 0.0, **built.facts,
              "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
     return image, facts
