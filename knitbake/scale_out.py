@@ -107,15 +107,16 @@ def bake_library(client, jobs: list[tuple[YarnSpec, str]], quality: str = "draft
 
 
 def submit_reference(client, scene, spp: int, seed: int = 0, fiber_seed: int | None = None, max_depth: int = 16,
-                     batch_spp: int | None = None, geometry: str = "curves"):
+                     batch_spp: int | None = None, geometry: str = "curves", use_cache: bool = True):
     """Submit the reference of ``scene`` (at its ``render.frame``): one task per sample batch (each builds the
-    fibers where it runs and renders its samples, ``reference_batch``) and one that adds their sums in batch order
-    and divides by spp. A future of (image, facts): the image ``trace_reference`` gives with the same
-    ``batch_spp``, bit for bit."""
+    fibers where it runs and renders its samples, ``reference_batch``, whose sums are cached so that a rerun of an
+    interrupted reference reuses the batches that finished) and one that adds their sums in batch order and
+    divides by spp. A future of (image, facts): the image ``trace_reference`` gives with the same ``batch_spp``,
+    bit for bit."""
     fiber_seed = seed if fiber_seed is None else fiber_seed
     tag = os.urandom(4).hex()
-    parts = [client.submit(reference_batch, scene, first, count, seed, fiber_seed, max_depth, geometry, pure=False,
-                           key=f"reference-f{scene.render.frame}-s{first}-{tag}")
+    parts = [client.submit(reference_batch, scene, first, count, seed, fiber_seed, max_depth, geometry, use_cache,
+                           pure=False, key=f"reference-f{scene.render.frame}-s{first}-{tag}")
              for first, count in sample_batches(spp, batch_spp)]
     facts = {"width": scene.camera.width, "height": scene.camera.height, "spp": spp, "batch_spp": batch_spp,
              "seed": seed, "fiber_seed": fiber_seed, "max_depth": max_depth, "frame": scene.render.frame}
@@ -128,6 +129,7 @@ def _sum_batches(parts, spp, facts):
         total = part if total is None else total + part
     image = total / spp
     seconds, rays = sum(f["render_s"] for _, f in parts), sum(f["rays"] for _, f in parts)
-    build = {k: v for k, v in parts[0][1].items() if k not in ("render_s", "rays")}
+    build = {k: v for k, v in parts[0][1].items() if k not in ("render_s", "rays", "cached")}
     return image, {**facts, "render_s": seconds, "rays": rays, "rays_per_s": rays / seconds if seconds else 0.0,
-                   "batches": len(parts), **build, "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
+                   "batches": len(parts), "batches_from_cache": sum(f["cached"] for _, f in parts), **build,
+                   "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}

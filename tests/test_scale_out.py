@@ -141,6 +141,36 @@ def test_a_distributed_reference_is_the_serial_one_in_the_same_batches(client):
     np.testing.assert_allclose(whole, serial, rtol=1e-12, atol=1e-15)  # the same samples, summed in another order
 
 
+def _set_env(name, value):
+    """Set (None: remove) an environment variable in the process that runs this (a worker, by ``client.run``)."""
+    if value is None:
+        os.environ.pop(name, None)
+    else:
+        os.environ[name] = value
+
+
+def test_a_rerun_reference_reuses_the_batches_that_finished(client, tmp_path, monkeypatch):
+    """Every batch's sum is cached (its key: scene, curve bytes, batch, seeds, sources), so a rerun of an
+    interrupted reference traces only the missing batches; a damaged entry is a miss, traced again."""
+    from knitbake.scale_out import submit_reference
+
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(tmp_path))  # read where the tasks run: pass it to the workers too
+    before = set(client.run(os.getenv, "KNIT_CACHE_DIR").values())
+    client.run(_set_env, "KNIT_CACHE_DIR", str(tmp_path))
+    try:
+        scene = _small_scene()
+        first, facts = submit_reference(client, scene, 4, seed=5, batch_spp=2).result(timeout=300)
+        entries = sorted((tmp_path / "reference").iterdir())
+        assert facts["batches_from_cache"] == 0 and len(entries) == 2
+        entries[1].write_bytes(entries[1].read_bytes()[:100])  # the second batch "interrupted": a truncated entry
+        again, facts = submit_reference(client, scene, 4, seed=5, batch_spp=2).result(timeout=300)
+        assert facts["batches_from_cache"] == 1 and np.array_equal(first, again)
+        _, facts = submit_reference(client, scene, 4, seed=6, batch_spp=2).result(timeout=300)
+        assert facts["batches_from_cache"] == 0  # another seed, other batches
+    finally:
+        client.run(_set_env, "KNIT_CACHE_DIR", before.pop())
+
+
 def test_a_reference_animation_split_on_dask_writes_the_serial_frames(tmp_path):
     """`knitbake reference --frames 0:2 --batch-spp 1 --workers 2`: every frame's batches as tasks on an embedded
     cluster; the EXR of each frame equals the serial command's with the same batches. `--resume` after an

@@ -14,6 +14,7 @@ compare --reference`` takes the reference's cost from it, ``reference_seconds``)
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from dataclasses import dataclass
@@ -22,8 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from data_formats.atomic import atomic_path
+from data_formats.cache_folders import cache_root
 from data_formats.errors import FormatError
 from data_formats.images import write_exr, write_png
+from data_formats.numba_setup import sources_hash
 from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.fiber_sweep import sweep_fibers
@@ -123,13 +126,43 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
     return image, facts
 
 
+def batch_key(scene: Scene, first: int, count: int, seed: int, fiber_seed: int, max_depth: int,
+              geometry: str) -> str:
+    """Content key of one sample batch: the scene (its parsed fields and the bytes of its curve files), the batch,
+    seeds, depth, geometry and the hash of every source file (``data_formats.numba_setup.sources_hash``), so any
+    change of input or code is a miss."""
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(repr((scene, first, count, seed, fiber_seed, max_depth, geometry, sources_hash())).encode())
+    for entry in scene.yarns:
+        if entry.curves is not None:
+            digest.update(Path(entry.curves).read_bytes())
+    return digest.hexdigest()
+
+
 def reference_batch(scene: Scene, first: int, count: int, seed: int, fiber_seed: int, max_depth: int,
-                    geometry: str = "curves") -> tuple[np.ndarray, dict]:
+                    geometry: str = "curves", use_cache: bool = True) -> tuple[np.ndarray, dict]:
     """One batch of a distributed reference, built where it runs: (sum of samples first … first + count − 1 as
-    ``render_samples`` gives it, facts of the build and the render)."""
+    ``render_samples`` gives it, facts of the build and the render). The sum is kept in the cache
+    (``cache_root()/reference``, key ``batch_key``), so a rerun of an interrupted reference reuses every batch that
+    finished; an unreadable entry is a miss, overwritten."""
+    path = cache_root() / "reference" / f"{batch_key(scene, first, count, seed, fiber_seed, max_depth, geometry)}.npz"
+    if use_cache:
+        try:
+            with np.load(path) as entry:
+                return entry["sum"], {**json.loads(str(entry["facts"])), "cached": True}
+        except Exception:  # noqa: BLE001  (missing, truncated or foreign entry: a miss, rewritten below)
+            pass
     built = build_reference(scene, seed=fiber_seed, geometry=geometry)
     part, stats = render_samples(built.tracer, built.camera, first, count, seed=seed, max_depth=max_depth)
-    return part, {**built.facts, "render_s": stats.seconds, "rays": stats.rays}
+    facts = {**built.facts, "render_s": stats.seconds, "rays": stats.rays}
+    if use_cache:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                np.savez(f, sum=part, facts=np.array(json.dumps(facts, default=float)))
+        except OSError:  # a read-only cache only costs the next run
+            pass
+    return part, {**facts, "cached": False}
 
 
 def summary_path(exr) -> Path:
