@@ -16,8 +16,8 @@ What runs where
 ---------------
 ``bake_library`` submits, for each yarn, ``knitbake.bake.run_stage`` per stage (the same function a serial bake
 calls: the stage cache is shared, so a rerun or another machine reuses finished stages) and one
-``write_baked_pack`` task that depends on them. Stage results travel to the pack task through Dask (a standard
-cotton1 stage result is at most ~20 MiB; the correction stage peaks at ~1 GiB of fibers and hits while it runs).
+``write_baked_pack`` task that depends on them. Stage results travel to the pack task through Dask (all of a
+standard cotton1 pack's tables are 21 MiB; a whole standard bake peaks at 0.39 GiB resident in one process).
 A stage is deterministic for its seed whatever the thread count, so a distributed bake writes the same tables,
 errors and attributes as a serial one (the provenance's timings differ). A worker that dies mid-task loses
 nothing: Dask reruns its task on another worker (up to ``distributed.scheduler.allowed-failures`` times) and the
@@ -25,7 +25,8 @@ result is the same.
 
 ``submit_reference`` splits a reference frame into sample batches (``knitbake.trace.reference.sample_batches``):
 each task builds the scene's fibers where it runs (the sweep and Embree build, seconds for the example patches)
-and returns the sum of its samples; one task adds the sums in batch order. A sample's random numbers depend only on
+and returns the sum of its samples, cached (``reference_batch``) so that a rerun reuses the batches that finished;
+one task adds the sums in batch order. A sample's random numbers depend only on
 (seed, its index, its pixel), so the image equals ``trace_reference`` with the same ``batch_spp`` bit for bit. Frames
 of an animation are independent references (one ``submit_reference`` per frame).
 """
