@@ -252,7 +252,6 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
       knitbake reference examples/scenes/straight_yarn_directional.toml -o ref.exr --spp 64
       knitbake reference anim.toml --frames 0:4 -o out/ref_####.exr --batch-spp 16 --workers 2
     """
-
     from data_formats.scene import load_scene, read_curves
     from knitbake.scale_out import SCHEDULER_ENV
     from knitbake.trace.reference import trace_reference, write_reference
@@ -314,8 +313,7 @@ def reference(scene_path, output, spp, seed, fiber_seed, max_depth, exposure, ge
             last[0] = done
 
         image, facts = trace_reference(_at_frame(scene, frames[0]), spp, seed, max_depth, progress=progress,
-                                       on_built=built,
-                                       fiber_seed=fiber_seed, geometry=geometry, batch_spp=batch_spp)
+                                       on_built=built, fiber_seed=fiber_seed, geometry=geometry, batch_spp=batch_spp)
     output = outputs[frames[0]]
     summary = write_reference(output, image, {"scene": scene_path, **facts}, exposure)
     if as_json:
@@ -344,7 +342,6 @@ def _finished_reference(exr, settings: dict) -> bool:
 def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_seed, max_depth, geometry,
                            batch_spp, scheduler, workers, exposure, as_json):
     """``knitbake reference`` on Dask: every frame's sample batches as tasks; each frame written as it finishes."""
-
     from distributed import as_completed
 
     from knitbake.scale_out import dask_client, submit_reference
