@@ -81,7 +81,7 @@ def _reference_image(scene, path, spp, seed, fiber_seed, say, what, future=None)
         image = read_exr(path)
         if image.shape[:2] != (scene.camera.height, scene.camera.width):
             raise FormatError(f"{path}: {image.shape[1]}x{image.shape[0]} image, the scene renders "
-                             f"{scene.camera.width}x{scene.camera.height}")
+                              f"{scene.camera.width}x{scene.camera.height}")
         summary = read_summary(path)
         return image, {"file": str(path), **({"spp": summary.get("spp")} if summary else {})}, \
             (reference_seconds(summary) if summary else None)

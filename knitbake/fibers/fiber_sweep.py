@@ -190,7 +190,7 @@ def sweep_fibers(curves: YarnCurves, frame: int, specs: dict[int, YarnSpec], rad
         ytype = int(curves.yarn_type[c])
         if ytype not in specs or ytype not in radii:
             raise FormatError(f"curve {c}: no yarn spec or radius for yarn type {ytype} "
-                             f"({curves.yarn_types[ytype]!r}); specs cover {sorted(specs)}, radii {sorted(radii)}")
+                              f"({curves.yarn_types[ytype]!r}); specs cover {sorted(specs)}, radii {sorted(radii)}")
         parts.append(sweep_curve(curves, c, frame, specs[ytype], radii[ytype], seed, segments_per_period, flyaways,
                                  samples_per_segment))
     counts = np.concatenate([np.diff(p.offsets) for p in parts])

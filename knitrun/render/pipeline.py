@@ -200,7 +200,7 @@ def _pack_path(k, entry, packs):
     if path is None:
         name = entry.spec.name
         raise FormatError(f"yarns[{k}] ({name}) has no asset pack: bake one (knitbake bake {entry.yarn} -o "
-                         f"{name}.h5) and name it in the scene (pack = ...) or with --pack {name}=FILE")
+                          f"{name}.h5) and name it in the scene (pack = ...) or with --pack {name}=FILE")
     if not Path(path).is_file():
         raise FormatError(f"yarns[{k}] ({entry.yarn}): pack {path} does not exist")
     return path

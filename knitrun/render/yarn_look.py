@@ -112,7 +112,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         names += [n for n in FULL_TABLES if n in stored]
     if missing:
         raise FormatError(f"{pack_path}: pack lacks {', '.join(missing)} "
-                         f"(bake the yarn again without --only or --scene)")
+                          f"(bake the yarn again without --only or --scene)")
     pack = read_pack(pack_path, tables=[k for k in stored if any(k == n or k.startswith(n + "/mip") for n in names)])
     colour = np.asarray(entry.color, np.float64)
     params = tinted(params_from_pack(pack.fiber_bcsdf), colour)

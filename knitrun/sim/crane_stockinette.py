@@ -46,7 +46,7 @@ def stockinette_curves(rows: int, cols: int, radius: float = 0.03, samples_per_s
     uniform in t, rest arc length = control-polygon length. Shape constants in Crane's units (module docstring)."""
     if rows < 1 or cols < 1 or samples_per_stitch < 4:
         raise FormatError(f"rows = {rows}, cols = {cols}, samples_per_stitch = {samples_per_stitch}: expected "
-                         f"rows, cols >= 1 and samples_per_stitch >= 4")
+                          f"rows, cols >= 1 and samples_per_stitch >= 4")
     if not (np.isfinite(radius) and radius > 0):
         raise FormatError(f"radius = {radius!r}, expected a positive finite number")
     s = radius / CRANE_RADIUS
