@@ -517,13 +517,27 @@ def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, sch
 @main.command("export")
 @click.argument("pack", type=click.Path(dir_okay=False))
 @click.argument("out_dir", metavar="DIR", type=click.Path(file_okay=False))
-def export_command(pack, out_dir):
-    """Write a pack's textures as PNG/EXR and its tables as CSV (with axis values and errors) for other engines.
+@click.option("--dtype", type=click.Choice(["float32", "float16"]), default="float32", show_default=True,
+              help="Values of the .bin files: float32 (exact) or float16 (half the bytes, rounding ≤ 2^-11).")
+@click.option("--csv", "as_csv", is_flag=True,
+              help="Instead: textures as PNG/EXR and tables as CSV with axis values and errors (for people, not "
+                   "engines).")
+def export_command(pack, out_dir, dtype, as_csv):
+    """Write a pack for engines: every table as a raw little-endian .bin (RGB tables as RGBA) and a manifest.json
+    of shapes, axes, ranges and lookup rules, checked against the schema shipped with knit (ASSET_PACK.md §14).
 
-    Example: knitbake export cotton1.h5 cotton1_export/
+    Example: knitbake export cotton1.h5 cotton1_export/ [--dtype float16]
     """
-    from data_formats.pack_export import export_pack
+    if as_csv:
+        from data_formats.pack_export import export_pack
 
-    manifest = export_pack(pack, out_dir)
-    n_files = sum(len(f["files"]) for f in manifest["files"])
-    click.echo(f"{pack} → {out_dir}: {len(manifest['files'])} datasets, {n_files} files (manifest.json)")
+        manifest = export_pack(pack, out_dir)
+        n_files = sum(len(f["files"]) for f in manifest["files"])
+        click.echo(f"{pack} → {out_dir}: {len(manifest['files'])} datasets, {n_files} files (manifest.json)")
+        return
+    from data_formats.engine_export import export_engine
+
+    manifest = export_engine(pack, out_dir, dtype)
+    size = sum(t["byte_length"] for t in manifest["tables"])
+    click.echo(f"{pack} → {out_dir}: {len(manifest['tables'])} tables as {dtype} .bin ({size / 2**20:.1f} MiB), "
+               f"manifest.json")

@@ -105,7 +105,7 @@ def test_cli_bake_inspect_export(tmp_path, monkeypatch):
     assert set(summary["stages"]) == {"shadowing", "textures"}
     inspect = runner.invoke(knitbake, ["inspect", str(out)])
     assert "shadowing/psi_residual" in inspect.stdout and "error" in inspect.stdout
-    export = runner.invoke(knitbake, ["export", str(out), str(tmp_path / "exp")])
+    export = runner.invoke(knitbake, ["export", str(out), str(tmp_path / "exp"), "--csv"])
     assert export.exit_code == 0
     manifest = json.loads((tmp_path / "exp" / "manifest.json").read_text())
     assert any(f["dataset"] == "textures/normal/mip0" for f in manifest["files"])
