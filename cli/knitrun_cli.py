@@ -24,7 +24,7 @@ def main():
 
     \b
     Examples:
-      knitrun convert yarns.h5 yarns.bcc
+      knitrun convert yarns.h5 yarns.usda
       knitrun pattern eyelet --rows 16 --cols 16 -o eyelet.h5
       knitrun simulate eyelet.h5 --deform stretch-x=1.5 --frames 31 -o yarns.h5
     """
@@ -32,31 +32,44 @@ def main():
 
 @main.command()
 @click.argument("source", type=click.Path(dir_okay=False))
-@click.argument("target", type=SuffixPath(".bcc", ".h5", ".hdf5"))
+@click.argument("target", type=SuffixPath(".bcc", ".h5", ".hdf5", ".obj", ".usd", ".usda", ".usdc"))
 @click.option("--frame", type=click.IntRange(min=0), default=0, show_default=True,
-              help="Frame to write when the target is BCC (one frame per file).")
-@click.option("--units", default="cm", show_default=True, help="Units to record when the source is BCC (it has none).")
-def convert(source, target, frame, units):
-    """Convert yarn curves between our HDF5 file and BCC (by the target's extension).
+              help="Frame to write when the target is BCC or OBJ (one frame per file).")
+@click.option("--units", default="cm", show_default=True,
+              help="Units to record when the source has none (BCC; OBJ without a knit header).")
+@click.option("--radius", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Yarn radius for the USD widths (diameters) when the curves carry none.")
+def convert(source, target, frame, units, radius):
+    """Convert yarn curves between our HDF5 file, BCC and OBJ polylines, or write them as USD BasisCurves for DCC
+    tools (all frames as time samples, widths = yarn diameter, rest arc length as a primvar); by the target's
+    extension, the source recognised by content.
 
-    Example: knitrun convert cotton1.bcc cotton1.h5 --units cm
+    \b
+    Examples:
+      knitrun convert cotton1.bcc cotton1.h5 --units cm
+      knitrun convert yarns.h5 yarns.usda
+      knitrun convert yarns.h5 yarns.obj --frame 30
     """
     from data_formats.bcc import read_bcc, write_bcc
+    from data_formats.curves_dcc import read_obj_curves, write_obj_curves, write_usd_curves
     from data_formats.yarn_curves import read_yarn_curves, write_yarn_curves
 
     check_outputs({"TARGET": target}, [source])
     kind, _ = file_kind(source)
-    if kind == "bcc":
-        curves = read_bcc(source, units=units)
-    elif kind == "yarn-curves":
-        curves = read_yarn_curves(source)
-    else:
+    readers = {"bcc": lambda: read_bcc(source, units=units), "yarn-curves": lambda: read_yarn_curves(source),
+               "yarn-curves-obj": lambda: read_obj_curves(source, units=units)}
+    if kind not in readers:
         raise FormatError(f"{source}: is a {kind}, not yarn curves")
+    curves = readers[kind]()
     suffix = Path(target).suffix.lower()
+    if suffix in (".bcc", ".obj") and frame >= curves.points.shape[0]:
+        raise FormatError(f"--frame {frame}: {source} has {curves.points.shape[0]} frame(s)")
     if suffix == ".bcc":
-        if frame >= curves.points.shape[0]:
-            raise FormatError(f"--frame {frame}: {source} has {curves.points.shape[0]} frame(s)")
         write_bcc(target, curves, frame=frame)
+    elif suffix == ".obj":
+        write_obj_curves(target, curves, frame=frame)
+    elif suffix in (".usd", ".usda", ".usdc"):
+        write_usd_curves(target, curves, radius)
     else:
         write_yarn_curves(target, curves)
     click.echo(f"{source} ({kind}, {len(curves.closed)} curves) → {target}")
