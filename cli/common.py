@@ -14,8 +14,8 @@ from types import SimpleNamespace
 
 import click
 
-from data_formats import (FormatError, asset_pack, bcc, curves_dcc, engine_export, scene, stitch_mesh, yarn_curves,
-                          yarn_spec)
+from data_formats import (FormatError, asset_pack, bcc, curves_dcc, engine_export, scene, smobj, stitch_mesh,
+                          yarn_curves, yarn_spec)
 from data_formats.input_files import HDF5_MAGIC, read_head, regular_file
 from data_formats.jsonable import jsonable
 
@@ -27,8 +27,8 @@ _CURVES_OBJ = SimpleNamespace(sniff=curves_dcc.sniff_obj_curves, describe=curves
                               validate=curves_dcc.validate_obj_curves)
 # Recognised by content, most specific first: (kind, module with sniff/describe/validate).
 FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),
-              ("scene", scene), ("yarn-spec", yarn_spec), ("yarn-curves-obj", _CURVES_OBJ),
-              ("stitch-mesh-obj", _STITCH_MESH_OBJ), ("engine-export", engine_export))
+              ("scene", scene), ("yarn-spec", yarn_spec), ("stitch-mesh-smobj", smobj),
+              ("yarn-curves-obj", _CURVES_OBJ), ("stitch-mesh-obj", _STITCH_MESH_OBJ), ("engine-export", engine_export))
 # a user's mistake (bad file, field, argument; a file system refusing) is one line; any other exception is a bug of
 # ours and shows its traceback
 USER_ERRORS = (FormatError, OSError)
@@ -116,7 +116,7 @@ def file_kind(path):
     if read_head(path, 8) == HDF5_MAGIC:
         raise FormatError(f"{path}: an HDF5 file that cannot be opened or is none of ours (truncated or corrupt?)")
     raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5 or BCC, stitch mesh HDF5 "
-                      f"or OBJ, OBJ polylines, scene or yarn spec TOML, engine-export manifest.json)")
+                      f"or OBJ or .smobj, OBJ polylines, scene or yarn spec TOML, engine-export manifest.json)")
 
 
 def echo_json(obj):

@@ -646,11 +646,17 @@ def validate_obj(path, labels_path=None):
 
 
 def load_stitch_mesh(path):
-    """A stitch mesh from our HDF5 file or an OBJ (+ its .labels sidecar), by content / extension."""
+    """A stitch mesh from our HDF5 file, an OBJ (+ its .labels sidecar) or an augmented stitch mesh ``.smobj``
+    (``data_formats.smobj``), by content / extension."""
+    from . import smobj
+
     if Path(path).suffix.lower() == ".obj":
         return read_obj_stitch_mesh(path)
     if not Path(path).is_file():
         raise FormatError(f"{path}: no such file")
+    if Path(path).suffix.lower() == ".smobj" or smobj.sniff(path):
+        return smobj.read_smobj(path)
     if not sniff(path):
-        raise FormatError(f"{path}: not a stitch mesh, expected a knit-stitch-mesh .h5 file or an .obj (+ .labels)")
+        raise FormatError(f"{path}: not a stitch mesh, expected a knit-stitch-mesh .h5 file, an .obj (+ .labels) or "
+                          f"an .smobj")
     return read_stitch_mesh(path)
