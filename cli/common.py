@@ -18,6 +18,7 @@ from data_formats import (FormatError, asset_pack, bcc, curves_dcc, engine_expor
                           yarn_curves, yarn_spec)
 from data_formats.input_files import HDF5_MAGIC, read_head, regular_file
 from data_formats.jsonable import jsonable
+from knitrun.sim import knitout
 
 # An OBJ stitch mesh (+ its .labels sidecar) through the same three calls as the other kinds.
 _STITCH_MESH_OBJ = SimpleNamespace(sniff=stitch_mesh.sniff_obj, describe=stitch_mesh.describe_obj,
@@ -28,7 +29,8 @@ _CURVES_OBJ = SimpleNamespace(sniff=curves_dcc.sniff_obj_curves, describe=curves
 # Recognised by content, most specific first: (kind, module with sniff/describe/validate).
 FILE_KINDS = (("asset-pack", asset_pack), ("yarn-curves", yarn_curves), ("stitch-mesh", stitch_mesh), ("bcc", bcc),
               ("scene", scene), ("yarn-spec", yarn_spec), ("stitch-mesh-smobj", smobj),
-              ("yarn-curves-obj", _CURVES_OBJ), ("stitch-mesh-obj", _STITCH_MESH_OBJ), ("engine-export", engine_export))
+              ("knitout", knitout), ("yarn-curves-obj", _CURVES_OBJ), ("stitch-mesh-obj", _STITCH_MESH_OBJ),
+              ("engine-export", engine_export))
 # a user's mistake (bad file, field, argument; a file system refusing) is one line; any other exception is a bug of
 # ours and shows its traceback
 USER_ERRORS = (FormatError, OSError)
@@ -115,8 +117,8 @@ def file_kind(path):
             return kind, module
     if read_head(path, 8) == HDF5_MAGIC:
         raise FormatError(f"{path}: an HDF5 file that cannot be opened or is none of ours (truncated or corrupt?)")
-    raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5 or BCC, stitch mesh HDF5 "
-                      f"or OBJ or .smobj, OBJ polylines, scene or yarn spec TOML, engine-export manifest.json)")
+    raise FormatError(f"{path}: not a file the toolchain reads (asset pack, yarn curves HDF5, BCC or OBJ polylines, "
+                      f"stitch mesh HDF5, OBJ or .smobj, knitout, scene or yarn spec TOML, engine-export manifest)")
 
 
 def echo_json(obj):

@@ -75,6 +75,18 @@ def convert(source, target, frame, units, radius):
     click.echo(f"{source} ({kind}, {len(curves.closed)} curves) → {target}")
 
 
+def _design_mesh(path):
+    """The stitch mesh of a knit-design file (knitout, .smobj) recognised by content, else None."""
+    from data_formats import smobj
+    from knitrun.sim import knitout
+
+    if knitout.sniff(path):
+        return knitout.read_knitout(path)
+    if smobj.sniff(path):
+        return smobj.read_smobj(path)
+    return None
+
+
 @main.command()
 @click.argument("source")
 @click.option("--rows", type=click.IntRange(min=1), help="Courses of a named pattern.  [default: 12]")
@@ -83,7 +95,7 @@ def convert(source, target, frame, units, radius):
               help="MESH.h5 (knit-stitch-mesh) or MESH.obj (also writes MESH.labels).")
 @click.option("--json", "as_json", is_flag=True, help="Print the mesh summary as JSON.")
 def pattern(source, rows, cols, output, as_json):
-    """Stitch mesh from a knit chart file or a named pattern (SOURCE).
+    """Stitch mesh from a knit chart file, a knitout or .smobj file (recognised by content), or a named pattern.
 
     A chart is text, top course first: k knit, p purl, o yarn-over, / k2tog, \\ ssk (data_formats/STITCH_MESH.md).
     Named patterns: stockinette, garter, rib1x1, rib2x2, seed, diamond, eyelet.
@@ -92,16 +104,20 @@ def pattern(source, rows, cols, output, as_json):
     Examples:
       knitrun pattern eyelet --rows 16 --cols 16 -o eyelet.h5
       knitrun pattern my_chart.txt -o patch.obj
+      knitrun pattern rib-2x2.knitout -o rib.h5
     """
     from data_formats.stitch_mesh import summary, write_obj_stitch_mesh, write_stitch_mesh
     from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
 
     check_outputs({"--output": output, "labels": _labels(output)}, [source])
     suffix = Path(output).suffix.lower()
-    if os.path.lexists(source):  # a chart file (a FIFO or folder is refused, not read)
+    if os.path.lexists(source):  # a chart, knitout or .smobj file (a FIFO or folder is refused, not read)
         if rows is not None or cols is not None:
-            raise FormatError(f"--rows/--cols size a named pattern, but {source} is a chart file")
-        mesh = chart_to_mesh(regular_file(source, "a knit chart").read_text(encoding="utf-8"), where=source)
+            raise FormatError(f"--rows/--cols size a named pattern, but {source} is a file")
+        regular_file(source, "a knit chart, knitout or .smobj file")
+        mesh = _design_mesh(source)
+        if mesh is None:
+            mesh = chart_to_mesh(Path(source).read_text(encoding="utf-8"), where=source)
     elif source in PATTERNS:
         mesh = chart_to_mesh(pattern_chart(source, rows or 12, cols or 12), where=f"pattern {source}")
     else:
@@ -160,7 +176,7 @@ def simulate(mesh_path, deforms, frames, obj_dir, output, iterations, w_length, 
     if obj_dir is not None and (deforms or frames is not None):
         raise FormatError("--obj-dir gives the frames: use it without --deform and --frames")
     specs = [parse_deformation(spec) for spec in deforms]
-    mesh = stitch_mesh.load_stitch_mesh(mesh_path)
+    mesh = _design_mesh(mesh_path) or stitch_mesh.load_stitch_mesh(mesh_path)
     vertex_frames = read_obj_frames(obj_dir, mesh) if obj_dir is not None else \
         deformation_frames(mesh.vertices, specs, frames or 1)
     count = len(vertex_frames)
