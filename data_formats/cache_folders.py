@@ -2,8 +2,8 @@
 (default ``~/.cache/knit``). Each kind of entry has its own sub-folder: ``numba`` (compiled kernels,
 ``numba_setup``), ``bake`` (bake stages, ``knitbake.bake``), ``srbf`` (environment fits,
 ``knitrun.shading.srbf_cache``), ``reference`` (sums of reference sample batches run on Dask,
-``knitbake.trace.reference.reference_batch``). Every entry can be deleted at any time; pointing ``KNIT_CACHE_DIR`` at an empty
-folder gives a cold start."""
+``knitbake.trace.reference.reference_batch``). Every entry can be deleted at any time; pointing ``KNIT_CACHE_DIR``
+at an empty folder gives a cold start."""
 
 import os
 from pathlib import Path

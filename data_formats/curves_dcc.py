@@ -35,11 +35,11 @@ import numpy as np
 from .atomic import atomic_path
 from .conventions import CM_PER_UNIT, LENGTH_UNITS
 from .errors import FormatError
-from .input_files import read_head, regular_file
+from .input_files import regular_file
+from .text_statements import parse_vertex, statement_keys
 from .yarn_curves import CURVE_TYPES, YarnCurves, make_yarn_curves, summary
 
 _HEADER = re.compile(r"#\s*knit:\s*(.*)")
-SNIFF_BYTES = 1 << 20
 USD_TYPE = {"PL": ("linear", None), "C0": ("cubic", "catmullRom"), "BS": ("cubic", "bspline"),
             "BZ": ("cubic", "bezier")}
 
@@ -64,13 +64,8 @@ def write_obj_curves(path, yc: YarnCurves, frame: int = 0) -> None:
 
 def sniff_obj_curves(path) -> bool:
     """True for text whose first MiB has ``v`` and ``l`` statements and no ``f`` (OBJ polylines). Never raises."""
-    head = read_head(path, SNIFF_BYTES)
-    if not head or b"\0" in head:
-        return False
-    lines = head.decode("utf-8", errors="ignore").splitlines()
-    kinds = {line.split(None, 1)[0] for line in (lines if len(head) < SNIFF_BYTES else lines[:-1])
-             if line.strip() and not line.lstrip().startswith("#")}
-    return "v" in kinds and "l" in kinds and "f" not in kinds
+    keys = statement_keys(path)
+    return keys is not None and {"v", "l"} <= keys and "f" not in keys
 
 
 def describe_obj_curves(path) -> dict:
@@ -103,13 +98,7 @@ def read_obj_curves(path, units: str = "cm") -> YarnCurves:
         if not tokens:
             continue
         if tokens[0] == "v":
-            try:
-                xyz = [float(t) for t in tokens[1:4]]
-            except ValueError:
-                xyz = []
-            if len(xyz) != 3:
-                raise FormatError(f"{where}: line {lineno}: {line.strip()!r:.60}, expected 'v x y z'")
-            vertices.append(xyz)
+            vertices.append(parse_vertex(tokens, where, lineno, line))
         elif tokens[0] in ("g", "o"):
             group = " ".join(tokens[1:]) or "unknown"
         elif tokens[0] == "l":

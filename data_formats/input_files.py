@@ -66,16 +66,10 @@ def read_head(path, n: int) -> bytes | None:
 
 def max_dataset_bytes() -> int:
     """The largest dataset a reader accepts, in bytes (``KNIT_MAX_DATASET_BYTES``, default 8 GiB)."""
-    value = os.environ.get("KNIT_MAX_DATASET_BYTES")
-    if value is None:
-        return DEFAULT_MAX_DATASET_BYTES
-    try:
-        limit = int(float(value))
-    except ValueError:
-        limit = 0
-    if limit <= 0:
-        raise FormatError(f"KNIT_MAX_DATASET_BYTES = {value!r}: expected a positive number of bytes")
-    return limit
+    from .memory_budget import bytes_setting
+
+    limit = bytes_setting("KNIT_MAX_DATASET_BYTES")
+    return DEFAULT_MAX_DATASET_BYTES if limit is None else limit
 
 
 def _gib(n: int) -> str:

@@ -14,16 +14,24 @@ import os
 from .errors import FormatError
 
 
+def bytes_setting(name: str) -> int | None:
+    """A positive byte count from environment variable ``name`` (None when unset); FormatError naming it otherwise."""
+    value = os.environ.get(name)
+    if value is None:
+        return None
+    try:
+        limit = int(float(value))
+    except (ValueError, OverflowError):
+        limit = 0
+    if limit <= 0:
+        raise FormatError(f"{name} = {value!r}: expected a positive number of bytes")
+    return limit
+
+
 def memory_limit() -> int:
     """Bytes one job may plan to allocate (module docstring)."""
-    value = os.environ.get("KNIT_MAX_MEMORY_BYTES")
-    if value is not None:
-        try:
-            limit = int(float(value))
-        except ValueError:
-            limit = 0
-        if limit <= 0:
-            raise FormatError(f"KNIT_MAX_MEMORY_BYTES = {value!r}: expected a positive number of bytes")
+    limit = bytes_setting("KNIT_MAX_MEMORY_BYTES")
+    if limit is not None:
         return limit
     try:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2

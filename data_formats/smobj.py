@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FormatError
-from .input_files import read_head, regular_file
+from .input_files import regular_file
+from .text_statements import parse_vertex, statement_keys
 
 PLAIN = {"knit": 0, "purl": 1}  # name prefix → stitch type code (STITCH_MESH.md)
-SNIFF_BYTES = 1 << 20
 
 
 def _face_type(name: str, edges: list[str]) -> tuple[int, int] | None:
@@ -66,10 +66,7 @@ def read_smobj(path, units: str = "cm"):
                     raise ValueError
                 library.append((args[0], args[1:], lineno))
             elif key == "v":
-                xyz = [float(t) for t in args[:3]]
-                if len(xyz) != 3:
-                    raise ValueError
-                vertices.append(xyz)
+                vertices.append(parse_vertex(tokens, where, lineno, line))
             elif key == "f":
                 idx = [int(t.split("/", 1)[0]) for t in args]
                 if len(idx) < 3 or any(not 1 <= i <= len(vertices) for i in idx):
@@ -85,9 +82,10 @@ def read_smobj(path, units: str = "cm"):
                 if len(pairs) != 2 or any(len(p) != 2 for p in pairs):
                     raise ValueError
                 connections.append((pairs, lineno))
+        except FormatError:
+            raise
         except ValueError:
-            raise FormatError(f"{where}: line {lineno}: {line.strip()!r:.60}, expected {_EXPECTED.get(key, key)}"
-                              ) from None
+            raise FormatError(f"{where}: line {lineno}: {line.strip()!r:.60}, expected {_EXPECTED[key]}") from None
     if not faces:
         raise FormatError(f"{where}: no faces ('f' lines), expected an augmented stitch mesh")
     if len(types) != len(faces):
@@ -114,7 +112,7 @@ def read_smobj(path, units: str = "cm"):
     return mesh
 
 
-_EXPECTED = {"L": "'L name edge edge …'", "v": "'v x y z'",
+_EXPECTED = {"L": "'L name edge edge …'",
              "f": "'f' and at least 3 indices of vertices defined above", "T": "'T k' with k a library entry above",
              "e": "'e face/edge face/edge' (1-based)"}
 
@@ -151,12 +149,8 @@ def _check_connections(mesh, connections, n_faces, where):
 
 def sniff(path) -> bool:
     """True for text whose first MiB has ``L``, ``f`` and ``T`` lines (an smobj). Never raises."""
-    head = read_head(path, SNIFF_BYTES)
-    if not head or b"\0" in head:
-        return False
-    keys = {line.split(None, 1)[0] for line in head.decode("utf-8", errors="ignore").splitlines()
-            if line.strip() and not line.lstrip().startswith("#")}
-    return {"L", "f", "T"} <= keys
+    keys = statement_keys(path)
+    return keys is not None and {"L", "f", "T"} <= keys
 
 
 def describe(path) -> dict:

@@ -31,6 +31,7 @@ from .conventions import MAX_COORD
 from .errors import FormatError
 from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
 from .input_files import open_hdf5, read_head, regular_file
+from .text_statements import parse_vertex
 
 FORMAT_NAME = "knit-stitch-mesh"
 FORMAT_VERSION = "1.0"
@@ -545,14 +546,7 @@ def parse_obj(path, where):
         if not tokens or tokens[0] not in ("v", "f"):
             continue  # other OBJ statements (vn, vt, g, usemtl, ...) carry nothing we use
         if tokens[0] == "v":
-            try:
-                xyz = [float(t) for t in tokens[1:4]]
-            except ValueError:
-                xyz = []
-            if len(xyz) != 3:
-                raise FormatError(f"{where}: line {lineno}: vertex {len(vertices)}: {line.strip()!r:.60}, expected "
-                                  f"'v x y z'")
-            vertices.append(xyz)
+            vertices.append(parse_vertex(tokens, where, lineno, line, label=f"vertex {len(vertices)}: "))
             vertex_lines.append(lineno)
         else:
             try:
