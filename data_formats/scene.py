@@ -50,8 +50,8 @@ RENDER_FIELDS = {
     "max_depth": (32, 1, 1000, "longest light path (scattering events) of the reference path tracer"),
     "seed": (0, 0, 2**63 - 1, "random seed of fiber generation and path tracing"),
     "msaa": (4, 1, 16, "samples per pixel of the strip renderer's rasteriser (1, 2, 4, 8 or 16)"),
-    # the fit's cost grows ~J^1.5 (1.5 s at 16, 5.5 s at 32, 12.7 s at 64 on the built-in sky, 2 cores; > 240 s at
-    # 256) and every lobe adds a shadow map, so J stops at 64
+    # the fit's cost grows ~J^1.5 (1.6 s at 16, 6 s at 32, 12.7 s at 64 on the built-in sky, 2 cores: BENCHMARKS,
+    # "Hostile inputs"; > 240 s at 256) and every lobe adds a shadow map, so J stops at 64
     "srbf_count": (16, 1, 64, "J, spherical Gaussians fitted to an environment light"),
     "shadow_map_size": (2048, 64, 16384, "yarn-level shadow-map resolution (a power of two)"),
     "frame": (0, 0, 2**31 - 1, "frame of the yarn curves to draw (0-based)"),
