@@ -23,6 +23,15 @@ Design
   min(0.95, max throughput). ``yarn_only_radius`` > 0 is the bake's "no global scattering" mode for a yarn along
   the z axis: a path that reaches geometry outside that cylinder ends there without scattering (no light it would
   bring back is counted; escaping to the environment is still counted).
+* Threads: ``_trace_curves`` runs ``prange`` over blocks of ``PATH_BLOCK`` paths, each block with its own scratch
+  arrays (``scatter_scratch``; per-path arrays made the allocator 8 % of the render). Hot loops copy rows of the
+  shared inputs (the BCSDF parameters, a light's direction) instead of taking views of them: a view bumps the
+  shared array's reference count with an atomic instruction, and two cores bumping one count took 12 % of the
+  render (``benchmarks/profile_tracer.py``, BENCHMARKS.md). For the same reason the per-event functions (here
+  ``_scatter``, ``_escaped``, ``_leave_point``, ``_frame``, ``_to_local``; the BCSDF's ``context_into``,
+  ``evaluate``, ``pdf``, ``sample``) are inlined by Numba (``inline='always'``): a call increfs and decrefs every
+  array it is passed, and those pairs were 16 % of the render. The price is compile time, paid once per cache:
+  the tracer's first use on an empty cache takes ~4 s longer (13 → 18 s) for ~10 % more rays/s.
 * Determinism: every random number is a hash of (seed, path id, depth, dimension), path id = sample·pixels +
   pixel; results do not depend on thread count or batching.
 
@@ -45,7 +54,7 @@ from knitbake.trace.embree_curves import TFAR, CurveScene, any_hits, closest_hit
 from knitbake.trace.env_light import EnvLight, env_pdf, env_pixel, env_sample
 from knitbake.trace.ray_scene import RayHits, RayScene
 from knitrun.render.camera import Camera, tan_half_fov
-from knitrun.shading.fiber_bcsdf import N_PARAMS, context, evaluate, pdf, sample
+from knitrun.shading.fiber_bcsdf import N_CONTEXT, N_PARAMS, context_into, evaluate, pdf, sample
 
 _MASK = np.uint64(0xFFFFFFFFFFFFFFFF)
 
@@ -188,42 +197,45 @@ def camera_rays(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, fir
 
 # --- shading -----------------------------------------------------------------------------------------------------
 
-@njit(cache=True)
-def _frame(t):
-    """Two unit vectors completing the unit tangent t to an orthonormal frame."""
-    a = np.array([1.0, 0.0, 0.0]) if abs(t[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = a - (a[0] * t[0] + a[1] * t[1] + a[2] * t[2]) * t
-    e1 /= math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
-    e2 = np.array([t[1] * e1[2] - t[2] * e1[1], t[2] * e1[0] - t[0] * e1[2], t[0] * e1[1] - t[1] * e1[0]])
-    return e1, e2
+@njit(cache=True, inline='always')
+def _frame(t, e1, e2):
+    """Writes into e1, e2 two unit vectors completing the unit tangent t to an orthonormal frame."""
+    ax = 1.0 if abs(t[0]) < 0.9 else 0.0  # the helper axis: x, or y when t is close to x
+    ay = 1.0 - ax
+    dot = ax * t[0] + ay * t[1] + 0.0 * t[2]
+    e1[0], e1[1], e1[2] = ax - dot * t[0], ay - dot * t[1], 0.0 - dot * t[2]
+    norm = math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    for k in range(3):
+        e1[k] /= norm
+    e2[0] = t[1] * e1[2] - t[2] * e1[1]
+    e2[1] = t[2] * e1[0] - t[0] * e1[2]
+    e2[2] = t[0] * e1[1] - t[1] * e1[0]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _to_local(w, t, e1, e2, out):
     out[0] = w[0] * t[0] + w[1] * t[1] + w[2] * t[2]
     out[1] = w[0] * e1[0] + w[1] * e1[1] + w[2] * e1[2]
     out[2] = w[0] * e2[0] + w[1] * e2[1] + w[2] * e2[2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _leave_point(axis_pt, t, radius, hit, w, out):
     """Start point for a ray in direction w leaving the tube (axis through axis_pt along t, given radius) from
     the side w points to, at the axial position of ``hit``."""
     s = (hit[0] - axis_pt[0]) * t[0] + (hit[1] - axis_pt[1]) * t[1] + (hit[2] - axis_pt[2]) * t[2]
     wt = w[0] * t[0] + w[1] * t[1] + w[2] * t[2]
-    v = np.empty(3)
-    norm = 0.0
-    for k in range(3):
-        v[k] = w[k] - wt * t[k]
-        norm += v[k] * v[k]
+    v0, v1, v2 = w[0] - wt * t[0], w[1] - wt * t[1], w[2] - wt * t[2]
+    norm = v0 * v0 + v1 * v1 + v2 * v2
     if norm < 1e-18:  # along the axis: leave from the hit's own side
-        norm = 0.0
-        for k in range(3):
-            v[k] = hit[k] - axis_pt[k] - s * t[k]
-            norm += v[k] * v[k]
+        v0 = hit[0] - axis_pt[0] - s * t[0]
+        v1 = hit[1] - axis_pt[1] - s * t[1]
+        v2 = hit[2] - axis_pt[2] - s * t[2]
+        norm = v0 * v0 + v1 * v1 + v2 * v2
     norm = math.sqrt(max(norm, 1e-300))
-    for k in range(3):
-        out[k] = axis_pt[k] + s * t[k] + radius * v[k] / norm
+    out[0] = axis_pt[0] + s * t[0] + radius * v0 / norm
+    out[1] = axis_pt[1] + s * t[1] + radius * v1 / norm
+    out[2] = axis_pt[2] + s * t[2] + radius * v2 / norm
 
 
 @njit(parallel=True, cache=True)
@@ -238,7 +250,7 @@ def leave_points(prims, hits, dirs, tri_fiber, tri_segment, axis_points, tube_ra
         _leave_point(a, t, tube_radius[tri_fiber[prims[n]]] * 1.0001, hits[n], dirs[n], out[n])
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _escaped(depth, d, throughput, prev_pdf, has_env, env_rad, env_prob, background, camera_background, radiance):
     """Radiance a path gathers when its ray (direction d) escapes: the background at depth 0 when the camera sees
     one, the environment otherwise (MIS-weighted against the BCSDF sample that sent it, of density prev_pdf)."""
@@ -255,36 +267,55 @@ def _escaped(depth, d, throughput, prev_pdf, has_env, env_rad, env_prob, backgro
             radiance[k] += throughput[k] * env_rad[r, c, k] * w
 
 
+PATH_BLOCK = 64  # paths per prange iteration of ``_trace_curves``: they share one set of scratch arrays
+
+# rows of the per-thread scratch that ``_scatter`` works in (``scatter_scratch``)
+S_E1, S_E2, S_WO, S_WO_L, S_WI_L, S_WI, S_F = 0, 1, 2, 3, 4, 5, 6
+N_SCRATCH_ROWS = 7
+
+
 @njit(cache=True)
+def scatter_scratch():
+    """What ``_scatter`` writes its intermediates into: (rows ``S_*`` × 3, a BCSDF context). Kernels allocate one per
+    thread's block of paths, not one per event: the allocator cost 8 % of the render (BENCHMARKS.md)."""
+    return np.empty((N_SCRATCH_ROWS, 3)), np.empty(N_CONTEXT)
+
+
+@njit(cache=True, inline='always')
 def _scatter(seed, pid, depth, hit, d, a, t, rad, p, light_dirs, light_irr, has_env, env_rad, env_row, env_col,
-             env_prob, rr_depth, throughput, shadow_org, shadow_dirs, shadow_val, new_org, new_dir):
+             env_prob, rr_depth, throughput, shadow_org, shadow_dirs, shadow_val, new_org, new_dir, work, ctx):
     """A scattering event at ``hit`` on the fiber whose hit segment starts at ``a`` with unit tangent ``t`` (leave
     radius ``rad``), for a ray of direction ``d``: next-event estimation toward every light (row j of ``shadow_org``,
     ``shadow_dirs``, ``shadow_val``: the shadow ray and the radiance it brings if unblocked; the environment's in
     row ``len(light_dirs)``), then a BCSDF sample with Russian roulette, which updates ``throughput`` and writes the
-    next ray. Returns the sample's density, or 0 when the path ends."""
+    next ray. ``work``, ``ctx``: scratch (``scatter_scratch``). Returns the sample's density, or 0 when the path
+    ends."""
     n_lights = light_dirs.shape[0]
-    e1, e2 = _frame(t)
-    wo = np.empty(3)
+    e1, e2 = work[S_E1], work[S_E2]
+    _frame(t, e1, e2)
+    wo = work[S_WO]
     for k in range(3):
         wo[k] = -d[k]
-    wo_l = np.empty(3)
+    wo_l = work[S_WO_L]
     _to_local(wo, t, e1, e2, wo_l)
-    ctx = context(p, wo_l)
-    wi_l = np.empty(3)
-    fval = np.empty(3)
+    context_into(p, wo_l, ctx)
+    wi_l = work[S_WI_L]
+    fval = work[S_F]
     # next-event estimation: directional lights
     for j in range(n_lights):
-        _to_local(light_dirs[j], t, e1, e2, wi_l)
+        wl = work[S_WI]
+        for k in range(3):  # a copy, not a view of the shared array (module docstring, "Threads")
+            wl[k] = light_dirs[j, k]
+        _to_local(wl, t, e1, e2, wi_l)
         evaluate(p, ctx, wi_l, fval)
         cos_i = math.sqrt(max(0.0, 1.0 - wi_l[0] * wi_l[0]))
-        _leave_point(a, t, rad, hit, light_dirs[j], shadow_org[j])
+        _leave_point(a, t, rad, hit, wl, shadow_org[j])
         for k in range(3):
             shadow_dirs[j, k] = light_dirs[j, k]
             shadow_val[j, k] = throughput[k] * fval[k] * cos_i * light_irr[j, k]
     # next-event estimation: environment (MIS with the BCSDF)
     if has_env:
-        wi = np.empty(3)
+        wi = work[S_WI]
         pe = env_sample(env_rad, env_row, env_col, env_prob, uniform(seed, pid, depth + 1, 0),
                         uniform(seed, pid, depth + 1, 1), uniform(seed, pid, depth + 1, 2),
                         uniform(seed, pid, depth + 1, 3), wi)
@@ -364,9 +395,10 @@ def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput
             hit[k] = org[n, k] + hit_t[n] * d[k]
         if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
             continue  # scattering outside the yarn's cylinder is global scattering: the path ends
+        work, ctx = scatter_scratch()  # the tube path is the validation option: per-path scratch is fine here
         pb = _scatter(seed, path_id[n], depth, hit, d, a, t, tube_radius[f] * 1.0001, params[fiber_type[f]],
                       light_dirs, light_irr, has_env, env_rad, env_row, env_col, env_prob, rr_depth, throughput[n],
-                      shadow_org[n], shadow_dirs[n], shadow_val[n], new_org[n], new_dirs[n])
+                      shadow_org[n], shadow_dirs[n], shadow_val[n], new_org[n], new_dirs[n], work, ctx)
         if pb > 0.0:
             prev_pdf[n] = pb
             alive[n] = True
@@ -381,58 +413,72 @@ def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, par
     as they are made: no Python between rays. Path n = sample·pixels + pixel writes ``radiance[n]`` and
     ``rays[n]`` (rays it traced). The same events and random numbers as the tube tracer's waves."""
     n_pix = width * height
+    n_paths = n_samples * n_pix
     n_shadow = light_dirs.shape[0] + (1 if has_env else 0)
-    for n in prange(n_samples * n_pix):
-        pix = n % n_pix
-        pid = (first_sample + n // n_pix) * n_pix + pix
-        org, d = np.empty(3), np.empty(3)
-        _camera_ray(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, pid, pix, org, d)
+    for block in prange((n_paths + PATH_BLOCK - 1) // PATH_BLOCK):
+        # scratch owned by this block of paths (each path overwrites it: the results do not depend on the blocking)
         buf = ray_buffer()
-        throughput = np.ones(3)
-        out = np.zeros(3)
+        work, ctx = scatter_scratch()
+        p = np.empty(params.shape[1])
+        vec = np.empty((8, 3))
+        org, d, hit, a, t, new_org, new_dir, throughput = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5], vec[6], \
+            vec[7]
+        out = np.empty(3)
         shadow_org, shadow_dirs = np.empty((max(n_shadow, 1), 3)), np.empty((max(n_shadow, 1), 3))
-        shadow_val = np.zeros((max(n_shadow, 1), 3))
-        new_org, new_dir = np.empty(3), np.empty(3)
-        prev_pdf = 0.0
-        traced = 0
-        for depth in range(max_depth + 1):
-            prim = intersect(scene, buf, org[0], org[1], org[2], d[0], d[1], d[2], 0.0, np.inf)
-            traced += 1
-            if prim < 0:
-                _escaped(depth, d, throughput, prev_pdf, has_env, env_rad, env_prob, background, camera_background,
-                         out)
-                break
-            if depth == max_depth:
-                break
-            hit = np.empty(3)
+        shadow_val = np.empty((max(n_shadow, 1), 3))
+        for n in range(block * PATH_BLOCK, min(n_paths, (block + 1) * PATH_BLOCK)):
+            pix = n % n_pix
+            pid = (first_sample + n // n_pix) * n_pix + pix
+            _camera_ray(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, pid, pix, org, d)
             for k in range(3):
-                hit[k] = org[k] + buf[TFAR] * d[k]
-            if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
-                break
-            v = segment_start[prim]
-            a = vertices[v, :3].astype(np.float64)
-            t = vertices[v + 1, :3].astype(np.float64) - a
-            t /= math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
-            shadow_val[:] = 0.0
-            pb = _scatter(seed, pid, depth, hit, d, a, t, float(vertices[v, 3]) * 1.0001,
-                          params[fiber_type[segment_fiber[prim]]], light_dirs, light_irr, has_env, env_rad, env_row,
-                          env_col, env_prob, rr_depth, throughput, shadow_org, shadow_dirs, shadow_val, new_org,
-                          new_dir)
-            for j in range(n_shadow):
-                if shadow_val[j, 0] > 0.0 or shadow_val[j, 1] > 0.0 or shadow_val[j, 2] > 0.0:
-                    traced += 1
-                    o, w = shadow_org[j], shadow_dirs[j]
-                    if not occluded(scene, buf, o[0], o[1], o[2], w[0], w[1], w[2], 0.0, np.inf):
-                        for k in range(3):
-                            out[k] += shadow_val[j, k]
-            if not pb > 0.0:
-                break
-            org[:] = new_org
-            d[:] = new_dir
-            prev_pdf = pb
-        for k in range(3):
-            radiance[n, k] = out[k]
-        rays[n] = traced
+                throughput[k] = 1.0
+                out[k] = 0.0
+            prev_pdf = 0.0
+            traced = 0
+            for depth in range(max_depth + 1):
+                prim = intersect(scene, buf, org[0], org[1], org[2], d[0], d[1], d[2], 0.0, np.inf)
+                traced += 1
+                if prim < 0:
+                    _escaped(depth, d, throughput, prev_pdf, has_env, env_rad, env_prob, background,
+                             camera_background, out)
+                    break
+                if depth == max_depth:
+                    break
+                for k in range(3):
+                    hit[k] = org[k] + buf[TFAR] * d[k]
+                if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
+                    break
+                v = segment_start[prim]
+                for k in range(3):
+                    a[k] = np.float64(vertices[v, k])
+                for k in range(3):
+                    t[k] = np.float64(vertices[v + 1, k]) - a[k]
+                norm = math.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+                for k in range(3):
+                    t[k] /= norm
+                shadow_val[:] = 0.0
+                ft = fiber_type[segment_fiber[prim]]
+                for k in range(p.shape[0]):  # a copy, not a view of the shared array (module docstring, "Threads")
+                    p[k] = params[ft, k]
+                pb = _scatter(seed, pid, depth, hit, d, a, t, float(vertices[v, 3]) * 1.0001, p, light_dirs, light_irr, has_env, env_rad,
+                              env_row, env_col, env_prob, rr_depth, throughput, shadow_org, shadow_dirs, shadow_val,
+                              new_org, new_dir, work, ctx)
+                for j in range(n_shadow):
+                    if shadow_val[j, 0] > 0.0 or shadow_val[j, 1] > 0.0 or shadow_val[j, 2] > 0.0:
+                        traced += 1
+                        if not occluded(scene, buf, shadow_org[j, 0], shadow_org[j, 1], shadow_org[j, 2],
+                                        shadow_dirs[j, 0], shadow_dirs[j, 1], shadow_dirs[j, 2], 0.0, np.inf):
+                            for k in range(3):
+                                out[k] += shadow_val[j, k]
+                if not pb > 0.0:
+                    break
+                for k in range(3):
+                    org[k] = new_org[k]
+                    d[k] = new_dir[k]
+                prev_pdf = pb
+            for k in range(3):
+                radiance[n, k] = out[k]
+            rays[n] = traced
 
 
 def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_depth: int = 16, rr_depth: int = 3,
