@@ -13,6 +13,7 @@ from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.procedural_yarn import generate_fibers
 from knitbake.fibers.tessellate import tessellate_fibers
 from knitbake.trace.env_light import env_from_image, env_pdf, env_sample, uniform_env
+from knitbake.trace.embree_curves import CurveScene
 from knitbake.trace.path_tracer import Camera, TracerScene, render
 from knitrun.shading import equirect
 from knitrun.shading import fiber_bcsdf as fb
@@ -188,8 +189,12 @@ def test_bad_render_settings():
     with pytest.raises(ValueError, match="direction"):
         TracerScene(straight_fiber(), np.zeros(1, np.int32), LOSSLESS[None], light_dirs=np.zeros((1, 3)),
                     light_irradiance=np.ones((1, 3)))
-    with pytest.raises(ValueError, match="either"):
+    with pytest.raises(ValueError, match="one geometry"):
         TracerScene(straight_fiber(), np.zeros(1, np.int32), LOSSLESS[None], fibers=straight_fibers())
+    with pytest.raises(ValueError, match="one geometry"):
+        TracerScene(None, np.zeros(1, np.int32), LOSSLESS[None])
+    with pytest.raises(RuntimeError, match="commit"):  # a scene built in two steps is not traced half-built
+        CurveScene(straight_fibers(), commit=False).handle
 
 
 def test_yarn_only_mode_drops_scattering_off_other_yarns():

@@ -83,9 +83,11 @@ _rtc_occluded1 = types.ExternalFunction("rtcOccluded1", types.void(types.intp, t
 class CurveScene:
     """A committed Embree scene of a ``FiberSet``'s fibers as round linear curves (module docstring). ``handle`` is
     the scene pointer the kernels take; ``close()`` (or the garbage collector) releases it. ``threads``: Embree's
-    build threads (default: Numba's thread count)."""
+    build threads (default: Numba's thread count). ``commit=False`` copies the fibers into Embree's buffers and
+    stops there, so that a caller can drop the ``FiberSet`` (24 B per point) before ``commit()`` builds the BVH,
+    where the build's own peak is."""
 
-    def __init__(self, fibers: FiberSet, threads: int | None = None):
+    def __init__(self, fibers: FiberSet, threads: int | None = None, commit: bool = True):
         points = np.asarray(fibers.points, np.float64)
         offsets = np.asarray(fibers.offsets, np.int64)
         radius = np.asarray(fibers.radius, np.float64)
@@ -121,6 +123,18 @@ class CurveScene:
             _lib.rtcCommitGeometry(geometry)
             _lib.rtcAttachGeometry(self._scene, geometry)
             _lib.rtcReleaseGeometry(geometry)
+        except BaseException:
+            self.close()
+            raise
+        self.committed = False
+        if commit:
+            self.commit()
+
+    def commit(self) -> None:
+        """Build the BVH (once; later calls do nothing)."""
+        if self.committed:
+            return
+        try:
             _lib.rtcCommitScene(self._scene)
             error = _lib.rtcGetDeviceError(self._device)
             if error:
@@ -129,9 +143,12 @@ class CurveScene:
         except BaseException:
             self.close()
             raise
+        self.committed = True
 
     @property
     def handle(self) -> int:
+        if not self.committed:
+            raise RuntimeError("CurveScene: commit() before tracing")
         return int(self._scene)
 
     @property

@@ -62,8 +62,9 @@ _MASK = np.uint64(0xFFFFFFFFFFFFFFFF)
 @dataclass
 class TracerScene:
     """Everything the tracer needs: geometry, per-fiber material, lights. The geometry is either ``mesh``, the fibers
-    tessellated into tubes (traced by waves through embreex), or ``fibers``, traced as Embree's round linear curves
-    by whole paths in one kernel (``embree_curves``); give exactly one."""
+    tessellated into tubes (traced by waves through embreex), or the fibers as Embree's round linear curves, traced
+    by whole paths in one kernel (``embree_curves``): ``fibers`` (their scene built here, then ``fibers`` is
+    dropped) or ``curves`` (built by the caller); give one geometry."""
 
     mesh: TubeMesh | None
     fiber_type: np.ndarray  # (F,) int32 index into params
@@ -77,10 +78,11 @@ class TracerScene:
     curves: CurveScene | None = None
 
     def __post_init__(self):
-        if (self.mesh is None) == (self.fibers is None):
-            raise ValueError("TracerScene needs either a tube mesh or fibers, not both")
         if self.fibers is not None and self.curves is None:
             self.curves = CurveScene(self.fibers)
+        self.fibers = None  # Embree holds the curves' own copy: the FiberSet's float64 points need not stay alive
+        if (self.mesh is None) == (self.curves is None):
+            raise ValueError("TracerScene needs one geometry: a tube mesh, or fibers (or their curve scene)")
         if self.mesh is not None and self.ray_scene is None:
             self.ray_scene = RayScene(self.mesh)
         self.params = np.ascontiguousarray(self.params, dtype=np.float64).reshape(-1, N_PARAMS)

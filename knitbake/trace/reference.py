@@ -31,6 +31,7 @@ from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.fiber_sweep import sweep_fibers
 from knitbake.fibers.tessellate import tessellate_fibers
+from knitbake.trace.embree_curves import CurveScene
 from knitbake.trace.env_light import env_from_image
 from knitbake.trace.path_tracer import TracerScene, render_samples
 from knitrun.render.camera import Camera, scene_camera
@@ -77,12 +78,18 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves") -> Re
         image = environment_image(e)
         env = env_from_image(image, e.scale)
     params = np.stack([tinted(params_from_optics(e.spec.optics), e.color) for e in scene.yarns])
-    tracer = TracerScene(mesh, np.concatenate(types), params, fibers=fibers if mesh is None else None,
+    n_fibers, n_segments = fibers.n_fibers, fibers.n_segments
+    curve_scene = None
+    if mesh is None:  # the fibers' float64 points are dropped before Embree builds: the build sets the peak
+        curve_scene = CurveScene(fibers, commit=False)
+        del fibers, parts
+        curve_scene.commit()
+    tracer = TracerScene(mesh, np.concatenate(types), params, curves=curve_scene,
                          light_dirs=np.array([light.unit_direction for light in lights]).reshape(-1, 3),
                          light_irradiance=np.array([light.irradiance for light in lights]).reshape(-1, 3),
                          env=env, background=np.asarray(scene.background, float))
     camera = scene_camera(scene)
-    facts = {"geometry": geometry, "fibers": fibers.n_fibers, "segments": fibers.n_segments,
+    facts = {"geometry": geometry, "fibers": n_fibers, "segments": n_segments,
              "triangles": 0 if mesh is None else int(mesh.triangles.shape[0]),
              "sweep_s": t_sweep, "tessellate_s": t_tess, "embree_build_s": time.perf_counter() - t0 - t_sweep - t_tess}
     return ReferenceScene(tracer, camera, facts)
