@@ -462,9 +462,9 @@ def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, par
                 ft = fiber_type[segment_fiber[prim]]
                 for k in range(p.shape[0]):  # a copy, not a view of the shared array (module docstring, "Threads")
                     p[k] = params[ft, k]
-                pb = _scatter(seed, pid, depth, hit, d, a, t, float(vertices[v, 3]) * 1.0001, p, light_dirs, light_irr, has_env, env_rad,
-                              env_row, env_col, env_prob, rr_depth, throughput, shadow_org, shadow_dirs, shadow_val,
-                              new_org, new_dir, work, ctx)
+                pb = _scatter(seed, pid, depth, hit, d, a, t, float(vertices[v, 3]) * 1.0001, p, light_dirs,
+                              light_irr, has_env, env_rad, env_row, env_col, env_prob, rr_depth, throughput,
+                              shadow_org, shadow_dirs, shadow_val, new_org, new_dir, work, ctx)
                 for j in range(n_shadow):
                     if shadow_val[j, 0] > 0.0 or shadow_val[j, 1] > 0.0 or shadow_val[j, 2] > 0.0:
                         traced += 1
