@@ -93,8 +93,10 @@ def _design_mesh(path):
 @click.option("--cols", type=click.IntRange(min=1), help="Stitches per course of a named pattern.  [default: 12]")
 @click.option("-o", "--output", required=True, type=SuffixPath(".h5", ".hdf5", ".obj"),
               help="MESH.h5 (knit-stitch-mesh) or MESH.obj (also writes MESH.labels).")
+@click.option("--in-the-round", "in_the_round", is_flag=True,
+              help="Knit a chart or named pattern as a tube: each course closed, the yarn one spiral.")
 @click.option("--json", "as_json", is_flag=True, help="Print the mesh summary as JSON.")
-def pattern(source, rows, cols, output, as_json):
+def pattern(source, rows, cols, output, in_the_round, as_json):
     """Stitch mesh from a knit chart file, a knitout or .smobj file (recognised by content), or a named pattern.
 
     A chart is text, top course first: k knit, p purl, o yarn-over, / k2tog, \\ ssk (data_formats/STITCH_MESH.md).
@@ -105,6 +107,9 @@ def pattern(source, rows, cols, output, as_json):
       knitrun pattern eyelet --rows 16 --cols 16 -o eyelet.h5
       knitrun pattern my_chart.txt -o patch.obj
       knitrun pattern rib-2x2.knitout -o rib.h5
+      knitrun pattern stockinette --rows 12 --cols 24 --in-the-round -o tube.h5
+
+    A knitout tube (front and back beds knitted in turn) is knitted in the round by itself.
     """
     from data_formats.stitch_mesh import summary, write_obj_stitch_mesh, write_stitch_mesh
     from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, pattern_chart
@@ -116,10 +121,13 @@ def pattern(source, rows, cols, output, as_json):
             raise FormatError(f"--rows/--cols size a named pattern, but {source} is a file")
         regular_file(source, "a knit chart, knitout or .smobj file")
         mesh = _design_mesh(source)
+        if mesh is not None and in_the_round:
+            raise FormatError(f"--in-the-round applies to charts and named patterns; {source} gives its own shape")
         if mesh is None:
-            mesh = chart_to_mesh(Path(source).read_text(encoding="utf-8"), where=source)
+            mesh = chart_to_mesh(Path(source).read_text(encoding="utf-8"), where=source, in_the_round=in_the_round)
     elif source in PATTERNS:
-        mesh = chart_to_mesh(pattern_chart(source, rows or 12, cols or 12), where=f"pattern {source}")
+        mesh = chart_to_mesh(pattern_chart(source, rows or 12, cols or 12), where=f"pattern {source}",
+                             in_the_round=in_the_round)
     else:
         raise FormatError(f"{source}: neither a chart file nor a pattern name, expected a file or one of "
                           f"{', '.join(PATTERNS)}")
@@ -128,7 +136,8 @@ def pattern(source, rows, cols, output, as_json):
     if as_json:
         echo_json(info)
     else:
-        click.echo(f"{source} → {output}: {info['faces']} faces in {info['courses']} courses "
+        click.echo(f"{source} → {output}: {info['faces']} faces in {info['courses']} "
+                   f"{'closed courses (in the round)' if info['in_the_round'] else 'courses'} "
                    f"({', '.join(f'{n} {k}' for k, n in info['faces_per_stitch_type'].items())})")
 
 

@@ -14,10 +14,14 @@ Wavefront OBJ with a stitch-label sidecar. The full spec is ``STITCH_MESH.md``; 
   shares bottom edge ``k`` (−1 padded to 2 columns); ``wale_above`` shares the top edge. Stored adjacency must be
   symmetric and equal to what the shared edges give.
 * ``course`` counts from 0 at the bottom (first knitted); ``column`` from 0 at the left of each course; every
-  course is one left → right chain of faces and (course, column) is unique.
+  course is one left → right chain of faces and (course, column) is unique. Knitting in the round (version 1.1): a
+  course may be **closed** (its last face's ``course_right`` is its column-0 face: a tube); then every course is
+  closed, and column 0 of each is its face of lowest index (the seam).
 * Yarns: yarn ``y`` visits ``yarn_faces[yarn_offsets[y]:yarn_offsets[y+1]]`` in knitting order, travelling
   ``yarn_direction`` (+1 left → right, −1 right → left) through each face. A yarn knits whole consecutive courses,
-  turning at the end of each (flat knitting: the direction flips between courses); every face is visited once.
+  turning at the end of each (flat knitting: the direction flips between courses); in the round it enters each
+  course at column 0, goes once round it and climbs into the next course's column 0 with the same direction (a
+  spiral); every face is visited once.
 """
 
 import dataclasses
@@ -34,7 +38,8 @@ from .input_files import open_hdf5, read_head, regular_file
 from .text_statements import parse_vertex
 
 FORMAT_NAME = "knit-stitch-mesh"
-FORMAT_VERSION = "1.0"
+FORMAT_VERSION = "1.1"  # 1.1 adds closed courses (knitting in the round); flat meshes are written as "1.0"
+FLAT_VERSION = "1.0"
 
 STITCH_TYPES = ("knit", "purl", "yarn_over", "k2tog", "ssk")  # code = index
 LOOPS_CONSUMED = np.array([1, 1, 0, 2, 2], dtype=np.int64)  # bottom edges per stitch type
@@ -78,11 +83,14 @@ def make_stitch_mesh(vertices, face_offsets, face_vertices, stitch_type, units="
     _check_faces(vertices, face_offsets, face_vertices, stitch_type, where)
     left, right, below, above = derive_adjacency(len(vertices), face_offsets, face_vertices, stitch_type, where)
     course, column = derive_courses(left, right, below, where)
-    # course-major order; odd courses are knitted right to left
-    yarn_faces = np.lexsort((np.where(course % 2 == 1, -column, column), course))
+    if (left < 0).any():  # flat: course-major order, odd courses knitted right to left
+        yarn_faces = np.lexsort((np.where(course % 2 == 1, -column, column), course))
+        direction = np.where(course[yarn_faces] % 2 == 1, -1, 1).astype(np.int8)
+    else:  # in the round: every course left to right from its seam, one spiral
+        yarn_faces = np.lexsort((column, course))
+        direction = np.ones(len(yarn_faces), np.int8)
     m = StitchMesh(vertices, face_offsets, face_vertices, stitch_type, left, right, below, above, course, column,
-                   np.array([0, len(yarn_faces)], np.int64), yarn_faces,
-                   np.where(course[yarn_faces] % 2 == 1, -1, 1).astype(np.int8),
+                   np.array([0, len(yarn_faces)], np.int64), yarn_faces, direction,
                    np.zeros(1, np.int32), [yarn_type], units)
     validate_stitch_mesh(m, where)
     return m
@@ -138,21 +146,33 @@ def derive_adjacency(n_vertices, face_offsets, face_vertices, stitch_type, where
 
 
 def derive_courses(course_left, course_right, wale_below, where="stitch mesh"):
-    """(course, column) of every face: each chain of course neighbours starting at a left border is one course; the
-    chain without faces below is course 0 and each chain's faces above form the next course."""
+    """(course, column) of every face: each chain of course neighbours starting at a left border is one course, and
+    so is each closed chain (knitting in the round; column 0 at its face of lowest index); the chain without faces
+    below is course 0 and each chain's faces above form the next course. Open and closed courses do not mix."""
     n_faces = len(course_left)
     chain = np.full(n_faces, -1, np.int64)
     column = np.full(n_faces, -1, np.int64)
-    starts = np.flatnonzero(course_left < 0)
-    for c, f in enumerate(starts.tolist()):
-        col = 0
-        while f >= 0:
-            chain[f], column[f] = c, col
-            col, f = col + 1, int(course_right[f])
+    flat = bool((course_left < 0).any())
+    starts = np.flatnonzero(course_left < 0).tolist() if flat else []
+    n_chains = 0
+    for f in (list(starts) if flat else range(n_faces)):  # in the round: each cycle from its lowest face index
+        if chain[f] >= 0:
+            continue
+        if not flat:
+            starts.append(f)
+        g, col = f, 0
+        while g >= 0 and chain[g] < 0:
+            chain[g], column[g] = n_chains, col
+            col, g = col + 1, int(course_right[g])
+        n_chains += 1
+        if not flat and g != f:
+            raise FormatError(f"{where}: face {g}: two faces of one closed course have it as course_right, expected "
+                              f"each course to be one chain")
     if (chain < 0).any():
         f = int(np.flatnonzero(chain < 0)[0])
-        raise FormatError(f"{where}: face {f}: its course has no left border (a closed course, as in knitting in the "
-                          f"round), expected flat courses")
+        raise FormatError(f"{where}: face {f}: its course is closed (knitting in the round) while others have borders, "
+                          f"expected every course flat or every course closed")
+    starts = np.array(starts, np.int64)
     has = wale_below >= 0
     pairs = np.unique(np.stack([chain[np.nonzero(has)[0]], chain[wale_below[has]]], axis=1), axis=0)
     above_chain = np.full(len(starts), -1, np.int64)
@@ -305,14 +325,30 @@ def _check_courses(m, where):
         bad = np.flatnonzero(getattr(m, name) < 0)
         if bad.size:
             raise FormatError(f"{where}: face {bad[0]}: {name} = {getattr(m, name)[bad[0]]}, expected >= 0")
-    bad = np.flatnonzero((m.column == 0) != (m.course_left < 0))
-    if bad.size:
-        f = bad[0]
-        raise FormatError(f"{where}: face {f}: column = {m.column[f]} with course_left = {m.course_left[f]}, expected "
-                          f"column 0 exactly at a course's left border")
+    closed = is_round(m)
+    if closed:
+        if (m.course_left < 0).any() or (m.course_right < 0).any():
+            f = int(np.flatnonzero((m.course_left < 0) | (m.course_right < 0))[0])
+            raise FormatError(f"{where}: face {f}: a course border in a mesh knitted in the round, expected every "
+                              f"course flat or every course closed")
+        seam = m.column == 0
+        lowest = np.full(int(m.course.max()) + 1, np.iinfo(np.int64).max)
+        np.minimum.at(lowest, m.course, np.arange(len(m.course)))
+        bad = np.flatnonzero(seam != (np.arange(len(m.course)) == lowest[m.course]))
+        if bad.size:
+            f = bad[0]
+            raise FormatError(f"{where}: face {f}: column = {m.column[f]}, expected column 0 exactly at the face of "
+                              f"lowest index of each closed course (its seam)")
+    else:
+        bad = np.flatnonzero((m.column == 0) != (m.course_left < 0))
+        if bad.size:
+            f = bad[0]
+            raise FormatError(f"{where}: face {f}: column = {m.column[f]} with course_left = {m.course_left[f]}, "
+                              f"expected column 0 exactly at a course's left border")
     r = np.flatnonzero(m.course_right >= 0)
     g = m.course_right[r]
-    bad = r[(m.course[g] != m.course[r]) | (m.column[g] != m.column[r] + 1)]
+    wraps = closed & (m.column[g] == 0)  # the last face of a closed course, back at its seam
+    bad = r[(m.course[g] != m.course[r]) | ((m.column[g] != m.column[r] + 1) & ~wraps)]
     if bad.size:
         f, g = bad[0], m.course_right[bad[0]]
         raise FormatError(f"{where}: face {f} (course {m.course[f]}, column {m.column[f]}): its right neighbour {g} "
@@ -361,6 +397,9 @@ def _check_yarns(m, where):
         raise FormatError(f"{where}: yarn_direction[{bad[0]}] = {m.yarn_direction[bad[0]]}, expected +1 "
                           f"(left -> right) or -1 (right -> left)")
     f, d = m.yarn_faces, m.yarn_direction.astype(np.int64)
+    if is_round(m):
+        _check_round_yarns(m, where)
+        return
     ahead = np.where(d > 0, m.course_right[f], m.course_left[f])  # next face along the direction of travel
     behind = np.where(d > 0, m.course_left[f], m.course_right[f])
     first, last = off[:-1], off[1:] - 1
@@ -387,6 +426,41 @@ def _check_yarns(m, where):
                           f"next course with the opposite direction")
 
 
+def is_round(m) -> bool:
+    """True for a stitch mesh knitted in the round (closed courses: no face has a left border)."""
+    return len(m.course_left) > 0 and not (m.course_left < 0).any()
+
+
+def _check_round_yarns(m, where):
+    """Yarn rules in the round: a yarn starts at a seam (column 0), goes once round each course in one direction and
+    climbs into the next course at its seam, keeping its direction."""
+    f, d, off = m.yarn_faces, m.yarn_direction.astype(np.int64), m.yarn_offsets
+    ahead = np.where(d > 0, m.course_right[f], m.course_left[f])
+    bad = np.flatnonzero(m.column[f[off[:-1]]] != 0)
+    if bad.size:
+        raise FormatError(f"{where}: yarn {bad[0]}: starts at face {f[off[bad[0]]]} (column "
+                          f"{m.column[f[off[bad[0]]]]}), expected a yarn knitting in the round to start at a seam "
+                          f"(column 0)")
+    bad = np.flatnonzero(m.column[ahead[off[1:] - 1]] != 0)
+    if bad.size:
+        raise FormatError(f"{where}: yarn {bad[0]}: ends at face {f[off[bad[0] + 1] - 1]} before going round its "
+                          f"course, expected it to end next to its seam")
+    step = np.ones(len(f) - 1, bool)
+    step[off[1:-1] - 1] = False
+    p = np.flatnonzero(step)
+    same = m.course[f[p + 1]] == m.course[f[p]]
+    ok = np.where(same, (ahead[p] == f[p + 1]) & (d[p + 1] == d[p]),
+                  (m.column[ahead[p]] == 0) & (m.column[f[p + 1]] == 0) & (m.course[f[p + 1]] == m.course[f[p]] + 1)
+                  & (d[p + 1] == d[p]))
+    bad = p[~ok]
+    if bad.size:
+        q = bad[0]
+        raise FormatError(f"{where}: yarn_faces[{q}..{q + 1}]: the yarn goes from face {f[q]} (course {m.course[f[q]]},"
+                          f" direction {d[q]:+d}) to face {f[q + 1]} (course {m.course[f[q + 1]]}, direction "
+                          f"{d[q + 1]:+d}), expected the next face round the course, or after the last one the seam "
+                          f"of the next course in the same direction (knitting in the round)")
+
+
 def summary(m):
     """JSON-serializable statistics of ``m`` shared by the ``describe`` functions of both file formats."""
     per_course = np.bincount(m.course)
@@ -395,6 +469,7 @@ def summary(m):
         "vertices": len(m.vertices),
         "faces": len(m.stitch_type),
         "courses": len(per_course),
+        "in_the_round": is_round(m),
         "stitches_per_course": [int(per_course.min()), int(per_course.max())],
         "faces_per_stitch_type": dict(zip(STITCH_TYPES, np.bincount(m.stitch_type, minlength=5).tolist())),
         "faces_per_size": {str(n): int(c) for n, c in enumerate(np.bincount(np.diff(m.face_offsets))) if c},
@@ -411,7 +486,7 @@ def write_stitch_mesh(path, m):
     validate_stitch_mesh(m, str(path))
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs["format"] = FORMAT_NAME
-        f.attrs["version"] = FORMAT_VERSION
+        f.attrs["version"] = FORMAT_VERSION if is_round(m) else FLAT_VERSION
         f.attrs["units"] = m.units
         f.create_dataset("vertices", data=m.vertices)
         for name in INDEX_FIELDS + ("stitch_type", "yarn_direction", "yarn_type"):

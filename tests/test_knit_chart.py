@@ -1,12 +1,15 @@
 """Tests of knitrun.sim.knit_chart: chart parsing, chart → StitchMesh, named patterns."""
 
+import dataclasses
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
 from data_formats.errors import FormatError
-from data_formats.stitch_mesh import STITCH_TYPES, validate_stitch_mesh
+from data_formats.stitch_mesh import (STITCH_TYPES, is_round, read_obj_stitch_mesh, read_stitch_mesh,
+                                      validate_stitch_mesh, write_obj_stitch_mesh, write_stitch_mesh)
 from knitrun.sim.knit_chart import PATTERNS, chart_to_mesh, parse_chart, pattern_chart
 from tests.helpers import K2TOG, KNIT, PURL, SSK, YO, assert_same, sample
 
@@ -147,3 +150,46 @@ def test_spec_example_chart_is_valid():
     assert np.bincount(m.course).tolist() == [4, 4, 3]
     assert [STITCH_TYPES[t] for t in m.stitch_type[4:]] == ["knit", "yarn_over", "k2tog", "knit", "knit", "knit",
                                                             "ssk"]
+
+
+def test_a_chart_knitted_in_the_round_is_a_tube_of_closed_courses(tmp_path):
+    """Every course closes on its seam (column 0, its lowest face), the yarn spirals left → right through every
+    course in order, the rest shape is a cylinder of circumference n w about y with its faces facing out, and both
+    file formats keep it (HDF5 as version 1.1; OBJ by its shared seam vertices)."""
+    m = chart_to_mesh(pattern_chart("rib2x2", 5, 12), in_the_round=True)
+    assert is_round(m) and len(m.stitch_type) == 60
+    last = np.flatnonzero(m.column == 11)
+    assert (m.course_right[last] == np.flatnonzero(m.column == 0)).all() and (m.course_left >= 0).all()
+    assert (m.yarn_faces == np.lexsort((m.column, m.course))).all() and (m.yarn_direction == 1).all()
+    radius = np.hypot(m.vertices[:, 0], m.vertices[:, 2])
+    assert np.allclose(radius, 12 * 0.25 / (2 * np.pi))
+    centre = np.stack([m.vertices[m.face_vertices[a:b]].mean(axis=0) for a, b in zip(m.face_offsets[:-1],
+                                                                                          m.face_offsets[1:])])
+    v = m.vertices[m.face_vertices.reshape(-1, 4)]
+    normal = np.cross(v[:, 1] - v[:, 0], v[:, 3] - v[:, 0])  # counter-clockwise from the bottom-left: out of the face
+    assert (np.einsum("ij,ij->i", normal[:, [0, 2]], centre[:, [0, 2]]) > 0).all()  # the front faces out of the tube
+    write_stitch_mesh(tmp_path / "t.h5", m)
+    with h5py.File(tmp_path / "t.h5") as f:
+        assert f.attrs["version"] == "1.1"
+    assert_same(read_stitch_mesh(tmp_path / "t.h5"), m)
+    write_obj_stitch_mesh(tmp_path / "t.obj", m)
+    assert_same(read_obj_stitch_mesh(tmp_path / "t.obj", units="cm", yarn_type="cotton1"), m)
+    eyelet = chart_to_mesh(pattern_chart("eyelet", 8, 12), in_the_round=True)  # decreases and yarn-overs close too
+    assert is_round(eyelet) and (eyelet.course_right >= 0).all()
+
+
+def test_in_the_round_errors():
+    with pytest.raises(FormatError, match="the cast-on has 2 loop.s., expected at least 3 stitches round a tube"):
+        chart_to_mesh("kk\nkk", in_the_round=True)
+    m = chart_to_mesh(pattern_chart("stockinette", 3, 6), in_the_round=True)
+    rolled = dataclasses.replace(m, yarn_faces=np.roll(m.yarn_faces, -1))
+    with pytest.raises(FormatError, match="yarn 0: starts at face 1 .column 1., expected a yarn knitting in the round"):
+        validate_stitch_mesh(rolled)
+    back = dataclasses.replace(m, yarn_direction=-m.yarn_direction)  # from each seam the other way round
+    with pytest.raises(FormatError, match="yarn 0: ends at face 17 before going round its course"):
+        validate_stitch_mesh(back)
+    order = np.lexsort((np.where(m.column == 0, 0, 6 - m.column), m.course))
+    validate_stitch_mesh(dataclasses.replace(m, yarn_faces=order, yarn_direction=-np.ones_like(m.yarn_direction)))
+    shifted = dataclasses.replace(m, column=(m.column + 1) % 6)
+    with pytest.raises(FormatError, match="expected column 0 exactly at the face of lowest index"):
+        validate_stitch_mesh(shifted)

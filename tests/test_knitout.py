@@ -1,17 +1,22 @@
 """Knitout executed into stitch meshes (``knitrun.sim.knitout``): flat jersey, rib (front and back bed, by
 transfers) and garter (a transfer every course) from small fixtures written here, and the public-domain
 ``basic-vol-1`` programs in ``../shared/fixtures/knitout`` (single jersey, alternate jersey, 2×2 rib); double-bed
-fabrics, decreases, tuck stitches, splits and malformed lines are one-line errors naming the line."""
+fabrics other than tubes, decreases, tuck stitches, splits and malformed lines are one-line errors naming the line;
+tubes (both beds in turn) are knitted in the round."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from cli.knitbake_cli import main as knitbake
 from cli.knitrun_cli import main as knitrun
 from data_formats import FormatError
-from knitrun.sim.knitout import knitout_chart, read_knitout, sniff
+from data_formats.stitch_mesh import is_round
+from knitrun.sim.contact import contact_statistic
+from knitrun.sim.knitout import knitout_chart, knitout_fabric, read_knitout, sniff
+from knitrun.sim.simulate import simulate
 
 FIXTURES = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "knitout"
 
@@ -32,6 +37,11 @@ def _jersey(rows=3, n=4):
     return [("+" if r % 2 == 0 else "-", "f", range(n) if r % 2 == 0 else reversed(range(n))) for r in range(rows)]
 
 
+def _tube(rows=3, n=4):
+    """A tube on needles 0..n−1: each course a front pass left → right and a back pass right → left."""
+    return [p for _ in range(rows) for p in (("+", "f", range(n)), ("-", "b", list(reversed(range(n)))))]
+
+
 def test_flat_jersey_rib_and_garter(tmp_path):
     (tmp_path / "jersey.k").write_text(_program(_jersey()))
     assert knitout_chart(tmp_path / "jersey.k") == "kkkk\nkkkk\nkkkk"
@@ -47,8 +57,35 @@ def test_flat_jersey_rib_and_garter(tmp_path):
     assert sniff(tmp_path / "garter.k")
 
 
+def test_a_tube_is_knitted_in_the_round(tmp_path):
+    """Front and back beds knit in turn: closed courses of 2n knit stitches, the yarn one spiral; simulated at rest
+    and stretched along the tube its yarns touch (contact statistic of issue 14) except at the seam's jog."""
+    cast_on = [[f"tuck + f{n} 1" for n in range(8)] + [f"tuck - b{n} 1" for n in reversed(range(8))]]
+    (tmp_path / "tube.k").write_text(_program(cast_on + _tube(10, 8)))
+    chart, in_the_round = knitout_fabric(tmp_path / "tube.k")
+    assert in_the_round and chart.splitlines() == ["k" * 16] * 10
+    mesh = read_knitout(tmp_path / "tube.k")
+    assert is_round(mesh) and len(mesh.stitch_type) == 160 and (mesh.yarn_direction == 1).all()
+    assert (mesh.course_right[mesh.column == 15] == np.flatnonzero(mesh.column == 0)).all()  # closed courses
+    rest = mesh.vertices
+    stretched = rest * np.array([1.0, 1.3, 1.0])  # along the tube's axis (y)
+    curves, report = simulate(mesh, [rest, stretched])
+    assert curves.points.shape[0] == 2 and np.isfinite(curves.points).all() and len(curves.closed) >= 1
+    for frame in (0, 1):
+        stats = contact_statistic(curves, report["yarn_radius"], frame)
+        assert stats["p5"] >= 0.8 and 0.9 <= stats["p50"] <= 1.1, stats
+    result = CliRunner().invoke(knitrun, ["pattern", str(tmp_path / "tube.k"), "-o", str(tmp_path / "tube.h5"),
+                                          "--json"])
+    assert result.exit_code == 0 and '"in_the_round": true' in result.output, result.output
+
+
 @pytest.mark.parametrize("passes, message", [
-    (_jersey(1) + [("-", "b", [3, 2, 1, 0])], "line 8: column 3 is knit twice in course 0 (also line 7): a double-bed"),
+    (_jersey(1) + [["knit - b3 1", "knit - b2 1", "knit - f1 1", "knit - f0 1"]],
+     "line 9: column 2 is knit on both beds in course 0 (also line 6) and the pass from line 8 knits on both beds: "
+     "a double-bed fabric (interlock"),
+    (_tube(2) + [["xfer f1 b1"]], "line 20: a transfer in a tube"),
+    (_tube(1) + [("+", "f", range(4)), ("-", "b", [3, 2, 0])], "course 1 has no stitch in column(s) [1] of needles "
+     "0..3 on one bed of the tube"),
     (_jersey(1) + [["xfer f1 f2"], ("-", "f", [3, 2, 0])], "knit on f2 holding 2 loops (a decrease"),
     (_jersey(1) + [["tuck + f1 1"]], "tuck on f1 holding a loop (a tuck stitch)"),
     (_jersey(1) + [["split + f1 b1 1"]], "split: not supported"),

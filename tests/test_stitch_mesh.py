@@ -168,7 +168,8 @@ def quads_obj(tmp_path, faces, n_vertices=8):
     ([(0, 1, 5, 4), (5, 6, 2, 1)], 8, "faces 0 and 1 both use edge 1->5 in the same direction"),
     ([(0, 1, 5, 4), (2, 6, 5, 1)], 8, "face 0 right edge 1->5 is shared with face 1's top edge, expected its left"),
     ([(0, 1, 5, 4), (2, 3, 7, 6)], 8, "faces 0, 1 each start a course with no faces below, expected exactly one"),
-    ([(0, 1, 5, 4), (1, 2, 6, 5), (2, 0, 4, 6)], 8, "face 0: its course has no left border"),
+    ([(0, 1, 5, 4), (1, 2, 6, 5), (2, 0, 4, 6), (4, 5, 9, 8)], 10,
+     "face 0: its course is closed (knitting in the round) while others have borders"),
 ])
 def test_obj_topology_errors_name_faces(tmp_path, faces, n_vertices, fragment):
     path = quads_obj(tmp_path, faces, n_vertices)
@@ -321,7 +322,7 @@ def test_describe_and_validate_both_formats(tmp_path):
     write_obj_stitch_mesh(obj, three_yarns())
     info = json.loads(json.dumps(describe(h5)))
     assert info == {"kind": "stitch-mesh", "version": "1.0", "units": "cm", "vertices": 19, "faces": 11,
-                    "courses": 3, "stitches_per_course": [3, 4],
+                    "courses": 3, "in_the_round": False, "stitches_per_course": [3, 4],
                     "faces_per_stitch_type": {"knit": 7, "purl": 1, "yarn_over": 1, "k2tog": 1, "ssk": 1},
                     "faces_per_size": {"3": 1, "4": 8, "5": 2}, "yarns": 3, "yarn_types": ["cotton1", "silk1"],
                     "bounds": [[0.0, 0.0, 0.0], [4.0, 3.0, 0.0]]}

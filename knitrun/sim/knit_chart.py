@@ -20,6 +20,12 @@ x = 0, w, 2w, ... (w = stitch_width), one more vertex than the course below it h
 (a yarn-over has the single vertex where it sits between two loops: a triangle) and whose top edge is [i w, (i+1) w]
 on boundary r+1. Rows are left-aligned as written, so stitches right of an unbalanced increase or decrease lean.
 
+In the round (``in_the_round=True``, a tube): each line is one closed course read left → right seen from outside,
+starting at the seam, and the yarn spirals (STITCH_MESH.md). Boundary ``b`` is a circle of as many vertices as it
+has loops (n_b), of circumference n_b w: vertex k at angle θ = 2πk/n_b is (R_b sin θ, b h, R_b cos θ) with
+R_b = n_b w / (2π), so the tube's axis is y and its outside faces +z at the seam. Every course needs at least 3
+stitches.
+
 Default stitch size: our guess sized for the cotton1 preset (yarn diameter about 2 * (ply_distance + ply semi-axis)
 = 0.064 cm): a knit stitch is about 4 yarn diameters wide, 0.25 cm, i.e. 40 stitches per 10 cm, the fine end of the
 Craft Yarn Council "lace" gauge range (33-40 sts / 10 cm); rows are 0.8 times as tall as stitches are wide (about 5
@@ -78,17 +84,31 @@ def parse_chart(text, where="chart"):
 
 
 def chart_to_mesh(text, stitch_width=STITCH_WIDTH_CM, stitch_height=STITCH_HEIGHT_CM, units="cm",
-                  yarn_type="cotton1", where="chart"):
+                  yarn_type="cotton1", where="chart", in_the_round=False):
     """Rest ``StitchMesh`` of a chart (geometry in the module docstring; sizes in ``units``): faces in course-major
-    order, left to right, one yarn of type ``yarn_type`` knitting course 0 left → right."""
+    order, left to right, one yarn of type ``yarn_type`` knitting course 0 left → right (in the round: a tube, the
+    yarn spiralling left → right)."""
     for name, value in (("stitch_width", stitch_width), ("stitch_height", stitch_height)):
         if isinstance(value, bool) or not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
             raise FormatError(f"{where}: {name} = {value!r}, expected a positive finite length in {units}")
     courses = parse_chart(text, where)
-    counts = [int(LOOPS_CONSUMED[courses[0]].sum()) + 1] + [len(codes) + 1 for codes in courses]
+    loops = [int(LOOPS_CONSUMED[courses[0]].sum())] + [len(codes) for codes in courses]  # loops on each boundary
+    if in_the_round and min(loops) < 3:
+        b = loops.index(min(loops))
+        raise FormatError(f"{where}: {'the cast-on' if b == 0 else f'course {b - 1}'} has {loops[b]} loop(s), "
+                          f"expected at least 3 stitches round a tube")
+    counts = loops if in_the_round else [n + 1 for n in loops]  # vertices per boundary: a ring closes on itself
     base = np.concatenate([[0], np.cumsum(counts)])  # first vertex of each boundary line
-    vertices = np.concatenate([np.stack([np.arange(n) * float(stitch_width), np.full(n, b * float(stitch_height)),
-                                         np.zeros(n)], axis=1) for b, n in enumerate(counts)])
+    w, h = float(stitch_width), float(stitch_height)
+    if in_the_round:
+        rings = []
+        for b, n in enumerate(counts):
+            theta, radius = 2.0 * np.pi * np.arange(n) / n, n * w / (2.0 * np.pi)
+            rings.append(np.stack([radius * np.sin(theta), np.full(n, b * h), radius * np.cos(theta)], axis=1))
+        vertices = np.concatenate(rings)
+    else:
+        vertices = np.concatenate([np.stack([np.arange(n) * w, np.full(n, b * h), np.zeros(n)], axis=1)
+                                   for b, n in enumerate(counts)])
     face_vertices = []
     for r, codes in enumerate(courses):
         consumed = LOOPS_CONSUMED[codes]
@@ -96,9 +116,11 @@ def chart_to_mesh(text, stitch_width=STITCH_WIDTH_CM, stitch_height=STITCH_HEIGH
         sizes = consumed + 3
         face = np.repeat(np.arange(len(codes)), sizes)
         slot = np.arange(sizes.sum()) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-        bottom = base[r] + first_loop[face] + slot  # slots 0..b: bottom vertices left to right
-        top = base[r + 1] + face + np.where(slot == consumed[face] + 1, 1, 0)  # then top-right, top-left
-        face_vertices.append(np.where(slot <= consumed[face], bottom, top))
+        bottom = first_loop[face] + slot  # slots 0..b: bottom vertices left to right
+        top = face + np.where(slot == consumed[face] + 1, 1, 0)  # then top-right, top-left
+        if in_the_round:  # the last stitch's right vertices are the seam's
+            bottom, top = bottom % counts[r], top % counts[r + 1]
+        face_vertices.append(np.where(slot <= consumed[face], base[r] + bottom, base[r + 1] + top))
     stitch_type = np.concatenate(courses)
     offsets = np.concatenate([[0], np.cumsum(LOOPS_CONSUMED[stitch_type] + 3)])
     return make_stitch_mesh(vertices, offsets, np.concatenate(face_vertices), stitch_type, units, yarn_type, where)
