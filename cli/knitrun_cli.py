@@ -136,8 +136,8 @@ def pattern(source, rows, cols, output, in_the_round, as_json):
     if as_json:
         echo_json(info)
     else:
-        click.echo(f"{source} → {output}: {info['faces']} faces in {info['courses']} "
-                   f"{'closed courses (in the round)' if info['in_the_round'] else 'courses'} "
+        click.echo(f"{source} → {output}: {info['faces']} faces in {info['courses']} courses"
+                   f"{', knitted in the round' if info['in_the_round'] else ''} "
                    f"({', '.join(f'{n} {k}' for k, n in info['faces_per_stitch_type'].items())})")
 
 

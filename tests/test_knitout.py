@@ -77,6 +77,8 @@ def test_a_tube_is_knitted_in_the_round(tmp_path):
     result = CliRunner().invoke(knitrun, ["pattern", str(tmp_path / "tube.k"), "-o", str(tmp_path / "tube.h5"),
                                           "--json"])
     assert result.exit_code == 0 and '"in_the_round": true' in result.output, result.output
+    example = read_knitout(Path(__file__).resolve().parents[1] / "examples" / "knitout" / "tube.knitout")
+    assert is_round(example) and len(example.stitch_type) == 48 * 30  # the docs' tube: 24 needles a bed, 30 courses
 
 
 @pytest.mark.parametrize("passes, message", [

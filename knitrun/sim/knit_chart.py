@@ -22,9 +22,9 @@ on boundary r+1. Rows are left-aligned as written, so stitches right of an unbal
 
 In the round (``in_the_round=True``, a tube): each line is one closed course read left → right seen from outside,
 starting at the seam, and the yarn spirals (STITCH_MESH.md). Boundary ``b`` is a circle of as many vertices as it
-has loops (n_b), of circumference n_b w: vertex k at angle θ = 2πk/n_b is (R_b sin θ, b h, R_b cos θ) with
-R_b = n_b w / (2π), so the tube's axis is y and its outside faces +z at the seam. Every course needs at least 3
-stitches.
+has loops (n_b), of circumference n_b w: vertex k at angle θ = 2πk/n_b − π/2 is (R_b sin θ, b h, R_b cos θ) with
+R_b = n_b w / (2π), so the tube's axis is y, the seam is at its left (x = −R_b) and the first half of each course
+faces +z (for a knitout tube: the front bed faces the viewer). Every course needs at least 3 stitches.
 
 Default stitch size: our guess sized for the cotton1 preset (yarn diameter about 2 * (ply_distance + ply semi-axis)
 = 0.064 cm): a knit stitch is about 4 yarn diameters wide, 0.25 cm, i.e. 40 stitches per 10 cm, the fine end of the
@@ -103,7 +103,7 @@ def chart_to_mesh(text, stitch_width=STITCH_WIDTH_CM, stitch_height=STITCH_HEIGH
     if in_the_round:
         rings = []
         for b, n in enumerate(counts):
-            theta, radius = 2.0 * np.pi * np.arange(n) / n, n * w / (2.0 * np.pi)
+            theta, radius = 2.0 * np.pi * np.arange(n) / n - 0.5 * np.pi, n * w / (2.0 * np.pi)
             rings.append(np.stack([radius * np.sin(theta), np.full(n, b * h), radius * np.cos(theta)], axis=1))
         vertices = np.concatenate(rings)
     else:
