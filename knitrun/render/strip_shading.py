@@ -59,6 +59,14 @@ body add light.
 
 Resolve (``resolve``): C = Σ w α L + (1 − Σ w α)·background for the regular layer, then the flyaway layer over it:
 C ← Σ w A L_fly + (1 − Σ w A (1 − τ))·C. All radiances linear RGB in the units of E and W.
+
+Threads
+-------
+The shading kernels run ``prange`` over blocks of ``POINT_BLOCK`` points, each block with its own scratch arrays
+(``ds_scratch`` and the rows of ``_N_VEC``), and copy the rows they read of arrays every thread shares (a point's
+tangent, a light's direction) instead of taking views: Numba allocates an array per ``np.empty`` and bumps the
+shared array's reference count with an atomic instruction per view, which cost as much as the shading itself
+(BENCHMARKS.md, "An interactive strip renderer on 2 cores"). Outputs are written per point as before.
 """
 
 from __future__ import annotations
@@ -71,14 +79,18 @@ from numba import njit, prange
 from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
 from knitrun.render.texture_sampling import mip_level, sample_mip
-from knitrun.shading.dual_scattering import (D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel,
+from knitrun.shading.dual_scattering import (D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel, ds_scratch,
                                              forward_fraction)
-from knitrun.shading.fiber_bcsdf import context, evaluate, spread_params, view_context
+from knitrun.shading.fiber_bcsdf import N_CONTEXT, context_into, evaluate, spread_params, view_context_into
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
 from knitrun.shading.im_lookup import im_kernel
 from knitrun.shading.table_lookup import axis_cell
 
 DEGENERATE = 1e-6  # |ω_o × t| below this: the strip is edge-on (ASSET_PACK.md §3); the point is not drawn
+POINT_BLOCK = 256  # shading points per prange iteration: they share one set of scratch arrays
+# rows of a block's (_N_VEC, 3) scratch in ``shade_regular``
+_T, _WO, _N, _B, _TF, _TEX, _XI, _PSI, _SCRATCH, _IM, _W, _WO_L = range(12)
+_N_VEC = 12
 MAX_TANGENT_SPREAD = 0.5  # rad: cap on the tangent spread of a texel (a texel of opposed tangents, r → 0)
 
 
@@ -282,7 +294,7 @@ def tangent_spread(tex, coverage):
     return min((1.0 - r) / r, MAX_TANGENT_SPREAD * MAX_TANGENT_SPREAD)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha):
     """Clear point q's output and set up its strip frame (n, b); returns (drawn, u, v), drawn False when edge-on."""
     rgb[q, :] = 0.0
@@ -304,62 +316,78 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
     n_occluded, n_cross = look.n_occluded, look.n_cross
     texel_u = period / tangent.cols[0, 0]
     texel_v = 2.0 * look.radius / tangent.rows[0, 0]
-    for m in prange(idx.shape[0]):
-        q = idx[m]
-        t, wo = points.tangent[q], points.view_dir[q]
-        n, b, tf = np.empty(3), np.empty(3), np.empty(3)
-        drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
-        if not drawn:
-            continue
-        level = mip_level(points.footprint[q], texel_u, texel_v)
-        cov, tex = np.empty(1), np.empty(3)
-        sample_mip(coverage, 0, level, u, v, cov)
-        sample_mip(tangent, 0, level, u, v, tex)
-        alpha[q] = min(max(cov[0], 0.0), 1.0)
-        _texture_tangent(tex, t, n, b, tf)
-        spread2 = tangent_spread(tex, cov[0])
-        theta_o = longitudinal_angle(t, wo)
-        theta_o_f = longitudinal_angle(tf, wo)
-        xi, psi, scratch, comp = np.ones(3), np.ones(3), np.empty(3), np.empty((7, 3))
-        wide = np.empty(params.shape[0])
-        for light in range(lights.direction.shape[0]):
-            wi = lights.direction[light]
-            _corrections(corrections, v, t, n, b, theta_o, wi, xi, psi, scratch)
-            fiber_lit = _fiber_lit(psi)
-            vis = lights.visibility[light, q]
-            n_front = n_occluded + (1.0 - vis) * n_cross
-            phi_f = azimuth_difference(tf, wo, wi)
-            spread_params(params, spread2, phi_f, wide)
-            ds_kernel(wide, ds, longitudinal_angle(tf, wi), theta_o_f, phi_f, n_front, D_F, D_B, vis * fiber_lit, comp)
-            for ch in range(3):
-                rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
-        i_m = np.empty(3)
-        for j in range(lobes.direction.shape[0]):
-            vis = lobes.visibility[j, q]
-            if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
+    for block in prange((idx.shape[0] + POINT_BLOCK - 1) // POINT_BLOCK):
+        # scratch owned by this block of points (module docstring, "Threads")
+        vec = np.empty((_N_VEC, 3))
+        t, wo, n, b, tf, tex = vec[_T], vec[_WO], vec[_N], vec[_B], vec[_TF], vec[_TEX]
+        xi, psi, scratch, i_m, w = vec[_XI], vec[_PSI], vec[_SCRATCH], vec[_IM], vec[_W]
+        cov = np.empty(1)
+        comp, ds_work = ds_scratch()
+        wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
+        for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
+            q = idx[m]
+            _copy_row(points.tangent, q, t)
+            _copy_row(points.view_dir, q, wo)
+            drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
+            if not drawn:
                 continue
-            wj = lobes.direction[j]
-            _corrections(corrections, v, t, n, b, theta_o, wj, xi, psi, scratch)
-            theta_j_f = longitudinal_angle(tf, wj)
-            phi_f = azimuth_difference(tf, wo, wj)
-            spread_params(params, spread2, phi_f, wide)
-            # the BCSDF context of the fiber-frame view, for I_M's R lobe
-            im_kernel(im, wide, view_context(wide, theta_o_f), theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
-            for ch in range(3):
-                rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
-        for c in range(ms.direction.shape[0]):  # multiple scattering: clusters of lobes as distant lights
-            wc = ms.direction[c]
-            _corrections(corrections, v, t, n, b, theta_o, wc, xi, psi, scratch)
-            vis = ms.visibility[c, q]
-            lit = vis * _fiber_lit(psi)
-            theta_c_f = longitudinal_angle(tf, wc)
-            phi_f = azimuth_difference(tf, wo, wc)
-            spread_params(params, spread2, phi_f, wide)
-            ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit, comp)
-            cos_c = math.cos(theta_c_f)
-            for ch in range(3):
-                multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
-                rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
+            level = mip_level(points.footprint[q], texel_u, texel_v)
+            sample_mip(coverage, 0, level, u, v, cov)
+            sample_mip(tangent, 0, level, u, v, tex)
+            alpha[q] = min(max(cov[0], 0.0), 1.0)
+            _texture_tangent(tex, t, n, b, tf)
+            spread2 = tangent_spread(tex, cov[0])
+            theta_o = longitudinal_angle(t, wo)
+            theta_o_f = longitudinal_angle(tf, wo)
+            xi[:] = 1.0
+            psi[:] = 1.0
+            for light in range(lights.direction.shape[0]):
+                _copy_row(lights.direction, light, w)
+                _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                fiber_lit = _fiber_lit(psi)
+                vis = lights.visibility[light, q]
+                n_front = n_occluded + (1.0 - vis) * n_cross
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, D_F, D_B, vis * fiber_lit,
+                          comp, ds_work)
+                for ch in range(3):
+                    rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
+            for j in range(lobes.direction.shape[0]):
+                vis = lobes.visibility[j, q]
+                if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
+                    continue
+                _copy_row(lobes.direction, j, w)
+                _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                theta_j_f = longitudinal_angle(tf, w)
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                # the BCSDF context of the fiber-frame view, for I_M's R lobe
+                view_context_into(wide, theta_o_f, scratch, ctx)
+                im_kernel(im, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
+                for ch in range(3):
+                    rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
+            for c in range(ms.direction.shape[0]):  # multiple scattering: clusters of lobes as distant lights
+                _copy_row(ms.direction, c, w)
+                _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                vis = ms.visibility[c, q]
+                lit = vis * _fiber_lit(psi)
+                theta_c_f = longitudinal_angle(tf, w)
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit,
+                          comp, ds_work)
+                cos_c = math.cos(theta_c_f)
+                for ch in range(3):
+                    multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
+                    rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
+
+
+@njit(cache=True, inline='always')
+def _copy_row(src, i, out):
+    """out[:3] = src[i, :3], copied: a view of an array every thread reads would bump its reference count with an
+    atomic instruction per call (module docstring, "Threads")."""
+    out[0], out[1], out[2] = src[i, 0], src[i, 1], src[i, 2]
 
 
 # --- flyaways --------------------------------------------------------------------------------------------------------
@@ -384,53 +412,59 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
     half_width, radius = look.flyaway_half_width, look.radius
     texel_u = period / flyaway.cols[0, 0]
     texel_v = 2.0 * half_width / flyaway.rows[0, 0]
-    for m in prange(idx.shape[0]):
-        q = idx[m]
-        t, wo = points.tangent[q], points.view_dir[q]
-        n, b, tf = np.empty(3), np.empty(3), np.empty(3)
-        drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
-        if not drawn:
-            continue
+    for block in prange((idx.shape[0] + POINT_BLOCK - 1) // POINT_BLOCK):
+        vec = np.empty((_N_VEC, 3))  # scratch owned by this block of points
+        t, wo, n, b, tf, ny = vec[_T], vec[_WO], vec[_N], vec[_B], vec[_TF], vec[_TEX]
+        f, wl, psi, scratch, w, wo_l = vec[_XI], vec[_IM], vec[_PSI], vec[_SCRATCH], vec[_W], vec[_WO_L]
         texel = np.empty(4)
-        sample_mip(flyaway, variant_of(points.curve[q], int(math.floor(u))),
-                   mip_level(points.footprint[q], texel_u, texel_v), u, v, texel)
-        if not _texture_tangent(texel, t, n, b, tf):
-            continue
-        alpha[q] = min(max(texel[3], 0.0), 1.0)
-        theta_o_f = longitudinal_angle(tf, wo)
-        forward_fraction(ds, theta_o_f, transmit[q])
-        # local fiber frame: x along tf, y toward the camera in the normal plane, z = x × y
-        ny = np.empty(3)
-        if not _strip_frame(tf, wo, ny, b):
-            continue
-        f, wl, psi, scratch = np.empty(3), np.empty(3), np.ones(3), np.empty(3)
-        wo_l = np.array([dot(wo, tf), dot(wo, ny), 0.0])
-        spread2 = tangent_spread(texel[:3], texel[3])
-        wide = np.empty(params.shape[0])
-        # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
-        # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
-        v_strip = v * half_width / radius
-        on_body = abs(v_strip) <= 1.0
-        for light in range(lights.direction.shape[0]):
-            wi = lights.direction[light]
-            wl[0], wl[1], wl[2] = dot(wi, tf), dot(wi, ny), -dot(wi, b)
-            spread_params(params, spread2, azimuth_difference(tf, wo, wi), wide)
-            evaluate(wide, context(wide, wo_l, False), wl, f)
-            cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
-            lit = lights.visibility[light, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, wi, psi, scratch)
-            for ch in range(3):
-                rgb[q, ch] += lights.irradiance[light, ch] * lit * f[ch] * cos_i
-        for j in range(lobes.direction.shape[0]):
-            if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
+        wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
+        for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
+            q = idx[m]
+            _copy_row(points.tangent, q, t)
+            _copy_row(points.view_dir, q, wo)
+            drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
+            if not drawn:
                 continue
-            wj = lobes.direction[j]
-            phi_f = azimuth_difference(tf, wo, wj)
-            spread_params(params, spread2, phi_f, wide)
-            im_kernel(im, wide, context(wide, wo_l, False), theta_o_f, longitudinal_angle(tf, wj), -phi_f,
-                      lobes.sharpness[j], f)
-            lit = lobes.visibility[j, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, wj, psi, scratch)
-            for ch in range(3):
-                rgb[q, ch] += lobes.weight[j, ch] * lit * f[ch]
+            sample_mip(flyaway, variant_of(points.curve[q], int(math.floor(u))),
+                       mip_level(points.footprint[q], texel_u, texel_v), u, v, texel)
+            if not _texture_tangent(texel, t, n, b, tf):
+                continue
+            alpha[q] = min(max(texel[3], 0.0), 1.0)
+            theta_o_f = longitudinal_angle(tf, wo)
+            forward_fraction(ds, theta_o_f, scratch)
+            transmit[q, 0], transmit[q, 1], transmit[q, 2] = scratch[0], scratch[1], scratch[2]
+            # local fiber frame: x along tf, y toward the camera in the normal plane, z = x × y
+            if not _strip_frame(tf, wo, ny, b):
+                continue
+            psi[:] = 1.0
+            wo_l[0], wo_l[1], wo_l[2] = dot(wo, tf), dot(wo, ny), 0.0
+            spread2 = tangent_spread(texel[:3], texel[3])
+            # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
+            # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
+            v_strip = v * half_width / radius
+            on_body = abs(v_strip) <= 1.0
+            for light in range(lights.direction.shape[0]):
+                _copy_row(lights.direction, light, w)
+                wl[0], wl[1], wl[2] = dot(w, tf), dot(w, ny), -dot(w, b)
+                spread_params(params, spread2, azimuth_difference(tf, wo, w), wide)
+                context_into(wide, wo_l, ctx, False)
+                evaluate(wide, ctx, wl, f)
+                cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
+                lit = lights.visibility[light, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, w, psi,
+                                                                 scratch)
+                for ch in range(3):
+                    rgb[q, ch] += lights.irradiance[light, ch] * lit * f[ch] * cos_i
+            for j in range(lobes.direction.shape[0]):
+                if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
+                    continue
+                _copy_row(lobes.direction, j, w)
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                context_into(wide, wo_l, ctx, False)
+                im_kernel(im, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f, lobes.sharpness[j], f)
+                lit = lobes.visibility[j, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, w, psi, scratch)
+                for ch in range(3):
+                    rgb[q, ch] += lobes.weight[j, ch] * lit * f[ch]
 
 
 @njit(cache=True, inline='always')

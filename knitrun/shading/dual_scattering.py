@@ -52,9 +52,9 @@ import numpy as np
 from numba import njit, prange
 
 from data_formats.conventions import HALF_PI, THETA_RANGE
-from knitrun.shading.fiber_bcsdf import (INV_PI2, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R, P_BETA_TT,
-                                         P_GAMMA_TT, context, cos2_normaliser, evaluate, gauss, lobe_centre_at,
-                                         tt_logistic_scale)
+from knitrun.shading.fiber_bcsdf import (INV_PI2, N_CONTEXT, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R,
+                                         P_BETA_TT, P_GAMMA_TT, context_into, cos2_normaliser, evaluate, gauss,
+                                         lobe_centre_at, tt_logistic_scale)
 from knitrun.shading.fiber_frame import wrap_angle
 from knitrun.shading.table_lookup import axis_cell
 
@@ -165,20 +165,32 @@ def forward_fraction(tab, theta, out):
         out[ch] = min(max((1.0 - fr) * tab[R_A_F, i0, ch] + fr * tab[R_A_F, i1, ch], 0.0), 1.0)
 
 
+DS_WORK = 9 + N_CONTEXT  # ``ds_kernel``'s scratch: ω_o, ω_i, f (3 each) and a BCSDF context
+
+
 @njit(cache=True)
-def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out):
+def ds_scratch():
+    """Scratch for ``ds_kernel``: (``K_TOTAL`` + 1, 3) output rows and ``DS_WORK`` floats. Kernels allocate them once
+    per block of points, not per evaluation."""
+    return np.empty((K_TOTAL + 1, 3)), np.empty(DS_WORK)
+
+
+@njit(cache=True)
+def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, work):
     """One DS evaluation. ``p``: BCSDF parameters; ``tab``: ``pack_tables`` output (5, N_theta, 3); ``direct``: D in
-    [0, 1]; ``out`` (7, 3) receives the rows of ``COMPONENTS`` (the last is L_o/E). Terms of weight zero are not
-    evaluated and read 0: f (in F_direct) when D = 0, f_back^scatter and f_s^scatter when D = 1, f_back^direct on the
-    front half (N_b = 0)."""
+    [0, 1]; ``out`` (7, 3) receives the rows of ``COMPONENTS`` (the last is L_o/E); ``work``: ``DS_WORK`` floats of
+    scratch (``ds_scratch``). Terms of weight zero are not evaluated and read 0: f (in F_direct) when D = 0,
+    f_back^scatter and f_s^scatter when D = 1, f_back^direct on the front half (N_b = 0)."""
     i0, i1, fr = axis_cell(theta_i, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
     sin_o, cos_o = math.sin(theta_o), math.cos(theta_o)
     cos_i = math.cos(theta_i)
-    wo = np.array([sin_o, cos_o, 0.0])  # φ_o = 0, so φ_i = −φ
-    wi = np.array([math.sin(theta_i), cos_i * math.cos(phi), -cos_i * math.sin(phi)])
-    f_single = np.zeros(3)
+    wo, wi, f_single, ctx = work[0:3], work[3:6], work[6:9], work[9:]
+    wo[0], wo[1], wo[2] = sin_o, cos_o, 0.0  # φ_o = 0, so φ_i = −φ
+    wi[0], wi[1], wi[2] = math.sin(theta_i), cos_i * math.cos(phi), -cos_i * math.sin(phi)
+    f_single[:] = 0.0
     if direct > 0.0:  # the direct terms; a point wholly in shadow skips f and f_back^direct (weight D = 0)
-        evaluate(p, context(p, wo, False), wi, f_single)
+        context_into(p, wo, ctx, False)
+        evaluate(p, ctx, wi, f_single)
     n_r_g = 0.5 * INV_PI
     n_tt_g = n_tt_global(phi, p[P_GAMMA_TT])
     n_b, n_b_g = n_back(phi), n_back_global(phi)
@@ -214,8 +226,8 @@ def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out):
 def _ds_batch(p, tab, theta_i, theta_o, phi, n_front, direct, d_f, d_b):
     out = np.empty((theta_i.shape[0], 3))
     for k in prange(theta_i.shape[0]):
-        comp = np.empty((7, 3))
-        ds_kernel(p, tab, theta_i[k], theta_o[k], phi[k], n_front[k], d_f, d_b, direct[k], comp)
+        comp, work = ds_scratch()
+        ds_kernel(p, tab, theta_i[k], theta_o[k], phi[k], n_front[k], d_f, d_b, direct[k], comp, work)
         out[k] = comp[K_TOTAL]
     return out
 
@@ -289,7 +301,7 @@ def ds_components(tables, theta_i, theta_o, phi, n_front, d_f=D_F, d_b=D_B, *, p
     tab, ti, to, ph, n, direct = _inputs(tables, theta_i, theta_o, phi, n_front, d_f, d_b, direct_fraction)
     if ti.ndim != 0:
         raise ValueError("ds_components takes scalar angles; use evaluate_ds for arrays")
-    out = np.empty((7, 3))
+    out, work = ds_scratch()
     ds_kernel(np.asarray(params, dtype=np.float64), tab, float(ti), float(to), float(ph), float(n), float(d_f),
-              float(d_b), float(direct), out)
+              float(d_b), float(direct), out, work)
     return dict(zip(COMPONENTS, out))

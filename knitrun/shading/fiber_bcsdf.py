@@ -359,7 +359,16 @@ def context_into(p, wo, c, sampling=True):
 def view_context(p, theta_o):
     """``context`` of a view at longitudinal angle θ_o and azimuth 0: enough for every quantity that depends on the
     view through θ_o alone (I_M, the dual-scattering averages)."""
-    return context(p, np.array([math.sin(theta_o), math.cos(theta_o), 0.0]), False)
+    c = np.empty(N_CONTEXT)
+    view_context_into(p, theta_o, np.empty(3), c)
+    return c
+
+
+@njit(cache=True, inline='always')
+def view_context_into(p, theta_o, wo, c):
+    """``view_context`` written into ``c``, with ``wo`` (3) as scratch."""
+    wo[0], wo[1], wo[2] = math.sin(theta_o), math.cos(theta_o), 0.0
+    context_into(p, wo, c, False)
 
 
 @njit(cache=True)

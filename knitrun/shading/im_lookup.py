@@ -232,39 +232,42 @@ def r_lobe_integral(c, theta_j, lam):
 
 
 @njit(cache=True, inline='always')
+def _im_axis(im, axis, theta_o, theta_j, dphi, lam):
+    """(i0, i1, fraction) of the ``IMTable``'s sampled axis ``axis`` at the lookup's coordinate on it."""
+    table, lo, hi, repeat, codes = im
+    code = codes[axis]
+    if code == 0:
+        x = theta_o
+    elif code == 1:
+        x = theta_j
+    elif code == 2:
+        x = abs((dphi + math.pi) % (2.0 * math.pi) - math.pi)
+    else:
+        x = math.log10(lam)
+    return axis_cell(x, lo[axis], hi[axis], table.shape[axis], repeat[axis])
+
+
+@njit(cache=True, inline='always')
 def im_kernel(im, params, c, theta_o, theta_j, dphi, lam, out):
     """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0): the ``IMTable`` ``im`` by multilinear interpolation over its four
     sampled axes (the §4.3 rule per axis, ``table_lookup.axis_cell``) plus A_R times ``r_lobe_integral``. ``c`` is
     ``fiber_bcsdf.context`` of ``params`` for a view at θ_o (the caller's, so a shading point pays for it once)."""
-    table, lo, hi, repeat, codes = im
-    i0 = np.empty(4, np.int64)
-    i1 = np.empty(4, np.int64)
-    fr = np.empty(4)
-    for axis in range(4):
-        code = codes[axis]
-        if code == 0:
-            x = theta_o
-        elif code == 1:
-            x = theta_j
-        elif code == 2:
-            x = abs((dphi + math.pi) % (2.0 * math.pi) - math.pi)
-        else:
-            x = math.log10(lam)
-        i0[axis], i1[axis], fr[axis] = axis_cell(x, lo[axis], hi[axis], table.shape[axis], repeat[axis])
+    table = im[0]
+    a0, a1, fa = _im_axis(im, 0, theta_o, theta_j, dphi, lam)
+    b0, b1, fb_ = _im_axis(im, 1, theta_o, theta_j, dphi, lam)
+    c0, c1, fc = _im_axis(im, 2, theta_o, theta_j, dphi, lam)
+    d0, d1, fd = _im_axis(im, 3, theta_o, theta_j, dphi, lam)
     out[:] = 0.0
-    idx = np.empty(4, np.int64)
-    for bits in range(16):
-        w = 1.0
-        for axis in range(4):
-            if (bits >> axis) & 1:
-                w *= fr[axis]
-                idx[axis] = i1[axis]
-            else:
-                w *= 1.0 - fr[axis]
-                idx[axis] = i0[axis]
+    for bits in range(16):  # the 16 corners, each weight a product in axis order
+        w = fa if bits & 1 else 1.0 - fa
+        w *= fb_ if bits & 2 else 1.0 - fb_
+        w *= fc if bits & 4 else 1.0 - fc
+        w *= fd if bits & 8 else 1.0 - fd
         if w > 0.0:
+            ia, ib = (a1 if bits & 1 else a0), (b1 if bits & 2 else b0)
+            ic, id_ = (c1 if bits & 4 else c0), (d1 if bits & 8 else d0)
             for ch in range(3):
-                out[ch] += w * table[idx[0], idx[1], idx[2], idx[3], ch]
+                out[ch] += w * table[ia, ib, ic, id_, ch]
     if params[fb.P_A_R] > 0.0 or params[fb.P_A_R + 1] > 0.0 or params[fb.P_A_R + 2] > 0.0:
         r = r_lobe_integral(c, min(max(theta_j, -HALF_PI), HALF_PI), lam)
         for ch in range(3):
