@@ -138,20 +138,27 @@ def rotation_minimizing_normals(xyz, t, n0):
     first reflection; equal tangents skip the second."""
     m = xyz.shape[0]
     out = np.empty((m, 3))
-    out[0] = n0
-    for i in range(m - 1):
-        v1 = xyz[i + 1] - xyz[i]
-        c1 = v1 @ v1
-        r, ti = out[i].copy(), t[i].copy()
+    out[0, 0], out[0, 1], out[0, 2] = n0[0], n0[1], n0[2]
+    for i in range(m - 1):  # scalar arithmetic: no temporaries, no array-shape checks to compile
+        v1x, v1y, v1z = xyz[i + 1, 0] - xyz[i, 0], xyz[i + 1, 1] - xyz[i, 1], xyz[i + 1, 2] - xyz[i, 2]
+        c1 = v1x * v1x + v1y * v1y + v1z * v1z
+        rx, ry, rz = out[i, 0], out[i, 1], out[i, 2]
+        tx, ty, tz = t[i, 0], t[i, 1], t[i, 2]
         if c1 > 0.0:
-            r = r - (2.0 / c1) * (v1 @ r) * v1
-            ti = ti - (2.0 / c1) * (v1 @ ti) * v1
-        v2 = t[i + 1] - ti
-        c2 = v2 @ v2
+            k = (2.0 / c1) * (v1x * rx + v1y * ry + v1z * rz)
+            rx, ry, rz = rx - k * v1x, ry - k * v1y, rz - k * v1z
+            k = (2.0 / c1) * (v1x * tx + v1y * ty + v1z * tz)
+            tx, ty, tz = tx - k * v1x, ty - k * v1y, tz - k * v1z
+        v2x, v2y, v2z = t[i + 1, 0] - tx, t[i + 1, 1] - ty, t[i + 1, 2] - tz
+        c2 = v2x * v2x + v2y * v2y + v2z * v2z
         if c2 > 0.0:
-            r = r - (2.0 / c2) * (v2 @ r) * v2
-        r = r - (r @ t[i + 1]) * t[i + 1]  # remove rounding drift; the exact result is already ⟂ t[i+1]
-        out[i + 1] = r / np.sqrt(r @ r)
+            k = (2.0 / c2) * (v2x * rx + v2y * ry + v2z * rz)
+            rx, ry, rz = rx - k * v2x, ry - k * v2y, rz - k * v2z
+        # remove rounding drift; the exact result is already ⟂ t[i+1]
+        k = rx * t[i + 1, 0] + ry * t[i + 1, 1] + rz * t[i + 1, 2]
+        rx, ry, rz = rx - k * t[i + 1, 0], ry - k * t[i + 1, 1], rz - k * t[i + 1, 2]
+        norm = math.sqrt(rx * rx + ry * ry + rz * rz)
+        out[i + 1, 0], out[i + 1, 1], out[i + 1, 2] = rx / norm, ry / norm, rz / norm
     return out
 
 

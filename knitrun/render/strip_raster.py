@@ -255,7 +255,8 @@ def _setup(points, seg_a, seg_b, s_a, s_b, seg_radius, tangent, bvec, ok, view, 
                     ib = 0 if e == 2 else e + 1 + half_quad
                     da, db = quad[ia, 2] - near, quad[ib, 2] - near
                     if da >= 0.0:
-                        poly[n_poly] = quad[ia]
+                        for m in range(8):  # element by element: a row assignment compiles a shape check
+                            poly[n_poly, m] = quad[ia, m]
                         n_poly += 1
                     if (da >= 0.0) != (db >= 0.0):
                         f = da / (da - db)

@@ -274,7 +274,7 @@ def _texture_tangent(tex, t, n, b, tf):
         tf[k] = tex[0] * t[k] + tex[1] * b[k] + tex[2] * n[k]
     norm = math.sqrt(dot(tf, tf))
     if norm < 1e-6:
-        tf[:] = t
+        tf[0], tf[1], tf[2] = t[0], t[1], t[2]
         return False
     for k in range(3):
         tf[k] /= norm

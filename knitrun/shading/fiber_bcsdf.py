@@ -100,7 +100,8 @@ def spread_params(p, spread2, phi, out):
     spreads reflection (φ near 0) fully and forward transmission (φ near ±π) not at all. The lobe stays normalised
     (Z_p is computed from the widened σ_p), so the widening moves energy in θ and never adds any (Toksvig 2005 and
     Olano and Baker 2010 filter normal-mapped highlights by the same variance sum)."""
-    out[:] = p
+    for k in range(p.shape[0]):  # element by element: a whole-array assignment compiles a shape check
+        out[k] = p[k]
     grow = spread2 * math.cos(0.5 * phi) ** 2
     out[P_BETA_R] = math.sqrt(p[P_BETA_R] ** 2 + grow)
     out[P_BETA_TT] = math.sqrt(p[P_BETA_TT] ** 2 + grow)
