@@ -365,7 +365,7 @@ def view_context(p, theta_o):
     return c
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True)
 def view_context_into(p, theta_o, wo, c):
     """``view_context`` written into ``c``, with ``wo`` (3) as scratch."""
     wo[0], wo[1], wo[2] = math.sin(theta_o), math.cos(theta_o), 0.0
