@@ -152,7 +152,7 @@ def _pcss(depth, view, origin, texel, d_min, positions, bias, tan_angle, pcf_rad
         visibility[k] = min(max(lit / (n * n), 0.0), 1.0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _fetch(depth, i, j):
     """depth[i, j], +inf outside the map."""
     if 0 <= i < depth.shape[0] and 0 <= j < depth.shape[1]:
@@ -160,7 +160,7 @@ def _fetch(depth, i, j):
     return np.inf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _lit(depth, i, j, threshold):
     """1.0 where texel (i, j) does not occlude a receiver whose biased depth is ``threshold``, else 0.0."""
     return 1.0 if _fetch(depth, i, j) >= threshold else 0.0
