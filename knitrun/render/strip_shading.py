@@ -148,13 +148,14 @@ def _group_fill(curve, use, depth, start, pattern, cam_pos, basis, tan_half, ort
                         view_dir[q, c] = -fwd[c]
                     footprint[q] = ortho_h / height
                 else:
-                    ray = np.empty(3)
-                    for c in range(3):
-                        ray[c] = fwd[c] + tan_half * (sx * right[c] + sy * up[c])
-                    norm = math.sqrt(ray[0] ** 2 + ray[1] ** 2 + ray[2] ** 2)
-                    for c in range(3):
-                        position[q, c] = cam_pos[c] + d * ray[c] / norm
-                        view_dir[q, c] = -ray[c] / norm
+                    rx = fwd[0] + tan_half * (sx * right[0] + sy * up[0])
+                    ry = fwd[1] + tan_half * (sx * right[1] + sy * up[1])
+                    rz = fwd[2] + tan_half * (sx * right[2] + sy * up[2])
+                    norm = math.sqrt(rx ** 2 + ry ** 2 + rz ** 2)
+                    position[q, 0] = cam_pos[0] + d * rx / norm
+                    position[q, 1] = cam_pos[1] + d * ry / norm
+                    position[q, 2] = cam_pos[2] + d * rz / norm
+                    view_dir[q, 0], view_dir[q, 1], view_dir[q, 2] = -rx / norm, -ry / norm, -rz / norm
                     footprint[q] = 2.0 * d * tan_half / height
                 q += 1
 
