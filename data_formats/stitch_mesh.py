@@ -397,68 +397,53 @@ def _check_yarns(m, where):
         raise FormatError(f"{where}: yarn_direction[{bad[0]}] = {m.yarn_direction[bad[0]]}, expected +1 "
                           f"(left -> right) or -1 (right -> left)")
     f, d = m.yarn_faces, m.yarn_direction.astype(np.int64)
-    if is_round(m):
-        _check_round_yarns(m, where)
-        return
     ahead = np.where(d > 0, m.course_right[f], m.course_left[f])  # next face along the direction of travel
-    behind = np.where(d > 0, m.course_left[f], m.course_right[f])
     first, last = off[:-1], off[1:] - 1
-    bad = np.flatnonzero(behind[first] >= 0)
-    if bad.size:
-        raise FormatError(f"{where}: yarn {bad[0]}: starts at face {f[first[bad[0]]]} inside its course, expected it "
-                          f"to start at the course border behind its direction of travel")
-    bad = np.flatnonzero(ahead[last] >= 0)
-    if bad.size:
-        raise FormatError(f"{where}: yarn {bad[0]}: ends at face {f[last[bad[0]]]} inside its course, expected it to "
-                          f"end at the course border")
+    closed = is_round(m)
+    if closed:  # in the round: a yarn starts at a seam and ends a course next to its seam
+        bad = np.flatnonzero(m.column[f[first]] != 0)
+        if bad.size:
+            raise FormatError(f"{where}: yarn {bad[0]}: starts at face {f[first[bad[0]]]} (column "
+                              f"{m.column[f[first[bad[0]]]]}), expected a yarn knitting in the round to start at a "
+                              f"seam (column 0)")
+        bad = np.flatnonzero(m.column[ahead[last]] != 0)
+        if bad.size:
+            raise FormatError(f"{where}: yarn {bad[0]}: ends at face {f[last[bad[0]]]} before going round its "
+                              f"course, expected it to end next to its seam")
+    else:
+        behind = np.where(d > 0, m.course_left[f], m.course_right[f])
+        bad = np.flatnonzero(behind[first] >= 0)
+        if bad.size:
+            raise FormatError(f"{where}: yarn {bad[0]}: starts at face {f[first[bad[0]]]} inside its course, expected "
+                              f"it to start at the course border behind its direction of travel")
+        bad = np.flatnonzero(ahead[last] >= 0)
+        if bad.size:
+            raise FormatError(f"{where}: yarn {bad[0]}: ends at face {f[last[bad[0]]]} inside its course, expected it "
+                              f"to end at the course border")
     step = np.ones(n_faces - 1, bool)
     step[off[1:-1] - 1] = False  # no step from one yarn to the next
     p = np.flatnonzero(step)
     same = m.course[f[p + 1]] == m.course[f[p]]
+    if closed:  # after a course's last face: the seam of the next course, in the same direction
+        turn = (m.column[ahead[p]] == 0) & (m.column[f[p + 1]] == 0) & (d[p + 1] == d[p])
+        rule = "after the last one the seam of the next course in the same direction (knitting in the round)"
+    else:  # at a course's border: a turn into the next course with the opposite direction
+        turn = (ahead[p] < 0) & (d[p + 1] == -d[p])
+        rule = "at its end a turn into the next course with the opposite direction"
     ok = np.where(same, (ahead[p] == f[p + 1]) & (d[p + 1] == d[p]),
-                  (ahead[p] < 0) & (m.course[f[p + 1]] == m.course[f[p]] + 1) & (d[p + 1] == -d[p]))
+                  turn & (m.course[f[p + 1]] == m.course[f[p]] + 1))
     bad = p[~ok]
     if bad.size:
         q = bad[0]
         raise FormatError(f"{where}: yarn_faces[{q}..{q + 1}]: the yarn goes from face {f[q]} (course {m.course[f[q]]},"
                           f" direction {d[q]:+d}) to face {f[q + 1]} (course {m.course[f[q + 1]]}, direction "
-                          f"{d[q + 1]:+d}), expected the next face along the course, or at its end a turn into the "
-                          f"next course with the opposite direction")
+                          f"{d[q + 1]:+d}), expected the next face {'round' if closed else 'along'} the course, or "
+                          f"{rule}")
 
 
 def is_round(m) -> bool:
     """True for a stitch mesh knitted in the round (closed courses: no face has a left border)."""
     return len(m.course_left) > 0 and not (m.course_left < 0).any()
-
-
-def _check_round_yarns(m, where):
-    """Yarn rules in the round: a yarn starts at a seam (column 0), goes once round each course in one direction and
-    climbs into the next course at its seam, keeping its direction."""
-    f, d, off = m.yarn_faces, m.yarn_direction.astype(np.int64), m.yarn_offsets
-    ahead = np.where(d > 0, m.course_right[f], m.course_left[f])
-    bad = np.flatnonzero(m.column[f[off[:-1]]] != 0)
-    if bad.size:
-        raise FormatError(f"{where}: yarn {bad[0]}: starts at face {f[off[bad[0]]]} (column "
-                          f"{m.column[f[off[bad[0]]]]}), expected a yarn knitting in the round to start at a seam "
-                          f"(column 0)")
-    bad = np.flatnonzero(m.column[ahead[off[1:] - 1]] != 0)
-    if bad.size:
-        raise FormatError(f"{where}: yarn {bad[0]}: ends at face {f[off[bad[0] + 1] - 1]} before going round its "
-                          f"course, expected it to end next to its seam")
-    step = np.ones(len(f) - 1, bool)
-    step[off[1:-1] - 1] = False
-    p = np.flatnonzero(step)
-    same = m.course[f[p + 1]] == m.course[f[p]]
-    ok = np.where(same, (ahead[p] == f[p + 1]) & (d[p + 1] == d[p]),
-                  (m.column[ahead[p]] == 0) & (m.column[f[p + 1]] == 0) & (m.course[f[p + 1]] == m.course[f[p]] + 1)
-                  & (d[p + 1] == d[p]))
-    bad = p[~ok]
-    if bad.size:
-        q = bad[0]
-        raise FormatError(f"{where}: yarn_faces[{q}..{q + 1}]: the yarn goes from face {f[q]} (course {m.course[f[q]]},"
-                          f" direction {d[q]:+d}) to face {f[q + 1]} (course {m.course[f[q + 1]]}, direction "
-                          f"{d[q + 1]:+d}), expected the next face round the course, or after the last one the seam "
-                          f"of the next course in the same direction (knitting in the round)")
 
 
 def summary(m):
