@@ -202,8 +202,9 @@ def camera_rays(pos, fwd, right, up, width, height, tan_half, ortho_h, seed, fir
 @njit(cache=True, inline='always')
 def _frame(t, e1, e2):
     """Writes into e1, e2 two unit vectors completing the unit tangent t to an orthonormal frame."""
-    ax = 1.0 if abs(t[0]) < 0.9 else 0.0  # the helper axis: x, or y when t is close to x
+    ax = 1.0 if abs(t[0]) < 0.9 else 0.0  # the helper axis a: x, or y when t is close to x
     ay = 1.0 - ax
+    # e1 = a − (a·t) t term for term as the vector expression it replaced (zeros included: the same bits)
     dot = ax * t[0] + ay * t[1] + 0.0 * t[2]
     e1[0], e1[1], e1[2] = ax - dot * t[0], ay - dot * t[1], 0.0 - dot * t[2]
     norm = math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
