@@ -81,7 +81,7 @@ from knitrun.render.camera import tan_half_fov
 from knitrun.render.texture_sampling import mip_level, sample_mip
 from knitrun.shading.dual_scattering import (D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel, ds_scratch,
                                              forward_fraction)
-from knitrun.shading.fiber_bcsdf import N_CONTEXT, context_into, evaluate, spread_params, view_context_into
+from knitrun.shading.fiber_bcsdf import N_CONTEXT, context_into, evaluate, r_lobe_context_into, spread_params
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
 from knitrun.shading.im_lookup import im_kernel
 from knitrun.shading.table_lookup import axis_cell
@@ -363,8 +363,8 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
                 theta_j_f = longitudinal_angle(tf, w)
                 phi_f = azimuth_difference(tf, wo, w)
                 spread_params(params, spread2, phi_f, wide)
-                # the BCSDF context of the fiber-frame view, for I_M's R lobe
-                view_context_into(wide, theta_o_f, scratch, ctx)
+                # the R lobe of the fiber-frame view, for I_M's R rule
+                r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
                 im_kernel(im, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
                 for ch in range(3):
                     rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
@@ -461,7 +461,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                 _copy_row(lobes.direction, j, w)
                 phi_f = azimuth_difference(tf, wo, w)
                 spread_params(params, spread2, phi_f, wide)
-                context_into(wide, wo_l, ctx, False)
+                r_lobe_context_into(wide, wo_l[0], ctx)
                 im_kernel(im, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f, lobes.sharpness[j], f)
                 lit = lobes.visibility[j, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, w, psi, scratch)
                 for ch in range(3):

@@ -334,13 +334,10 @@ def context_into(p, wo, c, sampling=True):
     c[C_COS_O] = math.sqrt(max(0.0, 1.0 - s * s))
     c[C_PHI_O] = math.atan2(wo[2], wo[1])
     for k in range(2):
-        sigma = 2.0 * (p[P_BETA_R] if k == 0 else p[P_BETA_TT])
-        mu = lobe_centre(p[P_ALPHA_R] if k == 0 else p[P_ALPHA_TT], sigma, s)
-        c[C_MU + k] = mu
-        c[C_SIGMA + k] = sigma
-        c[C_Z + k] = cos2_normaliser(mu, sigma)
+        _lobe_entries(p, k, s, c)
         c[C_MASS + k] = math.nan
         if sampling:
+            mu, sigma = c[C_MU + k], c[C_SIGMA + k]
             c[C_MASS + k] = sigma * math.sqrt(2.0 * math.pi) * _normal_mass((-HALF_PI - mu) / sigma,
                                                                             (HALF_PI - mu) / sigma)
     if not sampling:
@@ -356,20 +353,31 @@ def context_into(p, wo, c, sampling=True):
     c[C_PROB], c[C_PROB + 1], c[C_PROB + 2] = w_r / total, w_tt / total, w_d / total
 
 
+@njit(cache=True, inline='always')
+def _lobe_entries(p, k, s, c):
+    """Centre, width and normaliser of longitudinal lobe k (0: R, 1: TT) of a view with sin θ_o = s, into ``c``."""
+    sigma = 2.0 * (p[P_BETA_R] if k == 0 else p[P_BETA_TT])
+    mu = lobe_centre(p[P_ALPHA_R] if k == 0 else p[P_ALPHA_TT], sigma, s)
+    c[C_MU + k] = mu
+    c[C_SIGMA + k] = sigma
+    c[C_Z + k] = cos2_normaliser(mu, sigma)
+
+
+@njit(cache=True)
+def r_lobe_context_into(p, sin_o, c):
+    """Only the R lobe's entries of ``context`` (``C_MU``, ``C_SIGMA``, ``C_Z`` of lobe 0) for a view with
+    sin θ_o = ``sin_o``: all that I_M's R rule (``knitrun.shading.im_lookup.r_lobe_integral``) reads. The other
+    entries of ``c`` are left as they were; the TT lobe's normaliser, the costly part of a context, is skipped."""
+    _lobe_entries(p, 0, min(max(sin_o, -1.0), 1.0), c)
+
+
 @njit(cache=True)
 def view_context(p, theta_o):
     """``context`` of a view at longitudinal angle θ_o and azimuth 0: enough for every quantity that depends on the
     view through θ_o alone (I_M, the dual-scattering averages)."""
     c = np.empty(N_CONTEXT)
-    view_context_into(p, theta_o, np.empty(3), c)
+    context_into(p, np.array([math.sin(theta_o), math.cos(theta_o), 0.0]), c, False)
     return c
-
-
-@njit(cache=True)
-def view_context_into(p, theta_o, wo, c):
-    """``view_context`` written into ``c``, with ``wo`` (3) as scratch."""
-    wo[0], wo[1], wo[2] = math.sin(theta_o), math.cos(theta_o), 0.0
-    context_into(p, wo, c, False)
 
 
 @njit(cache=True)

@@ -251,7 +251,8 @@ def _im_axis(im, axis, theta_o, theta_j, dphi, lam):
 def im_kernel(im, params, c, theta_o, theta_j, dphi, lam, out):
     """out[:3] = I_M at (θ_o, θ_j, φ_j − φ_o, λ > 0): the ``IMTable`` ``im`` by multilinear interpolation over its four
     sampled axes (the §4.3 rule per axis, ``table_lookup.axis_cell``) plus A_R times ``r_lobe_integral``. ``c`` is
-    ``fiber_bcsdf.context`` of ``params`` for a view at θ_o (the caller's, so a shading point pays for it once)."""
+    ``fiber_bcsdf.context`` of ``params`` for a view at θ_o (the caller's, so a shading point pays for it once); only
+    its R-lobe entries are read, so ``fiber_bcsdf.r_lobe_context_into`` suffices."""
     table = im[0]
     a0, a1, fa = _im_axis(im, 0, theta_o, theta_j, dphi, lam)
     b0, b1, fb_ = _im_axis(im, 1, theta_o, theta_j, dphi, lam)
