@@ -227,6 +227,23 @@ def test_runtime_reads_the_tables_by_the_lookup_rule():
         np.testing.assert_allclose(comp["sigma_f2"], 2.5 * beta_f ** 2, rtol=1e-12)
 
 
+def test_without_single_scattering_only_f_leaves_the_direct_term():
+    """``single=False`` (the renderer's multiple-scattering lights, whose f is in I_M) drops D·f from F_direct and
+    changes nothing else."""
+    p = params(COLOURS, *ROUGHNESS[0])
+    tables = precompute_dual_scattering(p, n_theta=9)
+    theta_i, theta_o, phi, n, direct = 0.3, -0.2, 2.2, 1.5, 0.4
+    full = ds.ds_components(tables, theta_i, theta_o, phi, n, params=p, direct_fraction=direct)
+    part = ds.ds_components(tables, theta_i, theta_o, phi, n, params=p, direct_fraction=direct, single=False)
+    for name in ("T_f", "sigma_f2", "f_back_direct", "f_back_scatter", "F_scatter"):
+        np.testing.assert_array_equal(part[name], full[name])
+    wo = np.array([[math.sin(theta_o), math.cos(theta_o), 0.0]])
+    wi = np.array([[math.sin(theta_i), math.cos(theta_i) * math.cos(phi), -math.cos(theta_i) * math.sin(phi)]])
+    f = fb.eval_batch(p, wo, wi)[0]
+    np.testing.assert_allclose(full["F_direct"] - part["F_direct"], direct * f, rtol=1e-12)
+    assert np.all(f > 0)
+
+
 def test_forward_fraction_is_the_interpolated_a_f_and_matches_the_brute_force_integral():
     """``forward_fraction`` (the flyaway layer's transmittance) reads ā_f by the lookup rule, in [0, 1]; at a cell
     centre it is the forward half's integral of f cos θ' (``brute_force``) to quadrature accuracy."""

@@ -377,7 +377,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
                 phi_f = azimuth_difference(tf, wo, w)
                 spread_params(params, spread2, phi_f, wide)
                 ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit,
-                          comp, ds_work)
+                          comp, ds_work, False)  # f itself is in the lobes' I_M
                 cos_c = math.cos(theta_c_f)
                 for ch in range(3):
                     multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c

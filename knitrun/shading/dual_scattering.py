@@ -176,11 +176,13 @@ def ds_scratch():
 
 
 @njit(cache=True)
-def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, work):
+def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, work, single=True):
     """One DS evaluation. ``p``: BCSDF parameters; ``tab``: ``pack_tables`` output (5, N_theta, 3); ``direct``: D in
     [0, 1]; ``out`` (7, 3) receives the rows of ``COMPONENTS`` (the last is L_o/E); ``work``: ``DS_WORK`` floats of
     scratch (``ds_scratch``). Terms of weight zero are not evaluated and read 0: f (in F_direct) when D = 0,
-    f_back^scatter and f_s^scatter when D = 1, f_back^direct on the front half (N_b = 0)."""
+    f_back^scatter and f_s^scatter when D = 1, f_back^direct on the front half (N_b = 0). ``single`` False leaves f
+    out too (F_direct and L_o/E then lack it), for callers that take single scattering from elsewhere (the
+    renderer's multiple-scattering lights: f is in I_M)."""
     i0, i1, fr = axis_cell(theta_i, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
     sin_o, cos_o = math.sin(theta_o), math.cos(theta_o)
     cos_i = math.cos(theta_i)
@@ -188,7 +190,7 @@ def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, wor
     wo[0], wo[1], wo[2] = sin_o, cos_o, 0.0  # φ_o = 0, so φ_i = −φ
     wi[0], wi[1], wi[2] = math.sin(theta_i), cos_i * math.cos(phi), -cos_i * math.sin(phi)
     f_single[:] = 0.0
-    if direct > 0.0:  # the direct terms; a point wholly in shadow skips f and f_back^direct (weight D = 0)
+    if direct > 0.0 and single:  # f; a point wholly in shadow skips it (weight D = 0)
         context_into(p, wo, ctx, False)
         evaluate(p, ctx, wi, f_single)
     n_r_g = 0.5 * INV_PI
@@ -296,12 +298,14 @@ def evaluate_ds(tables, theta_i, theta_o, phi, n_front, d_f=D_F, d_b=D_B, *, par
     return out.reshape(shape + (3,))
 
 
-def ds_components(tables, theta_i, theta_o, phi, n_front, d_f=D_F, d_b=D_B, *, params, direct_fraction=None):
-    """The intermediate terms of one scalar evaluation: name (``COMPONENTS``) → RGB array."""
+def ds_components(tables, theta_i, theta_o, phi, n_front, d_f=D_F, d_b=D_B, *, params, direct_fraction=None,
+                  single=True):
+    """The intermediate terms of one scalar evaluation: name (``COMPONENTS``) → RGB array (``single``: as in
+    ``ds_kernel``)."""
     tab, ti, to, ph, n, direct = _inputs(tables, theta_i, theta_o, phi, n_front, d_f, d_b, direct_fraction)
     if ti.ndim != 0:
         raise ValueError("ds_components takes scalar angles; use evaluate_ds for arrays")
     out, work = ds_scratch()
     ds_kernel(np.asarray(params, dtype=np.float64), tab, float(ti), float(to), float(ph), float(n), float(d_f),
-              float(d_b), float(direct), out, work)
+              float(d_b), float(direct), out, work, bool(single))
     return dict(zip(COMPONENTS, out))
