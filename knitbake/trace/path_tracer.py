@@ -31,7 +31,7 @@ Design
   ``_scatter``, ``_escaped``, ``_leave_point``, ``_frame``, ``_to_local``; the BCSDF's ``context_into``,
   ``evaluate``, ``pdf``, ``sample``) are inlined by Numba (``inline='always'``): a call increfs and decrefs every
   array it is passed, and those pairs were 16 % of the render. The price is compile time, paid once per cache:
-  the tracer's first use on an empty cache takes ~4 s longer (13 → 18 s) for ~10 % more rays/s.
+  the tracer's first use on an empty cache takes ~4 s longer (14 → 18 s) for ~10 % more rays/s.
 * Determinism: every random number is a hash of (seed, path id, depth, dimension), path id = sample·pixels +
   pixel; results do not depend on thread count or batching.
 
