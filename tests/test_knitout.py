@@ -77,6 +77,9 @@ def test_a_tube_is_knitted_in_the_round(tmp_path):
     result = CliRunner().invoke(knitrun, ["pattern", str(tmp_path / "tube.k"), "-o", str(tmp_path / "tube.h5"),
                                           "--json"])
     assert result.exit_code == 0 and '"in_the_round": true' in result.output, result.output
+    result = CliRunner().invoke(knitrun, ["pattern", str(tmp_path / "tube.k"), "--in-the-round", "-o",
+                                          str(tmp_path / "again.h5")])
+    assert result.exit_code == 1 and "gives its own shape" in result.output and not (tmp_path / "again.h5").exists()
     example = read_knitout(Path(__file__).resolve().parents[1] / "examples" / "knitout" / "tube.knitout")
     assert is_round(example) and len(example.stitch_type) == 48 * 30  # the docs' tube: 24 needles a bed, 30 courses
 
