@@ -296,13 +296,16 @@ def tangent_spread(tex, coverage):
 
 
 @njit(cache=True, inline='always')
-def _begin_point(q, t, wo, arclength, v_coord, period, n, b, rgb, alpha):
-    """Clear point q's output and set up its strip frame (n, b); returns (drawn, u, v), drawn False when edge-on."""
+def _begin_point(q, points, period, t, wo, n, b, rgb, alpha):
+    """Clear point q's output, copy its tangent and view direction into t, wo (``_copy_row``) and set up its strip
+    frame (n, b); returns (drawn, u, v), drawn False when edge-on."""
+    _copy_row(points.tangent, q, t)
+    _copy_row(points.view_dir, q, wo)
     rgb[q, :] = 0.0
     alpha[q] = 0.0
     if not _strip_frame(t, wo, n, b):
         return False, 0.0, 0.0
-    return True, arclength[q] / period, min(max(v_coord[q], -1.0), 1.0)
+    return True, points.arclength[q] / period, min(max(points.v[q], -1.0), 1.0)
 
 
 # --- regular fibers --------------------------------------------------------------------------------------------------
@@ -327,9 +330,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
         wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
         for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
             q = idx[m]
-            _copy_row(points.tangent, q, t)
-            _copy_row(points.view_dir, q, wo)
-            drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
+            drawn, u, v = _begin_point(q, points, period, t, wo, n, b, rgb, alpha)
             if not drawn:
                 continue
             level = mip_level(points.footprint[q], texel_u, texel_v)
@@ -421,9 +422,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
         wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
         for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
             q = idx[m]
-            _copy_row(points.tangent, q, t)
-            _copy_row(points.view_dir, q, wo)
-            drawn, u, v = _begin_point(q, t, wo, points.arclength, points.v, period, n, b, rgb, alpha)
+            drawn, u, v = _begin_point(q, points, period, t, wo, n, b, rgb, alpha)
             if not drawn:
                 continue
             sample_mip(flyaway, variant_of(points.curve[q], int(math.floor(u))),
