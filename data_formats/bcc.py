@@ -17,7 +17,7 @@ import struct
 import numpy as np
 
 from .atomic import atomic_path
-from .errors import FormatError
+from .errors import FormatError, read_problems
 from .input_files import read_head, regular_file
 from .yarn_curves import CURVE_TYPES, make_yarn_curves, summary, validate_curves
 
@@ -143,8 +143,4 @@ def describe(path):
 
 def validate(path):
     """Problems found in a BCC file (empty list: valid); never raises for bad content."""
-    try:
-        read_bcc(path)
-    except FormatError as e:
-        return [str(e)]
-    return []
+    return read_problems(read_bcc, path)

@@ -34,7 +34,7 @@ import numpy as np
 
 from .atomic import atomic_path
 from .conventions import CM_PER_UNIT, LENGTH_UNITS
-from .errors import FormatError
+from .errors import FormatError, read_problems
 from .input_files import regular_file
 from .text_statements import parse_vertex, statement_keys
 from .yarn_curves import CURVE_TYPES, YarnCurves, make_yarn_curves, summary
@@ -74,12 +74,8 @@ def describe_obj_curves(path) -> dict:
 
 
 def validate_obj_curves(path) -> list[str]:
-    """[] when ``read_obj_curves`` reads the file, else its one-line error. Never raises."""
-    try:
-        read_obj_curves(path)
-    except FormatError as e:
-        return [str(e)]
-    return []
+    """[] when ``read_obj_curves`` reads the file, else its one-line error."""
+    return read_problems(read_obj_curves, path)
 
 
 def read_obj_curves(path, units: str = "cm") -> YarnCurves:

@@ -9,11 +9,7 @@ import numpy as np
 from .errors import FormatError
 from .input_files import HDF5_MAGIC, read_head
 
-__all__ = ["HDF5_MAGIC", "check_format_attrs", "dataset", "one_line", "sniff_hdf5", "str_attr", "string_dataset"]
-
-
-def one_line(e) -> str:
-    return " ".join(str(e).split())
+__all__ = ["HDF5_MAGIC", "check_format_attrs", "dataset", "sniff_hdf5", "str_attr", "string_dataset"]
 
 
 def str_attr(f, name, where):

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import h5py
 
-from .errors import FormatError
+from .errors import FormatError, one_line
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 DEFAULT_MAX_DATASET_BYTES = 8 << 30
@@ -31,10 +31,6 @@ MAX_COMPRESSION_RATIO = 1100
 MIN_CHECKED_BYTES = 1 << 20
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
           (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
-
-
-def _one_line(e) -> str:
-    return " ".join(str(e).split())
 
 
 def regular_file(path, what: str) -> Path:
@@ -46,7 +42,7 @@ def regular_file(path, what: str) -> Path:
     except FileNotFoundError:
         raise FormatError(f"{path}: no such file, expected {what}") from None
     except OSError as e:
-        raise FormatError(f"{path}: cannot read ({_one_line(e)}), expected {what}") from None
+        raise FormatError(f"{path}: cannot read ({one_line(e)}), expected {what}") from None
     if not stat.S_ISREG(mode):
         kind = next((name for test, name in _KINDS if test(mode)), "not a regular file")
         raise FormatError(f"{path}: is {kind}, not a regular file; expected {what}")
@@ -122,7 +118,7 @@ def open_hdf5(path, what: str) -> h5py.File:
     try:
         f = h5py.File(path, "r")
     except (OSError, ValueError) as e:
-        raise FormatError(f"{path}: unreadable HDF5 (truncated or corrupt: {_one_line(e)}), expected {what}") \
+        raise FormatError(f"{path}: unreadable HDF5 (truncated or corrupt: {one_line(e)}), expected {what}") \
             from None
     try:
         check_hdf5_storage(f, str(path))

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FormatError
+from .errors import FormatError, read_problems
 from .input_files import regular_file
 from .text_statements import parse_vertex, statement_keys
 
@@ -160,8 +160,4 @@ def describe(path) -> dict:
 
 
 def validate(path) -> list[str]:
-    try:
-        read_smobj(path)
-    except FormatError as e:
-        return [str(e)]
-    return []
+    return read_problems(read_smobj, path)

@@ -32,8 +32,8 @@ import numpy as np
 
 from .atomic import atomic_path
 from .conventions import MAX_COORD
-from .errors import FormatError
-from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
+from .errors import FormatError, one_line, read_problems
+from .hdf5_fields import check_format_attrs, dataset, sniff_hdf5, str_attr, string_dataset
 from .input_files import open_hdf5, read_head, regular_file
 from .text_statements import parse_vertex
 
@@ -535,17 +535,7 @@ def describe(path):
 
 def validate(path):
     """Problems found in a knit-stitch-mesh file (empty list: valid); never raises for bad content."""
-    return _problems(read_stitch_mesh, path)
-
-
-def _problems(read, *args):
-    try:
-        read(*args)
-    except FormatError as e:
-        return [str(e)]
-    except Exception as e:  # corrupt HDF5 internals surface as assorted h5py errors
-        return [f"{args[0]}: unreadable ({type(e).__name__}: {one_line(e)})"]
-    return []
+    return read_problems(read_stitch_mesh, path, any_error=True)
 
 
 # --- Wavefront OBJ + labels sidecar ------------------------------------------------------------------------------
@@ -696,7 +686,7 @@ def describe_obj(path, labels_path=None):
 
 def validate_obj(path, labels_path=None):
     """Problems found in an OBJ stitch mesh and its labels (empty list: valid); never raises for bad content."""
-    return _problems(read_obj_stitch_mesh, path, labels_path)
+    return read_problems(read_obj_stitch_mesh, path, labels_path, any_error=True)
 
 
 def load_stitch_mesh(path):

@@ -22,8 +22,8 @@ import numpy as np
 
 from .atomic import atomic_path
 from .conventions import MAX_COORD
-from .errors import FormatError
-from .hdf5_fields import check_format_attrs, dataset, one_line, sniff_hdf5, str_attr, string_dataset
+from .errors import FormatError, read_problems
+from .hdf5_fields import check_format_attrs, dataset, sniff_hdf5, str_attr, string_dataset
 from .input_files import open_hdf5
 
 FORMAT_NAME = "knit-yarn-curves"
@@ -267,10 +267,4 @@ def describe(path):
 
 def validate(path):
     """Problems found in a knit-yarn-curves file (empty list: valid); never raises for bad content."""
-    try:
-        read_yarn_curves(path)
-    except FormatError as e:
-        return [str(e)]
-    except Exception as e:  # corrupt HDF5 internals surface as assorted h5py errors
-        return [f"{path}: unreadable ({type(e).__name__}: {one_line(e)})"]
-    return []
+    return read_problems(read_yarn_curves, path, any_error=True)

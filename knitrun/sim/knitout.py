@@ -34,7 +34,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from data_formats.errors import FormatError
+from data_formats.errors import FormatError, read_problems
 from data_formats.input_files import read_head, regular_file
 from knitrun.sim.knit_chart import chart_to_mesh
 
@@ -175,8 +175,4 @@ def describe(path) -> dict:
 
 
 def validate(path) -> list[str]:
-    try:
-        read_knitout(path)
-    except FormatError as e:
-        return [str(e)]
-    return []
+    return read_problems(read_knitout, path)
