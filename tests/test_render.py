@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from cli.knitrun_cli import main as knitrun
-from data_formats.images import read_exr
+from data_formats.images import read_exr, write_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import dumps_spec, load_preset
@@ -386,14 +386,20 @@ def test_curves_drawn_off_the_radius_they_were_built_for_give_a_warning(tmp_path
 
 
 def test_lobes_of_zero_weight_are_not_drawn_and_the_fit_is_cached(tmp_path, pack, monkeypatch):
-    """The fit of the built-in sky leaves some of 16 lobes at zero weight: the renderer draws the others only, and a
-    second render reads the fit from the cache (``knitrun.shading.srbf_cache``) and gives the same image."""
+    """A black environment with a small sun is one lobe (the compact source of ``srbf_fit``) and 15 of zero weight:
+    the renderer draws that one only, and a second render reads the fit from the cache
+    (``knitrun.shading.srbf_cache``) and gives the same image."""
     monkeypatch.setenv("KNIT_CACHE_DIR", str(tmp_path / "cache"))
-    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY)
+    d = texel_directions(32, 64)
+    image = (d @ (np.array([0.3, 0.6, 1.0]) / np.linalg.norm([0.3, 0.6, 1.0])) > math.cos(math.radians(6.0)))[
+        ..., None] * np.array([40.0, 38.0, 35.0])
+    write_exr(tmp_path / "env.exr", image.astype(np.float32))
+    lights = '[[lights]]\ntype = "environment"\nfile = "env.exr"'
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=lights)
     path.write_text(path.read_text().replace("srbf_count = 4", "srbf_count = 16"))
     first, again = _render(path, pack), _render(path, pack)
-    fit = fit_srbf(np.asarray(sky_image(), np.float64), n_lobes=16, seed=0)
+    fit = fit_srbf(read_exr(tmp_path / "env.exr").astype(np.float64), n_lobes=16, seed=0)
     assert first.facts["srbf_lobes"] == 16
-    assert first.facts["srbf_lobes_drawn"] == int(np.any(fit.weights > 0, axis=1).sum()) < 16
+    assert first.facts["srbf_lobes_drawn"] == int(np.any(fit.weights > 0, axis=1).sum()) == 1
     assert not first.facts["srbf_fit_cached"] and again.facts["srbf_fit_cached"]
     assert np.array_equal(first.image, again.image)
