@@ -137,13 +137,13 @@ def compact_sources(radiance, dirs, omega, max_sources: int, lam_max: float):
         bright = lum > SOURCE_CONTRAST * mean
         if not mean > 0 or not bright.any():
             break
-        seed = int(np.argmax(np.where(bright, lum, -np.inf)))
-        cos = dirs @ dirs[seed]
+        peak = int(np.argmax(np.where(bright, lum, -np.inf)))
+        cos = dirs @ dirs[peak]
         inside, ring = cos >= cos_in, (cos < cos_in) & (cos >= cos_ring)
         if np.any(bright & ring) or not ring.any():  # not compact (or a map too coarse to tell): left to the lobes
             break
         level = (omega[ring] @ rest[ring]) / omega[ring].sum()
-        if not level @ LUMINANCE * SOURCE_CONTRAST < lum[seed]:  # a broad lobe's core, not a source on a backdrop
+        if not level @ LUMINANCE * SOURCE_CONTRAST < lum[peak]:  # a broad lobe's core, not a source on a backdrop
             break
         members = bright & inside
         excess = np.clip(rest[members] - level, 0.0, None) * omega[members, None]  # (M, 3) energy per texel
