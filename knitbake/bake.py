@@ -85,9 +85,9 @@ QUALITY = {
 # correction 4: ξ divides by the DS the renderer evaluates (n_occluded for shadowed hits);
 # environment 2: the table holds the TT and D lobes (schema 2.0), finer grids, measured lookup error; 3: scalar
 # quadrature error; correction 5, shadowing 3, interreflection 2, textures 2, flyaway 2: the fibers traced as Embree
-# curves, not tubes
-STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 5, "shadowing": 3, "environment": 3,
-                 "interreflection": 2, "textures": 2, "flyaway": 2}
+# curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn
+STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 6, "shadowing": 3, "environment": 3,
+                 "interreflection": 3, "textures": 2, "flyaway": 2}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64

@@ -87,3 +87,28 @@ def test_shadowing_sees_the_lit_side_and_not_the_back():
     front = np.abs(phis) < math.pi / 2  # light from the camera's side
     assert psi[:, :, front].mean() > 2 * psi[:, :, ~front].mean()
     assert np.all((psi >= 0) & (psi <= 1.5)) and all(np.all(np.isfinite(e)) for e in errors.values())
+
+
+@pytest.mark.parametrize("theta_deg", [0.0, 11.25, -33.75, 56.25, -78.75, 87.0])
+def test_the_strip_camera_starts_its_rays_outside_the_yarn(theta_deg):
+    """An orthographic ray starts on the image plane: an oblique view must not put that plane through the yarn, or
+    its rays begin inside the fibers and the bake sees the yarn cut open (every correction bin with |θ_d| ≳ 28°
+    did, for cotton1)."""
+    from knitbake.fibers.procedural_yarn import generate_fibers
+    from knitbake.trace.path_tracer import camera_rays
+    from knitrun.render.camera import tan_half_fov
+
+    spec = load_preset("cotton1")
+    fibers = generate_fibers(spec, flyaways=False)
+    extent = np.hypot(fibers.points[:, 0], fibers.points[:, 1]).max() + fibers.radius.max()
+    cam = cb.strip_camera(spec, math.radians(theta_deg), 16)
+    fwd, right, up = cam.basis()
+    org, dirs = np.empty((cam.width * cam.height, 3)), np.empty((cam.width * cam.height, 3))
+    camera_rays(np.asarray(cam.position, float), fwd, right, up, cam.width, cam.height, tan_half_fov(cam),
+                float(cam.ortho_height), 0, 0, 1, org, dirs)
+    assert np.hypot(org[:, 0], org[:, 1]).min() > extent
+    # the rays still cross the axis plane over the framed period (the width is rounded up to whole pixels)
+    t = -org[:, 0] / dirs[:, 0]
+    z = org[:, 2] + t * dirs[:, 2]
+    pixel = 2 * spec.radius / cam.height / math.cos(math.radians(theta_deg))
+    assert -pixel < z.min() < pixel and -pixel < z.max() - spec.geometry.ply_pitch < pixel

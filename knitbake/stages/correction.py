@@ -51,6 +51,7 @@ def yarn_direction(theta, phi):
 
 
 _GEOMETRY_MEMO: dict = {}
+CAMERA_CLEARANCE = 3.0  # yarn radii between the axis and the nearest ray origin of ``strip_camera``
 
 
 def yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
@@ -78,14 +79,21 @@ def _build_yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
 
 
 def strip_camera(spec: YarnSpec, theta_o: float, rows: int) -> Camera:
-    """Orthographic camera from direction θ_o (φ_o = 0) framing v ∈ [−1, 1] in ``rows`` rows and ≥ one period."""
+    """Orthographic camera from direction θ_o (φ_o = 0) framing v ∈ [−1, 1] in ``rows`` rows and ≥ one period.
+
+    An orthographic ray starts on the image plane, so the plane must clear the yarn: its point farthest along the
+    yarn, half the image width W out, lies d cos θ_o − (W/2)|sin θ_o| in front of the axis for a camera d away, and
+    d is chosen to leave ``CAMERA_CLEARANCE`` yarn radii there at every θ_o (a fixed d of 4 radii, as once used,
+    started the rays of oblique views inside or behind the yarn: from |θ_o| ≈ 28° on for cotton1)."""
     h = spec.radius
     period = spec.geometry.ply_pitch
     wo = yarn_direction(theta_o, 0.0)
     centre = np.array([0.0, 0.0, period / 2])
     width = max(1, math.ceil(rows * period * math.cos(theta_o) / (2 * h)))
+    half_width = width * h / rows  # pixels are 2h / rows square
+    distance = (CAMERA_CLEARANCE * h + half_width * abs(math.sin(theta_o))) / math.cos(theta_o)
     # image up = +y = −b, so image row r has v = −(1 − 2 (r + ½)/rows)
-    return Camera(centre + 4 * h * wo, centre, np.array([0.0, 1.0, 0.0]), width, rows, ortho_height=2 * h)
+    return Camera(centre + distance * wo, centre, np.array([0.0, 1.0, 0.0]), width, rows, ortho_height=2 * h)
 
 
 def row_v(rows: int) -> np.ndarray:
