@@ -153,10 +153,12 @@ def view_phase_arclength(points, lines, looks):
     return s - sign * gamma / (2.0 * np.pi) * period
 
 
-def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MERGE_DEG):
-    """Distant lights for the environment's multiple scattering (``strip_shading`` docstring): lobes in order of
-    decreasing irradiance luminance join the first cluster within ``merge_deg`` of them, else start one. Returns
-    (directions (C, 3), irradiance (C, 3), [visibility (C, N) per receiver set])."""
+def ms_clusters(lobe_dir, lobe_lambda, lobe_w, merge_deg: float = MS_MERGE_DEG):
+    """The environment's multiple-scattering lights (``strip_shading`` docstring): lobes in order of decreasing
+    irradiance luminance join the first cluster within ``merge_deg`` of them, else start one. Returns (directions
+    (C, 3), irradiance (C, 3), weights (C, J)): a cluster's direction is the luminance-weighted mean of its lobes',
+    its irradiance their sum, and its visibility at a point Σ_j weights[c, j] T̃_j (a lobe's luminance over its
+    cluster's)."""
     energy = np.asarray(lobe_w) * sg_integral(lobe_lambda)[:, None]
     luminance = energy @ LUMINANCE
     cos_merge = math.cos(math.radians(merge_deg))
@@ -170,17 +172,22 @@ def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MER
             axes.append(np.asarray(lobe_dir[j], float))
         else:
             members[k].append(j)
-    dirs, irr, vis = [], [], [[] for _ in lobe_vis]
-    for group in members:
+    dirs, irr = [], []
+    weights = np.zeros((len(members), len(luminance)))
+    for c, group in enumerate(members):
         w = luminance[group] / luminance[group].sum()
         d = (w[:, None] * lobe_dir[group]).sum(axis=0)
         dirs.append(d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-12 else lobe_dir[group[0]])
         irr.append(energy[group].sum(axis=0))
-        for out, v in zip(vis, lobe_vis):
-            out.append(w @ v[group])
-    n = [v.shape[1] for v in lobe_vis]
-    return (np.array(dirs, np.float64).reshape(-1, 3), np.array(irr, np.float64).reshape(-1, 3),
-            [np.array(v, np.float64) if v else np.zeros((0, m)) for v, m in zip(vis, n)])
+        weights[c, group] = w
+    return np.array(dirs, np.float64).reshape(-1, 3), np.array(irr, np.float64).reshape(-1, 3), weights
+
+
+def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MERGE_DEG):
+    """``ms_clusters`` with each cluster's visibility at the points of every receiver set: (directions (C, 3),
+    irradiance (C, 3), [visibility (C, N) per receiver set of ``lobe_vis``, each (J, N)])."""
+    dirs, irr, weights = ms_clusters(lobe_dir, lobe_lambda, lobe_w, merge_deg)
+    return dirs, irr, [np.ascontiguousarray(weights @ v) for v in lobe_vis]
 
 
 def _check_pack_keys(scene: Scene, packs: dict) -> None:
