@@ -1,0 +1,489 @@
+"""The strip renderer on OpenGL (Huang et al. 2025 §5.2 draw their strips with OpenGL): the CPU renderer's model
+(``knitrun.render.strip_shading``) ported to GLSL, drawn through moderngl on a headless EGL context (any GPU, or
+Mesa's llvmpipe on a machine without one).
+
+What runs where
+---------------
+* Set-up (once, on the CPU, shared with the CPU renderer): ``pipeline.Renderer`` reads the packs (with the ablation's
+  tables), the yarn curves and the environment's SRBF fit; the multiple-scattering clusters are formed once
+  (``pipeline.ms_clusters``). Here every pack table becomes a GL texture: the DS tables (``ds_table``), ξ and Ψ^Fiber
+  (3-D textures for the full tables, 2-D for the factors), the I_M^{TT,D} table (a 3-D texture, its second and third
+  axes merged into one), the tangent and coverage mip chains (each pack level uploaded as that GL mip level).
+* Per frame (``render``): the curves' polylines (``pipeline._polylines``) and their vertex tangents are uploaded as
+  GL_LINES segments; a geometry shader builds the camera-facing strips (``shaders/strip.geom``, the quads of
+  ``strip_raster``). Pass 1, per directional light and per SRBF lobe: the strips seen from the light camera of
+  ``shadow_map.build_shadow_map`` into a tile of a depth atlas (lights at ``shadow_map_size``, lobes at a quarter,
+  at least 64). Pass 2: the strips seen from the scene camera into a multisampled float framebuffer; the fragment
+  shader (``shaders/regular.frag``) shades the regular fibers exactly as ``shade_regular`` does, with PCSS
+  visibility from the atlases (``shaders/shadow.glsl``), and writes α·L + (1 − α)·background. Pass 3: the MSAA
+  resolve averages the samples.
+* Table lookups follow ASSET_PACK.md §4.3 by ``texelFetch`` and explicit weights (``axis_cell``), textures
+  ``texture_sampling.sample_mip`` likewise: the GL image does not depend on a driver's filtering rules.
+
+Differences from the CPU renderer, by design: single precision; the GPU shades once per pixel and primitive at the
+centroid of the covered samples (the CPU once per pixel and curve at its first covered sample) and uses the driver's
+sample positions (the CPU the Direct3D patterns); the CPU's nearest depth of a shadow map is the nearest projected
+polyline point here. ``tests/test_gl_render.py`` holds the two renderers together at the yarn scale.
+
+Not drawn yet: the flyaway layer (``Features.flyaways``) is refused with a one-line error.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from data_formats.errors import FormatError
+from data_formats.scene import EnvironmentLight
+from knitrun.render import pipeline
+from knitrun.render.ablations import Features
+from knitrun.render.camera import Camera, scene_camera
+from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS
+from knitrun.render.strip_raster import SAMPLE_PATTERNS
+
+SHADERS = Path(__file__).with_name("shaders")
+MAX_LIGHTS = 8  # directional lights a scene may have on this backend
+MAX_LOBES = 64  # SRBF lobes (the scene format's largest srbf_count)
+NO_YARN = 3.0e38  # depth of a shadow-map texel no yarn covers
+PCF_RADIUS = 1.5  # texels (shadow_map.shadow_visibility's default)
+
+
+class GLUnavailable(FormatError):
+    """No OpenGL 4.5 context could be made (no moderngl, no EGL, no GL driver): the message says which."""
+
+
+_CONTEXT = []
+
+
+def gl_context():
+    """The process's headless moderngl context (EGL; OpenGL 4.5 core), made on first use. GLUnavailable (one line)
+    when the libraries or the driver are missing."""
+    if _CONTEXT:
+        return _CONTEXT[0]
+    try:
+        import moderngl
+    except ImportError as e:
+        raise GLUnavailable(f"the GL backend needs the Python package moderngl ({e}): pip install -e .") from None
+    try:
+        ctx = moderngl.create_context(standalone=True, backend="egl", require=450)
+    except Exception as e:  # moderngl raises plain Exceptions for a missing libEGL or driver
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise GLUnavailable(f"no OpenGL 4.5 context through EGL ({reason}): install libegl1 and libgl1-mesa-dri "
+                            f"(Debian/Ubuntu), or a GPU driver with EGL") from None
+    _CONTEXT.append(ctx)
+    return ctx
+
+
+def _glsl_array(name, values):
+    return f"const float {name}[{len(values)}] = float[{len(values)}](" + ", ".join(f"{v:.17g}" for v in values) + ");"
+
+
+def gl_constants() -> str:
+    """The GLSL constants the shaders share with the Python definitions they follow (one source of each number)."""
+    from knitrun.render import strip_shading
+    from knitrun.shading import dual_scattering, fiber_bcsdf, im_lookup
+
+    lines = [
+        f"const float LOBE_WINDOW = {fiber_bcsdf.LOBE_WINDOW!r};",
+        f"const float WIDTH_FLOOR = {dual_scattering.WIDTH_FLOOR!r};",
+        f"const float D_F = {dual_scattering.D_F!r};",
+        f"const float D_B = {dual_scattering.D_B!r};",
+        f"const float R_NEGLIGIBLE = {im_lookup.R_NEGLIGIBLE!r};",
+        f"const float R_WINDOW = {im_lookup.R_WINDOW!r};",
+        f"const int R_NODES = {im_lookup.R_NODES};",
+        _glsl_array("R_X", im_lookup._R_GX), _glsl_array("R_W", im_lookup._R_GW),
+        f"const int GL_NODES = {len(fiber_bcsdf._GL_X)};",
+        _glsl_array("GL_X", fiber_bcsdf._GL_X), _glsl_array("GL_W", fiber_bcsdf._GL_W),
+        f"const float MAX_TANGENT_SPREAD = {strip_shading.MAX_TANGENT_SPREAD!r};",
+        f"const float DEGENERATE = {strip_shading.DEGENERATE!r};",
+        f"const float MAX_FILTER_TEXELS = {MAX_FILTER_TEXELS!r};",
+        f"const int MAX_TAPS = {MAX_TAPS};",
+        f"const float NO_YARN = {NO_YARN!r};",
+        f"const float PCF_RADIUS = {PCF_RADIUS!r};",
+        f"#define MAX_LIGHTS {MAX_LIGHTS}",
+        f"#define MAX_LOBES {MAX_LOBES}",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _source(*names) -> str:
+    return "#version 450 core\n" + gl_constants() + "\n".join((SHADERS / n).read_text() for n in names)
+
+
+def _programs(ctx):
+    """(regular-fiber program, shadow-map program), compiled once per context."""
+    cache = getattr(ctx, "_knit_programs", None)
+    if cache is None:
+        vertex, geometry = _source("strip.vert"), _source("strip.geom")
+        regular = ctx.program(vertex_shader=vertex, geometry_shader=geometry,
+                              fragment_shader=_source("shading.glsl", "shadow.glsl", "regular.frag"))
+        depth = ctx.program(vertex_shader=vertex, geometry_shader=geometry, fragment_shader=_source("depth.frag"))
+        cache = (regular, depth)
+        ctx._knit_programs = cache
+    return cache
+
+
+def _set(program, name, value):
+    """Set a uniform if the compiler kept it (an unused uniform has no location); sequences fill a vector or an
+    array of scalars."""
+    if name not in program:
+        return
+    member = program[name]
+    if member.array_length > 1:  # an array: rows of ``value``, padded with zeros to its length
+        rows = np.asarray(value).reshape(-1, member.dimension)
+        padded = np.zeros((member.array_length, member.dimension), rows.dtype)
+        padded[:len(rows)] = rows
+        member.value = [tuple(r) if member.dimension > 1 else r[0] for r in padded.tolist()]
+    elif isinstance(value, (list, tuple, np.ndarray)):
+        flat = np.asarray(value).ravel().tolist()
+        member.value = tuple(flat) if len(flat) > 1 else flat[0]
+    else:
+        member.value = value
+
+
+def vertex_tangents(points, offsets) -> np.ndarray:
+    """Unit vertex tangents of open polylines by ``strip_raster``'s rule: the normalized sum of the unit directions of
+    a point's two segments (one at an end), zero-length segments ignored, at an exact hairpin the outgoing one."""
+    tangent = np.zeros_like(points)
+    for c in range(len(offsets) - 1):
+        p = points[offsets[c]:offsets[c + 1]]
+        if len(p) < 2:
+            continue
+        d = np.diff(p, axis=0)
+        length = np.linalg.norm(d, axis=1, keepdims=True)
+        unit = np.where(length > 0, d / np.where(length > 0, length, 1.0), 0.0)
+        incoming = np.vstack([np.zeros(3), unit])
+        outgoing = np.vstack([unit, np.zeros(3)])
+        t = incoming + outgoing
+        small = np.einsum("ij,ij->i", t, t) < 1e-18
+        t[small] = np.where(np.any(outgoing[small] != 0, axis=1, keepdims=True), outgoing[small], incoming[small])
+        norm = np.linalg.norm(t, axis=1, keepdims=True)
+        tangent[offsets[c]:offsets[c + 1]] = np.where(norm > 0, t / np.where(norm > 0, norm, 1.0), 0.0)
+    return tangent
+
+
+def _texture2d(ctx, array):
+    """A float32 2-D texture of an (H, W, C) or (H, W) array, texel (x = column, y = row)."""
+    a = np.ascontiguousarray(array, np.float32)
+    a = a[..., None] if a.ndim == 2 else a
+    return ctx.texture((a.shape[1], a.shape[0]), a.shape[2], a.tobytes(), dtype="f4")
+
+
+def _texture3d(ctx, array):
+    """A float32 3-D texture of a (D, H, W, C) array, texel (x = W index, y = H index, z = D index); FormatError
+    when a side exceeds the driver's limit (a texture that size would read as zeros)."""
+    a = np.ascontiguousarray(array, np.float32)
+    limit = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
+    if max(a.shape[:3]) > limit:
+        raise FormatError(f"a pack table of {a.shape[:3]} texels exceeds this GL driver's 3-D texture size {limit}")
+    return ctx.texture3d((a.shape[2], a.shape[1], a.shape[0]), a.shape[3], a.tobytes(), dtype="f4")
+
+
+def _mip_texture(ctx, mip):
+    """A 2-D texture whose GL mip levels are the levels of a ``texture_sampling.MipStack`` (variant 0)."""
+    data, offset, rows, cols = mip
+    levels = offset.shape[1]
+    first = data[offset[0, 0]:offset[0, 0] + rows[0, 0] * cols[0, 0]].reshape(rows[0, 0], cols[0, 0], -1)
+    tex = ctx.texture((int(cols[0, 0]), int(rows[0, 0])), first.shape[2], np.ascontiguousarray(first, np.float32)
+                      .tobytes(), dtype="f4")
+    if levels > 1:
+        tex.build_mipmaps(0, levels - 1)
+    for level in range(1, levels):
+        h, w = int(rows[0, level]), int(cols[0, level])
+        if (w, h) != (max(1, int(cols[0, 0]) >> level), max(1, int(rows[0, 0]) >> level)):
+            raise FormatError(f"texture level {level} is {h}×{w}: not the GL mip chain of a {rows[0, 0]}×"
+                              f"{cols[0, 0]} level 0")
+        block = data[offset[0, level]:offset[0, level] + h * w]
+        tex.write(np.ascontiguousarray(block, np.float32).tobytes(), level=level)
+    return tex, levels
+
+
+def _light_camera(direction, lo, hi, radius_max, size):
+    """The orthographic light camera of ``shadow_map.build_shadow_map`` and its sphere radius."""
+    sphere = 0.5 * float(np.linalg.norm(hi - lo)) + radius_max
+    if not sphere > 0:
+        sphere = 1.0
+    centre = 0.5 * (lo + hi)
+    up = np.eye(3)[int(np.argmin(np.abs(direction)))]
+    return Camera(centre + 2 * sphere * direction, centre, up, size, size, ortho_height=2 * sphere), sphere
+
+
+class GLRenderer:
+    """``pipeline.Renderer``'s interface on OpenGL: ``render(frame)`` → ``RenderResult``; ``frame_count``,
+    ``warnings``, ``setup_timings`` as there (plus ``gl_setup``: context, shaders, textures). Arguments as
+    ``pipeline.Renderer``; FormatError (one line) for what this backend cannot draw, GLUnavailable without GL."""
+
+    def __init__(self, scene, packs=None, features: Features = Features(), samples_per_segment: int = 4,
+                 use_cache: bool = True, progress=None):
+        if features.flyaways:
+            raise FormatError("the GL backend does not draw the flyaway layer yet: render --ablation flyaways with "
+                              "the CPU backend")
+        lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
+        if len(lights) > MAX_LIGHTS:
+            raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
+                              f"{MAX_LIGHTS}")
+        self.ctx = gl_context()
+        self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
+        start = time.perf_counter()
+        self.scene, self.features = scene, features
+        self.regular, self.depth = _programs(self.ctx)
+        self.looks = [self._upload_look(k) for k in range(len(self.cpu.looks))]
+        fit = self.cpu.fit
+        if fit is not None and len(fit.sharpness) > MAX_LOBES:
+            raise FormatError(f"{len(fit.sharpness)} SRBF lobes: the GL backend draws at most {MAX_LOBES}")
+        self.lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
+        self.lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
+        self.lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
+        self.ms_dir, self.ms_e, ms_weights = pipeline.ms_clusters(self.lobe_dir, self.lobe_lambda, self.lobe_w)
+        self.cluster_weights = _texture2d(self.ctx, ms_weights if ms_weights.size else np.zeros((1, 1)))
+        self.light_dir = np.array([light.unit_direction for light in lights], np.float64).reshape(-1, 3)
+        self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)
+        self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
+        self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"])
+
+    @property
+    def frame_count(self):
+        return self.cpu.frame_count
+
+    @property
+    def warnings(self):
+        return self.cpu.warnings
+
+    def _upload_look(self, k):
+        """GL textures and uniforms of yarn entry k (``pipeline.Renderer``'s look with the ablation applied)."""
+        ctx, look = self.ctx, self.cpu.looks[k]
+        kernel_look, corr, _ = self.cpu.kernel_looks[k]
+        im = self.cpu.im_tables[k]
+        table = im.table
+        na, nb, nc, nd = table.shape[:4]
+        tangent, levels = _mip_texture(ctx, look.tangent)
+        coverage, levels_c = _mip_texture(ctx, look.coverage)
+        if levels_c != levels:
+            raise FormatError(f"yarn {look.name}: tangent and coverage textures have {levels} and {levels_c} levels")
+
+        def full(tab):
+            return (_texture3d(ctx, tab), 1) if tab.shape[0] > 0 else (_texture3d(ctx, np.zeros((1, 1, 1, 3))), 0)
+
+        xi_full, use_xi = full(corr.xi_full)
+        psi_full, use_psi = full(corr.psi_full)
+        p = kernel_look.params
+        albedo = (look.yarn_albedo or 0.0) if self.features.interreflection else 0.0
+        uniforms = {
+            "p_a_r": p[0:3], "p_a_tt": p[3:6], "p_a_d": p[6:9], "p_beta_r": float(p[9]), "p_beta_tt": float(p[10]),
+            "p_gamma_tt": float(p[11]), "p_alpha_r": float(p[12]), "p_alpha_tt": float(p[13]),
+            "period": float(kernel_look.period), "radius": float(kernel_look.radius),
+            "n_occluded": float(kernel_look.n_occluded), "n_cross": float(kernel_look.n_cross),
+            "twist_sign": float(look.twist_sign), "yarn_albedo": float(albedo),
+            "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
+            "use_xi_full": use_xi, "use_psi_full": use_psi,
+            "im_lo": im.lo, "im_hi": im.hi, "im_repeat": [int(r) for r in im.repeat],
+            "im_size": [na, nb, nc, nd], "im_code": [int(c) for c in im.codes],
+        }
+        textures = {
+            "ds_table": _texture2d(ctx, kernel_look.ds.reshape(5, -1, 3)),
+            "xi_full": xi_full, "xi_m": _texture2d(ctx, corr.xi_m), "xi_n": _texture2d(ctx, corr.xi_n),
+            "psi_full": psi_full, "psi_gm": _texture2d(ctx, corr.psi_gm), "psi_gn": _texture2d(ctx, corr.psi_gn),
+            "im_table": _texture3d(ctx, table.reshape(na, nb * nc, nd, 3)),
+            "tangent_tex": tangent, "coverage_tex": coverage,
+        }
+        return uniforms, textures
+
+    # --- per frame --------------------------------------------------------------------------------------------------
+
+    def render(self, frame: int | None = None, progress=None) -> pipeline.RenderResult:
+        """Draw ``frame`` (default: the scene's ``render.frame``); timings per pass, as the CPU renderer's."""
+        scene, ctx = self.scene, self.ctx
+        frame = scene.render.frame if frame is None else int(frame)
+        if not 0 <= frame < self.frame_count:
+            raise FormatError(f"frame {frame} is out of range: the scene's curves have {self.frame_count} frame(s)")
+        timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
+        clock = [time.perf_counter()]
+
+        def lap(name):
+            ctx.finish()
+            now = time.perf_counter()
+            timings[name] = now - clock[0]
+            if progress is not None:
+                progress(name, now - clock[0])
+            clock[0] = now
+
+        lines = pipeline._polylines(scene, self.cpu.curves, frame, self.cpu.samples_per_segment)
+        facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
+        camera = scene_camera(scene)
+        w, h = camera.width, camera.height
+        background = np.asarray(scene.background, np.float64)
+        if len(lines.entry) == 0:
+            lap("load")
+            image = np.broadcast_to(background.astype(np.float32), (h, w, 3)).copy()
+            return pipeline.RenderResult(image, timings, facts)
+        draws = self._upload_segments(lines)
+        lap("load")
+
+        radius = np.array([self.cpu.looks[k].radius for k in lines.entry])
+        lo, hi = lines.points.min(axis=0), lines.points.max(axis=0)
+        size = scene.render.shadow_map_size
+        light_maps, light_atlas = self._shadow_atlas(draws, self.light_dir, size, np.zeros(len(self.light_dir)), lo,
+                                                     hi, radius.max(), lines.points)
+        lobe_size = max(64, size // pipeline.LOBE_SHADOW_DIVISOR)
+        angular = np.minimum(1.0 / np.sqrt(np.maximum(self.lobe_lambda, 1e-300)), pipeline.MAX_LOBE_ANGULAR_RADIUS)
+        lobe_maps, lobe_atlas = self._shadow_atlas(draws, self.lobe_dir, lobe_size, angular, lo, hi, radius.max(),
+                                                   lines.points)
+        facts["ms_lights"] = int(len(self.ms_dir))
+        lap("shadow")
+
+        samples = min(scene.render.msaa, ctx.max_samples)
+        if samples != scene.render.msaa:
+            facts["warnings"].append(f"msaa {scene.render.msaa} is more than this GL driver's {ctx.max_samples} "
+                                     f"samples: drawn with {samples}")
+        colour = ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4")
+        depth = ctx.depth_renderbuffer((w, h), samples=samples)
+        fbo = ctx.framebuffer(color_attachments=[colour], depth_attachment=depth)
+        fbo.use()
+        ctx.viewport = (0, 0, w, h)
+        fbo.clear(*background.tolist(), 1.0, depth=1.0)
+        ctx.enable(ctx.DEPTH_TEST)
+        program = self.regular
+        near, far = self._depth_range(camera, lo, hi, radius.max())
+        self._camera_uniforms(program, camera, near, far)
+        _set(program, "image_height", int(h))
+        _set(program, "samples", int(samples))
+        _set(program, "sample_pattern", SAMPLE_PATTERNS[samples])
+        _set(program, "background", background)
+        self._light_uniforms(program, light_maps, lobe_maps)
+        light_atlas.use(location=10)
+        lobe_atlas.use(location=11)
+        self.cluster_weights.use(location=12)
+        _set(program, "light_atlas", 10)
+        _set(program, "lobe_atlas", 11)
+        _set(program, "cluster_weights", 12)
+        for k, vao, count in draws:
+            uniforms, textures = self.looks[k]
+            for name, value in uniforms.items():
+                _set(program, name, value)
+            for unit, (name, tex) in enumerate(textures.items()):
+                tex.use(location=unit)
+                _set(program, name, unit)
+            vao[0].render(ctx.LINES, vertices=count)
+        lap("shade")
+
+        resolved = ctx.framebuffer(color_attachments=[ctx.renderbuffer((w, h), 4, dtype="f4")])
+        ctx.copy_framebuffer(resolved, fbo)
+        pixels = np.frombuffer(resolved.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
+        image = np.ascontiguousarray(pixels[::-1, :, :3])
+        for obj in (fbo, colour, depth, resolved, light_atlas, lobe_atlas):
+            obj.release()
+        for _, arrays, _ in draws:
+            for obj in arrays:
+                obj.release()
+        if not np.all(np.isfinite(image)):
+            raise RuntimeError("GL strip renderer produced a non-finite pixel (a bug: please report the scene)")
+        lap("resolve")
+        facts["residuals"] = {look.name: look.residuals for look in self.cpu.looks}
+        return pipeline.RenderResult(image, timings, facts)
+
+    def _upload_segments(self, lines):
+        """One vertex array of GL_LINES segments per yarn entry: [(entry, (vao, vbo), vertex count)]."""
+        tangent = vertex_tangents(lines.points, lines.offsets)
+        draws = []
+        for k in np.unique(lines.entry):
+            index = []
+            for c in np.flatnonzero(lines.entry == k):
+                a = np.arange(lines.offsets[c], lines.offsets[c + 1] - 1)
+                index.append(np.stack([a, a + 1], axis=1).ravel())
+            index = np.concatenate(index) if index else np.zeros(0, np.int64)
+            curve_of = np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets))[index]
+            record = np.zeros(len(index), dtype=[("p", "f4", 3), ("t", "f4", 3), ("s", "f4"), ("n", "f4", 3),
+                                                 ("c", "i4")])
+            record["p"], record["t"], record["s"] = lines.points[index], tangent[index], lines.rest[index]
+            record["n"], record["c"] = lines.normal[index], curve_of
+            vbo = self.ctx.buffer(record.tobytes())
+            vao = self.ctx.vertex_array(self.regular, [(vbo, "3f 3f 1f 3f 1i", "in_position", "in_tangent",
+                                                        "in_arclength", "in_normal", "in_curve")], skip_errors=True)
+            depth_vao = self.ctx.vertex_array(self.depth, [(vbo, "3f 3f 1f 3f 1i", "in_position", "in_tangent",
+                                                            "in_arclength", "in_normal", "in_curve")], skip_errors=True)
+            draws.append((int(k), (vao, vbo, depth_vao), len(index)))
+        return draws
+
+    @staticmethod
+    def _depth_range(camera, lo, hi, radius_max):
+        """(near, far) view depths that hold every yarn: the CPU's near (1e-3) and the farthest corner of the box."""
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        far = float(np.max(np.linalg.norm(corners - np.asarray(camera.position, float), axis=1))) + 2 * radius_max
+        return 1e-3, max(far * 1.01, 2e-3)
+
+    @staticmethod
+    def _camera_uniforms(program, camera, near, far):
+        fwd, right, up = camera.basis()
+        for name, value in (("cam_position", np.asarray(camera.position, float)), ("cam_right", right),
+                            ("cam_up", up), ("cam_fwd", fwd), ("ortho_height", float(camera.ortho_height)),
+                            ("tan_half", math.tan(math.radians(camera.fov_deg) / 2)),
+                            ("aspect", camera.width / camera.height), ("near_plane", near), ("far_plane", far)):
+            _set(program, name, value)
+
+    def _shadow_atlas(self, draws, directions, size, angular, lo, hi, radius_max, points):
+        """Render one shadow map per direction into the tiles of an atlas; returns (map descriptions, texture)."""
+        ctx = self.ctx
+        n = len(directions)
+        grid = max(1, math.ceil(math.sqrt(n)))
+        side = grid * size
+        if side > ctx.info["GL_MAX_TEXTURE_SIZE"]:
+            raise FormatError(f"{n} shadow maps of {size}² texels need a {side}² atlas, more than this GL driver's "
+                              f"{ctx.info['GL_MAX_TEXTURE_SIZE']}: lower render.shadow_map_size")
+        atlas = ctx.texture((side, side) if n else (1, 1), 1, dtype="f4")
+        maps = []
+        if n == 0:
+            atlas.write(np.full(1, NO_YARN, np.float32).tobytes())
+            return maps, atlas
+        depth = ctx.depth_renderbuffer((side, side))
+        fbo = ctx.framebuffer(color_attachments=[atlas], depth_attachment=depth)
+        fbo.use()
+        ctx.viewport = (0, 0, side, side)
+        fbo.clear(NO_YARN, NO_YARN, NO_YARN, NO_YARN, depth=1.0)
+        ctx.enable(ctx.DEPTH_TEST)
+        program = self.depth
+        for i, d in enumerate(directions):
+            cam, sphere = _light_camera(np.asarray(d, float), lo, hi, radius_max, size)
+            gx, gy = i % grid, i // grid
+            ctx.viewport = (gx * size, gy * size, size, size)
+            self._camera_uniforms(program, cam, 0.5 * sphere, 3.5 * sphere)
+            for k, vao, count in draws:
+                _set(program, "radius", float(self.cpu.looks[k].radius))
+                vao[2].render(ctx.LINES, vertices=count)
+            fwd, right, up = cam.basis()
+            d_min = float(np.min((points - cam.position) @ fwd))
+            # GL's rows run upward, so texel row i of a tile is the map's row size − 1 − i (shadow_map.py counts
+            # rows from the top): the map's up is given negated, and shadow.glsl's row from the top is GL's row
+            maps.append({"right": right, "up": -up, "fwd": fwd, "origin": np.asarray(cam.position, float),
+                         "texel": 2 * sphere / size, "d_min": d_min, "tan_angle": math.tan(float(angular[i])),
+                         "size": size, "tile": (gx * size, gy * size)})
+        fbo.release()
+        depth.release()
+        return maps, atlas
+
+    def _light_uniforms(self, program, light_maps, lobe_maps):
+        _set(program, "n_lights", len(self.light_dir))
+        _set(program, "light_dir", self.light_dir)
+        _set(program, "light_irradiance", self.light_e)
+        for i, m in enumerate(light_maps):
+            self._map_uniforms(program, f"light_map[{i}]", m)
+        _set(program, "n_lobes", len(self.lobe_dir))
+        _set(program, "lobe_dir", self.lobe_dir)
+        _set(program, "lobe_lambda", self.lobe_lambda)
+        _set(program, "lobe_weight", self.lobe_w)
+        for j, m in enumerate(lobe_maps):
+            self._map_uniforms(program, f"lobe_map[{j}]", m)
+        _set(program, "n_clusters", len(self.ms_dir))
+        _set(program, "cluster_dir", self.ms_dir)
+        _set(program, "cluster_irradiance", self.ms_e)
+
+    @staticmethod
+    def _map_uniforms(program, prefix, m):
+        for key in ("right", "up", "fwd", "origin"):
+            _set(program, f"{prefix}.{key}", m[key])
+        for key in ("texel", "d_min", "tan_angle"):
+            _set(program, f"{prefix}.{key}", float(m[key]))
+        _set(program, f"{prefix}.size", int(m["size"]))
+        _set(program, f"{prefix}.tile", tuple(int(x) for x in m["tile"]))
