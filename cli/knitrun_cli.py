@@ -306,9 +306,12 @@ def _pack_overrides(values):
 @click.option("--msaa", type=click.Choice(["1", "2", "4", "8", "16"]), default=None,
               help="Samples per pixel (default: the scene's).")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="PNG exposure in stops.")
+@click.option("--backend", type=click.Choice(["cpu", "gl"]), default="cpu", show_default=True,
+              help="cpu: the Numba renderer; gl: the same model in OpenGL 4.5 through EGL (a GPU, or Mesa's llvmpipe "
+                   "without one; needs libEGL and a GL driver).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary: time per pass, counts.")
 def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values, ablation, samples_per_segment, msaa,
-           exposure, as_json):
+           exposure, backend, as_json):
     """Render a scene with the strip renderer (yarns as textured strips shaded from their asset packs).
 
     \b
@@ -320,8 +323,12 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
 
     from data_formats.images import write_exr, write_png
     from data_formats.scene import load_scene
-    from knitrun.render.pipeline import Renderer
-    from knitrun.render.pipeline import render as render_scene
+    if backend == "gl":
+        from knitrun.render.gl.gl_renderer import GLRenderer as Renderer
+        from knitrun.render.gl.gl_renderer import render as render_scene
+    else:
+        from knitrun.render.pipeline import Renderer
+        from knitrun.render.pipeline import render as render_scene
 
     scene = load_scene(scene_path)
     check_outputs({"--output": output, "--exr": exr_path, "--gif": gif_path},
@@ -342,7 +349,7 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
     if exr_path is not None:
         write_exr(exr_path, result.image)
     total = sum(result.timings.values())
-    summary = {"scene": scene_path, "output": output, "exr": exr_path, "ablation": ablation,
+    summary = {"scene": scene_path, "output": output, "exr": exr_path, "ablation": ablation, "backend": backend,
                "width": scene.camera.width, "height": scene.camera.height, "msaa": scene.render.msaa,
                "ms_total": total * 1e3, "ms_per_pass": {k: v * 1e3 for k, v in result.timings.items()},
                **result.facts, "mean_rgb": result.image.reshape(-1, 3).mean(axis=0).tolist()}

@@ -403,3 +403,19 @@ def test_lobes_of_zero_weight_are_not_drawn_and_the_fit_is_cached(tmp_path, pack
     assert first.facts["srbf_lobes_drawn"] == int(np.any(fit.weights > 0, axis=1).sum()) == 1
     assert not first.facts["srbf_fit_cached"] and again.facts["srbf_fit_cached"]
     assert np.array_equal(first.image, again.image)
+
+
+def test_multiple_scattering_clusters_weigh_their_lobes():
+    """``pipeline.ms_clusters``: every lobe with light joins one cluster, a cluster's weights sum to 1, and
+    ``ms_lights`` is those weights applied to the lobes' visibilities."""
+    from knitrun.render import pipeline
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(9, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    lam, w = rng.uniform(1, 50, 9), rng.uniform(0.1, 1, (9, 3))
+    dirs, irr, weights = pipeline.ms_clusters(d, lam, w)
+    assert np.allclose(weights.sum(axis=1), 1.0) and np.all((weights > 0).sum(axis=0) == 1)
+    assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0) and np.all(irr > 0)
+    vis = rng.uniform(0, 1, (9, 5))
+    assert np.allclose(pipeline.ms_lights(d, lam, w, [vis])[2][0], weights @ vis)

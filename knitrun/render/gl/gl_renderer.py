@@ -10,20 +10,23 @@ What runs where
   (3-D textures for the full tables, 2-D for the factors), the I_M^{TT,D} table (a 3-D texture, its second and third
   axes merged into one), the tangent and coverage mip chains (each pack level uploaded as that GL mip level).
 * Per frame (``render``): the curves' polylines (``pipeline._polylines``) and their vertex tangents are uploaded as
-  GL_LINES segments; a geometry shader builds the camera-facing strips (``shaders/strip.geom``, the quads of
-  ``strip_raster``). Pass 1, per directional light and per SRBF lobe: the strips seen from the light camera of
-  ``shadow_map.build_shadow_map`` into a tile of a depth atlas (lights at ``shadow_map_size``, lobes at a quarter,
-  at least 64). Pass 2: the strips seen from the scene camera into a multisampled float framebuffer; the fragment
-  shader (``shaders/regular.frag``) shades the regular fibers exactly as ``shade_regular`` does, with PCSS
-  visibility from the atlases (``shaders/shadow.glsl``), and writes α·L + (1 − α)·background. Pass 3: the MSAA
-  resolve averages the samples.
+  segments with their neighbours (GL_LINES_ADJACENCY); a geometry shader builds the camera-facing strips
+  (``shaders/strip.geom``, the quads of ``strip_raster``). Pass 1, per directional light and per SRBF lobe: the
+  strips seen from the light camera of ``shadow_map.build_shadow_map`` into a tile of a depth atlas (lights at
+  ``shadow_map_size``, lobes at a quarter, at least 64). Pass 2: the strips seen from the scene camera into a
+  multisampled float framebuffer; the fragment shader (``shaders/regular.frag``) shades the regular fibers exactly
+  as ``shade_regular`` does, with PCSS visibility from the atlases (``shaders/shadow.glsl``), and writes α·L + (1 −
+  α)·background. A fragment is shaded at the first sample of the CPU's pattern that lies on its curve's strip (the
+  CPU shades a pixel once per curve, at its first covered sample). Pass 3: the MSAA resolve averages the samples.
 * Table lookups follow ASSET_PACK.md §4.3 by ``texelFetch`` and explicit weights (``axis_cell``), textures
   ``texture_sampling.sample_mip`` likewise: the GL image does not depend on a driver's filtering rules.
 
-Differences from the CPU renderer, by design: single precision; the GPU shades once per pixel and primitive at the
-centroid of the covered samples (the CPU once per pixel and curve at its first covered sample) and uses the driver's
-sample positions (the CPU the Direct3D patterns); the CPU's nearest depth of a shadow map is the nearest projected
-polyline point here. ``tests/test_gl_render.py`` holds the two renderers together at the yarn scale.
+Differences from the CPU renderer, by design: single precision; the driver's sample positions decide coverage (the
+CPU's are the Direct3D patterns: the same x and y values at 4×, in other pairs), so edges that are not along the
+image axes cover other samples; a primitive shades one fragment per pixel (a pixel two segments of one curve share
+is shaded twice, each weighted by its own coverage); the shadow maps are rasterised by the driver; the nearest depth
+of a shadow map is the nearest projected polyline point. ``tests/test_gl_render.py`` holds the two renderers
+together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
 
 Not drawn yet: the flyaway layer (``Features.flyaways``) is refused with a one-line error.
 """
@@ -366,7 +369,7 @@ class GLRenderer:
             for unit, (name, tex) in enumerate(textures.items()):
                 tex.use(location=unit)
                 _set(program, name, unit)
-            vao[0].render(ctx.LINES, vertices=count)
+            vao[0].render(ctx.LINES_ADJACENCY, vertices=count)
         lap("shade")
 
         resolved = ctx.framebuffer(color_attachments=[ctx.renderbuffer((w, h), 4, dtype="f4")])
@@ -385,14 +388,16 @@ class GLRenderer:
         return pipeline.RenderResult(image, timings, facts)
 
     def _upload_segments(self, lines):
-        """One vertex array of GL_LINES segments per yarn entry: [(entry, (vao, vbo), vertex count)]."""
+        """One vertex array of segments with their neighbours (GL_LINES_ADJACENCY: previous point, the segment's two,
+        next point; an end repeats its own) per yarn entry: [(entry, (vao, vbo, depth vao), vertex count)]."""
         tangent = vertex_tangents(lines.points, lines.offsets)
         draws = []
         for k in np.unique(lines.entry):
             index = []
             for c in np.flatnonzero(lines.entry == k):
-                a = np.arange(lines.offsets[c], lines.offsets[c + 1] - 1)
-                index.append(np.stack([a, a + 1], axis=1).ravel())
+                first, last = lines.offsets[c], lines.offsets[c + 1] - 1
+                a = np.arange(first, last)
+                index.append(np.stack([np.maximum(a - 1, first), a, a + 1, np.minimum(a + 2, last)], axis=1).ravel())
             index = np.concatenate(index) if index else np.zeros(0, np.int64)
             curve_of = np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets))[index]
             record = np.zeros(len(index), dtype=[("p", "f4", 3), ("t", "f4", 3), ("s", "f4"), ("n", "f4", 3),
@@ -451,7 +456,7 @@ class GLRenderer:
             self._camera_uniforms(program, cam, 0.5 * sphere, 3.5 * sphere)
             for k, vao, count in draws:
                 _set(program, "radius", float(self.cpu.looks[k].radius))
-                vao[2].render(ctx.LINES, vertices=count)
+                vao[2].render(ctx.LINES_ADJACENCY, vertices=count)
             fwd, right, up = cam.basis()
             d_min = float(np.min((points - cam.position) @ fwd))
             # GL's rows run upward, so texel row i of a tile is the map's row size − 1 − i (shadow_map.py counts
@@ -487,3 +492,15 @@ class GLRenderer:
             _set(program, f"{prefix}.{key}", float(m[key]))
         _set(program, f"{prefix}.size", int(m["size"]))
         _set(program, f"{prefix}.tile", tuple(int(x) for x in m["tile"]))
+
+
+def render(scene, packs=None, features: Features = Features(), samples_per_segment: int = 4, progress=None,
+           use_cache: bool = True) -> pipeline.RenderResult:
+    """One frame of ``scene`` on the GL backend (``pipeline.render``'s counterpart): timings include the set-up
+    (``load``, ``srbf_fit``, ``gl_setup``)."""
+    renderer = GLRenderer(scene, packs, features, samples_per_segment, use_cache, progress)
+    result = renderer.render(progress=progress)
+    setup = dict(renderer.setup_timings)
+    setup["load"] = setup.get("load", 0.0) + result.timings.pop("load", 0.0)
+    result.timings = {**setup, **result.timings}
+    return result

@@ -67,8 +67,9 @@ uniform sampler2D cluster_weights;
 
 void main() {
     // shaded where the CPU renderer shades it: at the first sample of its pattern (strip_raster.SAMPLE_PATTERNS, y
-    // down) that lies on this strip segment (rest arc length within the segment's, |v| ≤ 1); the centroid of the
-    // covered samples when none does (the driver's sample positions are not the CPU's)
+    // down) on this curve's strip, the CPU shading a pixel once per curve (|v| ≤ 1 and the rest arc length between
+    // the segment's neighbouring points, this segment's attributes extended to it); the centroid of the covered
+    // samples when none is (the driver's sample positions are not the CPU's)
     vec2 offset = vec2(0.0);
     bool found = false;
     for (int k = 0; k < samples && !found; ++k) {

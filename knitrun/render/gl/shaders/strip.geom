@@ -1,10 +1,10 @@
-// Strip renderer, GL backend: segment (a, b) → the camera-facing quad p_a ∓ r b_a, p_b ∓ r b_b of
+// Strip renderer, GL backend: segment (a, b) (with its neighbouring points) → the camera-facing quad p_a ∓ r b_a, p_b ∓ r b_b of
 // knitrun/render/strip_raster.py (b_i = normalize(ω_o × t_i), ω_o toward the camera from p_i, −fwd when
 // orthographic; v = −1 on the −b edge, +1 on the +b edge). Skipped like there: a zero-length segment, or an end
 // where |ω_o × t| < 1e-6. The camera is given by its basis (camera.py): view coordinates of p are
 // (right, up', fwd)·(p − position); clip coordinates follow the pinhole or orthographic projection, and the view
 // depth travels to the fragment shader, which writes it (linear) as the depth.
-layout(lines) in;
+layout(lines_adjacency) in;  // previous point, the segment (a, b), next point
 layout(triangle_strip, max_vertices = 4) out;
 
 in VertexData {
@@ -22,7 +22,7 @@ out FragmentData {
     centroid float v;          // across the strip, [-1, 1]
     centroid vec3 normal;      // the yarn frame's normal N
     centroid float depth;      // view depth (pinhole: distance from the camera, as strip_raster)
-    flat vec2 segment_s;  // rest arc lengths of the segment's ends (ascending)
+    flat vec2 segment_s;  // rest arc lengths from the previous point to the next (ascending): the curve around here
     flat int curve;
 } gout;
 
@@ -68,21 +68,21 @@ void emit(int i, vec3 b, float v) {
     gout.v = v;
     gout.normal = vin[i].normal;
     gout.depth = ortho_height > 0.0 ? dot(p - cam_position, cam_fwd) : length(p - cam_position);
-    gout.segment_s = vec2(min(vin[0].arclength, vin[1].arclength), max(vin[0].arclength, vin[1].arclength));
-    gout.curve = vin[0].curve;
+    gout.segment_s = vec2(min(vin[0].arclength, vin[3].arclength), max(vin[0].arclength, vin[3].arclength));
+    gout.curve = vin[1].curve;
     gl_Position = clip_of(p);
     EmitVertex();
 }
 
 void main() {
-    if (distance(vin[0].position, vin[1].position) == 0.0)
+    if (distance(vin[1].position, vin[2].position) == 0.0)
         return;
     vec3 ba, bb;
-    if (!half_width_dir(vin[0].position, vin[0].tangent, ba) || !half_width_dir(vin[1].position, vin[1].tangent, bb))
+    if (!half_width_dir(vin[1].position, vin[1].tangent, ba) || !half_width_dir(vin[2].position, vin[2].tangent, bb))
         return;
-    emit(0, ba, -1.0);
-    emit(0, ba, 1.0);
-    emit(1, bb, -1.0);
-    emit(1, bb, 1.0);
+    emit(1, ba, -1.0);
+    emit(1, ba, 1.0);
+    emit(2, bb, -1.0);
+    emit(2, bb, 1.0);
     EndPrimitive();
 }

@@ -1,4 +1,4 @@
-// Strip renderer, GL backend: one vertex per polyline point of a segment (GL_LINES); the geometry shader builds the
+// Strip renderer, GL backend: one vertex per polyline point of a segment and its neighbours (GL_LINES_ADJACENCY); the geometry shader builds the
 // strip. Attributes as computed on the CPU (knitrun/render/gl/gl_renderer.py, upload_segments): world position,
 // unit vertex tangent (strip_raster._vertex_frames' rule), rest arc length, the yarn frame's normal N, curve index.
 in vec3 in_position;

@@ -1,0 +1,139 @@
+"""The GL backend of the strip renderer (``knitrun.render.gl``) against the CPU renderer it ports: the same image at
+the yarn scale on lit, shadowed, sky-lit and ablated scenes; its refusals and its one-line errors. The tests need an
+OpenGL 4.5 context through EGL (Mesa's llvmpipe is enough; no GPU); without one they are skipped with the reason."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from data_formats.errors import FormatError
+from data_formats.scene import load_scene
+from knitbake.compare.image_metrics import yarn_scale_metrics
+from knitrun.render.ablations import ABLATIONS, Features
+from knitrun.render.gl import gl_renderer
+from tests.helpers import FRONT, SKY, SUN, straight, write_scene
+
+# orthographic, yarns along the image axes: the strips' edges then cross the same samples in both renderers (the
+# driver's 4× positions have the CPU pattern's x and y values), so the images agree to rounding
+ORTHO = """[camera]
+position = [0.0, 0.0, 1.0]
+look_at = [0.0, 0.0, 0.0]
+ortho_height = 0.5
+width = 64
+height = 48"""
+ALONG_Y = np.array([[0, 1, 0], [1, 0, 0], [0, 0, 1.0]])
+
+try:
+    gl_renderer.gl_context()
+except gl_renderer.GLUnavailable as e:
+    pytest.skip(f"no OpenGL context: {e}", allow_module_level=True)
+
+
+def _both(path, pack, features=Features()):
+    """(GL image, CPU image) of the scene at ``path`` over a black background (the comparison is of the yarns, not
+    diluted by empty pixels), the CPU one drawn from the GL renderer's own set-up."""
+    scene = dataclasses.replace(load_scene(path), background=(0.0, 0.0, 0.0))
+    renderer = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}, features)
+    return renderer.render().image, renderer.cpu.render().image
+
+
+def _yarn_l1(a, b, diameter_px=8.0):
+    return yarn_scale_metrics(a, b, diameter_px)["rel_l1"]
+
+
+@pytest.mark.parametrize("lights", ["sun", "sun and sky"])
+def test_a_lit_straight_yarn_is_the_cpu_image(tmp_path, pack, lights):
+    """One yarn, so no yarn-level shadow: the shading itself (DS, ξ, Ψ^Fiber; under the sky I_M with the R rule,
+    the multiple-scattering clusters and the inter-reflection) agrees to single-precision rounding."""
+    path = write_scene(tmp_path, [straight()], camera=ORTHO, lights=SUN if lights == "sun" else SUN + "\n" + SKY)
+    gl, cpu = _both(path, pack)
+    assert gl.shape == cpu.shape and gl.dtype == np.float32 and np.all(np.isfinite(gl))
+    assert cpu.mean() > 0.003 and (cpu.mean(axis=2) > 0.01).mean() > 0.05  # the yarn covers some pixels
+    assert abs(gl.mean() / cpu.mean() - 1) < 2e-3
+    assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()  # per pixel: the same geometry, shaded at the same sample
+
+
+@pytest.mark.parametrize("ablation", ["plain_ds", "xi", "factored", "no_tables"])
+def test_ablations_follow_the_cpu_renderer(tmp_path, pack, ablation):
+    gl, cpu = _both(write_scene(tmp_path, [straight()], camera=ORTHO, lights=SUN + "\n" + SKY), pack,
+                    ABLATIONS[ablation])
+    assert abs(gl.mean() / cpu.mean() - 1) < 2e-3
+    assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
+
+
+def test_a_pinhole_view_agrees_at_the_yarn_scale(tmp_path, pack):
+    """Under perspective the strips' edges cross the driver's samples, not the CPU's: the images agree at the yarn
+    scale, not per pixel."""
+    gl, cpu = _both(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN), pack)
+    assert abs(gl.mean() / cpu.mean() - 1) < 0.015
+    assert _yarn_l1(gl, cpu) < 0.02
+
+
+def test_shadows_agree_at_the_yarn_scale(tmp_path, pack):
+    """A yarn in front of another under a slanted sun and the sky, a third across them: the shadow maps are
+    rasterised by the driver from the light's view (edges at its samples), so again the yarn scale."""
+    yarns = [straight(z=0.0), straight(z=-0.1) + [0, -0.04, 0], straight(z=0.05) @ ALONG_Y.T]
+    gl, cpu = _both(write_scene(tmp_path, yarns, camera=ORTHO, lights=SUN + "\n" + SKY), pack)
+    assert abs(gl.mean() / cpu.mean() - 1) < 0.01
+    assert _yarn_l1(gl, cpu) < 0.025
+
+
+def test_frames_an_empty_scene_and_the_renderer_interface(tmp_path, pack):
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    renderer = gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)})
+    assert renderer.frame_count == 1 and renderer.warnings == []
+    assert {"load", "gl_setup"} <= set(renderer.setup_timings)
+    result = renderer.render(0)
+    assert {"load", "shadow", "shade", "resolve"} == set(result.timings)
+    with pytest.raises(FormatError, match="frame 1 is out of range"):
+        renderer.render(1)
+    empty = write_scene(tmp_path, [np.zeros((2, 3))], camera=FRONT, lights=SUN, name="empty")  # a point: nothing drawn
+    scene = load_scene(empty)
+    image = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}).render().image
+    assert np.allclose(image, np.asarray(scene.background, np.float32))
+
+
+def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    with pytest.raises(FormatError, match="flyaway layer") as e:
+        gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)}, Features(flyaways=True))
+    assert "\n" not in str(e.value)
+    many = "\n".join(SUN for _ in range(gl_renderer.MAX_LIGHTS + 1))
+    with pytest.raises(FormatError, match="directional lights"):
+        gl_renderer.GLRenderer(load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=many, name="m")),
+                               {"cotton1": str(pack)})
+
+
+def test_a_machine_without_egl_gets_a_one_line_reason(monkeypatch):
+    import moderngl
+
+    def no_egl(**kw):
+        raise Exception("libEGL.so.1: cannot open shared object file: No such file or directory\nmore detail")
+
+    monkeypatch.setattr(gl_renderer, "_CONTEXT", [])
+    monkeypatch.setattr(moderngl, "create_context", no_egl)
+    with pytest.raises(gl_renderer.GLUnavailable) as e:
+        gl_renderer.gl_context()
+    message = str(e.value)
+    assert "\n" not in message and "libEGL.so.1" in message and "libegl1" in message
+
+
+def test_the_command_line_renders_with_the_gl_backend(tmp_path, pack):
+    from cli.knitrun_cli import main
+
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
+    out = tmp_path / "gl.png"
+    result = CliRunner().invoke(main, ["render", str(path), "--pack", f"cotton1={pack}", "-o", str(out), "--backend",
+                                       "gl", "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["backend"] == "gl" and out.is_file() and summary["mean_rgb"][0] > 0
+    assert "GL_RENDERER" not in summary and summary["gl_renderer"]
+    refused = CliRunner().invoke(main, ["render", str(path), "--pack", f"cotton1={pack}", "-o", str(tmp_path / "f.png"),
+                                        "--backend", "gl", "--ablation", "flyaways"])
+    assert refused.exit_code != 0 and "flyaway layer" in refused.output
+    assert not (tmp_path / "f.png").exists()
+
