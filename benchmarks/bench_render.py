@@ -7,7 +7,10 @@ MSAA 4, shadow maps 2048² (lobes 512²). Every figure is the median of ``--fram
 render (which pays Numba's compile or cache load). ``load`` re-reads the pack and re-evaluates the curves each
 frame (an interactive viewer would keep them); the per-frame work is the other passes.
 
-    .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3] [--light directional|sky16] [--no-sweep]
+    .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3] [--light directional|sky16]
+        [--no-sweep] [--backend cpu|gl]
+
+``--backend gl`` times the OpenGL backend (``knitrun.render.gl``) on whatever EGL gives: a GPU, or Mesa's llvmpipe.
 
 Without ``--pack`` a draft cotton1 pack is baked (or taken from the bake cache).
 """
@@ -23,7 +26,7 @@ from data_formats.scene import load_scene
 from data_formats.yarn_curves import write_yarn_curves
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
-from knitrun.render.pipeline import render
+from knitrun.render import pipeline
 from knitrun.sim.crane_stockinette import stockinette_curves
 
 SCENE = """format = "knit-scene"
@@ -50,15 +53,25 @@ LIGHTS = {"directional": 'type = "directional"\ndirection = [0.4, 0.6, 1.0]\nirr
           "sky16": 'type = "environment"\nbuiltin = "sky"'}
 
 
-def time_scene(folder, pack, rows, width, height, light, frames):
+def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu"):
+    """(median seconds, its timings, facts). CPU: each frame a whole ``pipeline.render`` (set-up included, as since
+    issue 6); GL: one ``GLRenderer`` set up once, then its frames (what a viewer pays per frame)."""
     write_yarn_curves(folder / "patch.h5", stockinette_curves(rows, 21))
     (folder / "scene.toml").write_text(SCENE.format(width=width, height=height, light=LIGHTS[light]))
     scene = load_scene(folder / "scene.toml")
-    result = render(scene, {"cotton1": str(pack)})
+    if backend == "gl":
+        from knitrun.render.gl.gl_renderer import GLRenderer
+
+        renderer = GLRenderer(scene, {"cotton1": str(pack)})
+        draw = renderer.render
+    else:
+        def draw():
+            return pipeline.render(scene, {"cotton1": str(pack)})
+    result = draw()
     runs = []
     for _ in range(frames):
         t0 = time.perf_counter()
-        result = render(scene, {"cotton1": str(pack)})
+        result = draw()
         runs.append((time.perf_counter() - t0, result.timings))
     total, timings = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
     return total, timings, result.facts
@@ -70,27 +83,37 @@ def main():
     parser.add_argument("--frames", type=int, default=3)
     parser.add_argument("--light", choices=sorted(LIGHTS), default=None, help="only the cases under this light")
     parser.add_argument("--no-sweep", action="store_true", help="only the 60K-point 1280×960 cases, not the sweep")
+    parser.add_argument("--backend", choices=("cpu", "gl"), default="cpu",
+                        help="gl: the OpenGL backend, plus the paper's 200K-point size under the sky")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="knit_bench_render_"))
     pack = args.pack
     if pack is None:
         pack = folder / "cotton1_draft.h5"
         bake(load_preset("cotton1"), pack, quality="draft")
-    print(f"## Strip renderer (cotton1, {numba.get_num_threads()} threads, pack {Path(pack).name})")
+    where = f"{numba.get_num_threads()} threads"
+    if args.backend == "gl":
+        from knitrun.render.gl.gl_renderer import gl_context
+
+        where = f"GL: {gl_context().info['GL_RENDERER']}"
+    print(f"## Strip renderer (cotton1, {where}, pack {Path(pack).name})")
     print("| light | control points | pixels | shading points | total ms | load | srbf_fit | raster | shadow | shade "
           "| resolve |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     cases = [("directional", 60, 1280, 960), ("sky16", 60, 1280, 960),
              ("directional", 15, 1280, 960), ("directional", 30, 1280, 960), ("directional", 120, 1280, 960),
              ("directional", 60, 640, 480), ("directional", 60, 2560, 1920)]
+    if args.backend == "gl":
+        cases = cases[:2] + [("sky16", 200, 1280, 960)] + cases[2:]
     if args.no_sweep:
-        cases = cases[:2]
+        cases = cases[:3 if args.backend == "gl" else 2]
     for light, rows, width, height in [c for c in cases if args.light in (None, c[0])]:
-        total, timings, facts = time_scene(folder, pack, rows, width, height, light, args.frames)
+        total, timings, facts = time_scene(folder, pack, rows, width, height, light, args.frames, args.backend)
         passes = " | ".join(f"{1e3 * timings.get(k, 0.0):.0f}" for k in
                             ("load", "srbf_fit", "raster", "shadow", "shade", "resolve"))
-        print(f"| {light} | {facts['points']} | {width}×{height} | {facts['shading_points']} | {1e3 * total:.0f} | "
-              f"{passes} |", flush=True)
+        points = facts.get("shading_points", "—")
+        print(f"| {light} | {facts['points']} | {width}×{height} | {points} | {1e3 * total:.0f} | {passes} |",
+              flush=True)
 
 
 if __name__ == "__main__":

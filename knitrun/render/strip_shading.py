@@ -1,4 +1,5 @@
-"""Shading of the strip renderer's multisampled G-buffer (Huang et al. 2025 §4.3–4.5, eqs. 8–11 and 17).
+"""Shading of the strip renderer's multisampled G-buffer (Huang et al. 2025 §4.3–4.5, eqs. 8–11 and 17): the model
+of ``data_formats/SHADING.md``, which the GL backend (``knitrun/render/gl/shaders``) implements too.
 
 Shading points
 --------------

@@ -15,9 +15,10 @@ What runs where
   strips seen from the light camera of ``shadow_map.build_shadow_map`` into a tile of a depth atlas (lights at
   ``shadow_map_size``, lobes at a quarter, at least 64). Pass 2: the strips seen from the scene camera into a
   multisampled float framebuffer; the fragment shader (``shaders/regular.frag``) shades the regular fibers exactly
-  as ``shade_regular`` does, with PCSS visibility from the atlases (``shaders/shadow.glsl``), and writes α·L + (1 −
-  α)·background. A fragment is shaded at the first sample of the CPU's pattern that lies on its curve's strip (the
-  CPU shades a pixel once per curve, at its first covered sample). Pass 3: the MSAA resolve averages the samples.
+  as ``shade_regular`` does, with PCSS visibility from the atlases (``shaders/shadow.glsl``), and writes
+  α·L + (1 − α)·background. A fragment is shaded at the first sample of the CPU's pattern that lies on its
+  curve's strip (the CPU shades a pixel once per curve, at its first covered sample). Pass 3: the MSAA resolve
+  averages the samples.
 * Table lookups follow ASSET_PACK.md §4.3 by ``texelFetch`` and explicit weights (``axis_cell``), textures
   ``texture_sampling.sample_mip`` likewise: the GL image does not depend on a driver's filtering rules.
 

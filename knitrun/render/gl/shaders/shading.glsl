@@ -1,4 +1,5 @@
-// Strip renderer, GL backend: the shading model of knitrun/render/strip_shading.py in GLSL, function by function.
+// Strip renderer, GL backend: the shading model of data_formats/SHADING.md as knitrun/render/strip_shading.py
+// implements it, in GLSL, function by function.
 // Every function names the Python definition it follows; ASSET_PACK.md §3 gives the angles (θ = asin(ω·t),
 // φ = φ_o − φ_i), §4.2–4.3 the table grids and interpolation, §8 the textures. Single precision throughout; the
 // CPU renderer (float64) is the reference the tests compare against (tests/test_gl_render.py).
