@@ -218,10 +218,12 @@ def _light_camera(direction, lo, hi, radius_max, size):
 class GLRenderer:
     """``pipeline.Renderer``'s interface on OpenGL: ``render(frame)`` → ``RenderResult``; ``frame_count``,
     ``warnings``, ``setup_timings`` as there (plus ``gl_setup``: context, shaders, textures). Arguments as
-    ``pipeline.Renderer``; FormatError (one line) for what this backend cannot draw, GLUnavailable without GL."""
+    ``pipeline.Renderer``, and ``ctx``: a moderngl context to draw with (default: the headless one of ``gl_context``;
+    a window's, for the viewer). ``light_dir`` (L, 3), unit vectors toward the directional lights, may be changed
+    between frames. FormatError (one line) for what this backend cannot draw, GLUnavailable without GL."""
 
     def __init__(self, scene, packs=None, features: Features = Features(), samples_per_segment: int = 4,
-                 use_cache: bool = True, progress=None):
+                 use_cache: bool = True, progress=None, ctx=None):
         if features.flyaways:
             raise FormatError("the GL backend does not draw the flyaway layer yet: render --ablation flyaways with "
                               "the CPU backend")
@@ -229,7 +231,7 @@ class GLRenderer:
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
                               f"{MAX_LIGHTS}")
-        self.ctx = gl_context()
+        self.ctx = gl_context() if ctx is None else ctx
         self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
         start = time.perf_counter()
         self.scene, self.features = scene, features
@@ -297,8 +299,9 @@ class GLRenderer:
 
     # --- per frame --------------------------------------------------------------------------------------------------
 
-    def render(self, frame: int | None = None, progress=None) -> pipeline.RenderResult:
-        """Draw ``frame`` (default: the scene's ``render.frame``); timings per pass, as the CPU renderer's."""
+    def render(self, frame: int | None = None, progress=None, camera: Camera | None = None) -> pipeline.RenderResult:
+        """Draw ``frame`` (default: the scene's ``render.frame``) through ``camera`` (default: the scene's; the
+        viewer's orbit); timings per pass, as the CPU renderer's."""
         scene, ctx = self.scene, self.ctx
         frame = scene.render.frame if frame is None else int(frame)
         if not 0 <= frame < self.frame_count:
@@ -316,7 +319,7 @@ class GLRenderer:
 
         lines = pipeline._polylines(scene, self.cpu.curves, frame, self.cpu.samples_per_segment)
         facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
-        camera = scene_camera(scene)
+        camera = scene_camera(scene) if camera is None else camera
         w, h = camera.width, camera.height
         background = np.asarray(scene.background, np.float64)
         if len(lines.entry) == 0:
