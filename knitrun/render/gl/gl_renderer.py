@@ -29,7 +29,11 @@ is shaded twice, each weighted by its own coverage); the shadow maps are rasteri
 of a shadow map is the nearest projected polyline point. ``tests/test_gl_render.py`` holds the two renderers
 together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
 
-Not drawn yet: the flyaway layer (``Features.flyaways``) is refused with a one-line error.
+The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
+textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
+sample keeps the nearest flyaway strip where no regular strip is nearer than that radius (the CPU's mask);
+``shaders/flyaway.frag`` shades it as ``shade_flyaway`` does into two targets, A·L and A·(1 − τ), whose resolves are
+composited over the regular image as the CPU's resolve does.
 """
 
 from __future__ import annotations
@@ -49,10 +53,14 @@ from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS
 from knitrun.render.strip_raster import SAMPLE_PATTERNS
 
 SHADERS = Path(__file__).with_name("shaders")
+FRAGMENT_COMMON = ("shading.glsl", "shadow.glsl", "point.glsl", "yarn.glsl")  # what the shading passes share
 MAX_LIGHTS = 8  # directional lights a scene may have on this backend
 MAX_LOBES = 64  # SRBF lobes (the scene format's largest srbf_count)
 NO_YARN = 3.0e38  # depth of a shadow-map texel no yarn covers
 PCF_RADIUS = 1.5  # texels (shadow_map.shadow_visibility's default)
+ATLAS_UNITS = (24, 25, 26, 27)  # texture units of the light atlas, lobe atlas, cluster weights, flyaway variants
+# (a yarn entry's own textures take units 0, 1, … in the order of ``_upload_look``)
+VARIANT_OFFSET = 2  # column of period index 0 in the flyaway variant table (flyaway.frag)
 
 
 class GLUnavailable(FormatError):
@@ -118,14 +126,16 @@ def _source(*names) -> str:
 
 
 def _programs(ctx):
-    """(regular-fiber program, shadow-map program), compiled once per context."""
+    """(regular-fiber, shadow-map, flyaway programs), compiled once per context."""
     cache = getattr(ctx, "_knit_programs", None)
     if cache is None:
         vertex, geometry = _source("strip.vert"), _source("strip.geom")
         regular = ctx.program(vertex_shader=vertex, geometry_shader=geometry,
-                              fragment_shader=_source("shading.glsl", "shadow.glsl", "regular.frag"))
+                              fragment_shader=_source(*FRAGMENT_COMMON, "regular.frag"))
         depth = ctx.program(vertex_shader=vertex, geometry_shader=geometry, fragment_shader=_source("depth.frag"))
-        cache = (regular, depth)
+        flyaway = ctx.program(vertex_shader=vertex, geometry_shader=geometry,
+                              fragment_shader=_source(*FRAGMENT_COMMON, "flyaway.frag"))
+        cache = (regular, depth, flyaway)
         ctx._knit_programs = cache
     return cache
 
@@ -186,21 +196,20 @@ def _texture3d(ctx, array):
     return ctx.texture3d((a.shape[2], a.shape[1], a.shape[0]), a.shape[3], a.tobytes(), dtype="f4")
 
 
-def _mip_texture(ctx, mip):
-    """A 2-D texture whose GL mip levels are the levels of a ``texture_sampling.MipStack`` (variant 0)."""
+def _mip_texture(ctx, mip, variant=0):
+    """A 2-D texture whose GL mip levels are the levels of ``variant`` of a ``texture_sampling.MipStack``."""
     data, offset, rows, cols = mip
     levels = offset.shape[1]
-    first = data[offset[0, 0]:offset[0, 0] + rows[0, 0] * cols[0, 0]].reshape(rows[0, 0], cols[0, 0], -1)
-    tex = ctx.texture((int(cols[0, 0]), int(rows[0, 0])), first.shape[2], np.ascontiguousarray(first, np.float32)
-                      .tobytes(), dtype="f4")
+    r0, c0 = int(rows[variant, 0]), int(cols[variant, 0])
+    first = data[offset[variant, 0]:offset[variant, 0] + r0 * c0].reshape(r0, c0, -1)
+    tex = ctx.texture((c0, r0), first.shape[2], np.ascontiguousarray(first, np.float32).tobytes(), dtype="f4")
     if levels > 1:
         tex.build_mipmaps(0, levels - 1)
     for level in range(1, levels):
-        h, w = int(rows[0, level]), int(cols[0, level])
-        if (w, h) != (max(1, int(cols[0, 0]) >> level), max(1, int(rows[0, 0]) >> level)):
-            raise FormatError(f"texture level {level} is {h}×{w}: not the GL mip chain of a {rows[0, 0]}×"
-                              f"{cols[0, 0]} level 0")
-        block = data[offset[0, level]:offset[0, level] + h * w]
+        h, w = int(rows[variant, level]), int(cols[variant, level])
+        if (w, h) != (max(1, c0 >> level), max(1, r0 >> level)):
+            raise FormatError(f"texture level {level} is {h}×{w}: not the GL mip chain of a {r0}×{c0} level 0")
+        block = data[offset[variant, level]:offset[variant, level] + h * w]
         tex.write(np.ascontiguousarray(block, np.float32).tobytes(), level=level)
     return tex, levels
 
@@ -224,9 +233,6 @@ class GLRenderer:
 
     def __init__(self, scene, packs=None, features: Features = Features(), samples_per_segment: int = 4,
                  use_cache: bool = True, progress=None, ctx=None):
-        if features.flyaways:
-            raise FormatError("the GL backend does not draw the flyaway layer yet: render --ablation flyaways with "
-                              "the CPU backend")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
@@ -235,7 +241,7 @@ class GLRenderer:
         self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
         start = time.perf_counter()
         self.scene, self.features = scene, features
-        self.regular, self.depth = _programs(self.ctx)
+        self.regular, self.depth, self.flyaway = _programs(self.ctx)
         self.looks = [self._upload_look(k) for k in range(len(self.cpu.looks))]
         fit = self.cpu.fit
         if fit is not None and len(fit.sharpness) > MAX_LOBES:
@@ -266,6 +272,7 @@ class GLRenderer:
         table = im.table
         na, nb, nc, nd = table.shape[:4]
         tangent, levels = _mip_texture(ctx, look.tangent)
+        flyaway = [_mip_texture(ctx, look.flyaway, v) for v in range(3)] if look.flyaway is not None else None
         coverage, levels_c = _mip_texture(ctx, look.coverage)
         if levels_c != levels:
             raise FormatError(f"yarn {look.name}: tangent and coverage textures have {levels} and {levels_c} levels")
@@ -281,6 +288,7 @@ class GLRenderer:
             "p_a_r": p[0:3], "p_a_tt": p[3:6], "p_a_d": p[6:9], "p_beta_r": float(p[9]), "p_beta_tt": float(p[10]),
             "p_gamma_tt": float(p[11]), "p_alpha_r": float(p[12]), "p_alpha_tt": float(p[13]),
             "period": float(kernel_look.period), "radius": float(kernel_look.radius),
+            "strip_half_width": float(kernel_look.radius),
             "n_occluded": float(kernel_look.n_occluded), "n_cross": float(kernel_look.n_cross),
             "twist_sign": float(look.twist_sign), "yarn_albedo": float(albedo),
             "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
@@ -295,6 +303,10 @@ class GLRenderer:
             "im_table": _texture3d(ctx, table.reshape(na, nb * nc, nd, 3)),
             "tangent_tex": tangent, "coverage_tex": coverage,
         }
+        if flyaway is not None:  # the three variants
+            uniforms.update(flyaway_half_width=float(kernel_look.flyaway_half_width), fly_levels=flyaway[0][1])
+            textures.update({f"fly_tex{v}": tex for v, (tex, _) in enumerate(flyaway)})
+        assert len(textures) <= ATLAS_UNITS[0], "a yarn entry's textures would share units with the atlases"
         return uniforms, textures
 
     # --- per frame --------------------------------------------------------------------------------------------------
@@ -352,35 +364,53 @@ class GLRenderer:
         ctx.viewport = (0, 0, w, h)
         fbo.clear(*background.tolist(), 1.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
-        program = self.regular
         near, far = self._depth_range(camera, lo, hi, radius.max())
-        self._camera_uniforms(program, camera, near, far)
-        _set(program, "image_height", int(h))
-        _set(program, "samples", int(samples))
-        _set(program, "sample_pattern", SAMPLE_PATTERNS[samples])
-        _set(program, "background", background)
-        self._light_uniforms(program, light_maps, lobe_maps)
-        light_atlas.use(location=10)
-        lobe_atlas.use(location=11)
-        self.cluster_weights.use(location=12)
-        _set(program, "light_atlas", 10)
-        _set(program, "lobe_atlas", 11)
-        _set(program, "cluster_weights", 12)
-        for k, vao, count in draws:
-            uniforms, textures = self.looks[k]
-            for name, value in uniforms.items():
-                _set(program, name, value)
-            for unit, (name, tex) in enumerate(textures.items()):
-                tex.use(location=unit)
+        light_atlas.use(location=ATLAS_UNITS[0])
+        lobe_atlas.use(location=ATLAS_UNITS[1])
+        self.cluster_weights.use(location=ATLAS_UNITS[2])
+        fly_entries = [d for d in draws if "fly_tex0" in self.looks[d[0]][1]]
+        for program in (self.regular, self.flyaway) if fly_entries else (self.regular,):
+            self._camera_uniforms(program, camera, near, far)
+            _set(program, "image_height", int(h))
+            _set(program, "samples", int(samples))
+            _set(program, "sample_pattern", SAMPLE_PATTERNS[samples])
+            self._light_uniforms(program, light_maps, lobe_maps)
+            for name, unit in zip(("light_atlas", "lobe_atlas", "cluster_weights"), ATLAS_UNITS):
                 _set(program, name, unit)
+        _set(self.regular, "background", background)
+        for k, vao, count in draws:
+            self._look_uniforms(self.regular, k)
             vao[0].render(ctx.LINES_ADJACENCY, vertices=count)
+        layers = []
+        if fly_entries:  # the flyaway layer over the regular one, against its depth (the module docstring)
+            layers = [ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4") for _ in range(2)]
+            fly_fbo = ctx.framebuffer(color_attachments=layers, depth_attachment=depth)
+            fly_fbo.use()
+            fly_fbo.depth_mask = False  # keep the regular pass's depth while clearing the colours
+            fly_fbo.clear(0.0, 0.0, 0.0, 0.0)
+            fly_fbo.depth_mask = True
+            _set(self.flyaway, "depth_tolerance", float(radius.max()))
+            variants = self._variant_table(lines)
+            variants.use(location=ATLAS_UNITS[3])
+            _set(self.flyaway, "fly_variant", ATLAS_UNITS[3])
+            for k, vao, count in fly_entries:
+                self._look_uniforms(self.flyaway, k)
+                _set(self.flyaway, "strip_half_width", self.looks[k][0]["flyaway_half_width"])
+                vao[3].render(ctx.LINES_ADJACENCY, vertices=count)
+            fly_fbo.release()
+            variants.release()
         lap("shade")
 
-        resolved = ctx.framebuffer(color_attachments=[ctx.renderbuffer((w, h), 4, dtype="f4")])
-        ctx.copy_framebuffer(resolved, fbo)
-        pixels = np.frombuffer(resolved.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
-        image = np.ascontiguousarray(pixels[::-1, :, :3])
-        for obj in (fbo, colour, depth, resolved, light_atlas, lobe_atlas):
+        image = self._resolve(fbo, w, h)
+        if layers:
+            resolved = []
+            for layer in layers:
+                source = ctx.framebuffer(color_attachments=[layer])
+                resolved.append(self._resolve(source, w, h))
+                source.release()
+            fly_radiance, fly_cover = resolved
+            image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
+        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers):
             obj.release()
         for _, arrays, _ in draws:
             for obj in arrays:
@@ -393,7 +423,7 @@ class GLRenderer:
 
     def _upload_segments(self, lines):
         """One vertex array of segments with their neighbours (GL_LINES_ADJACENCY: previous point, the segment's two,
-        next point; an end repeats its own) per yarn entry: [(entry, (vao, vbo, depth vao), vertex count)]."""
+        next point; an end repeats its own) per yarn entry: [(entry, (vao, vbo, depth vao, flyaway vao), vertices)]."""
         tangent = vertex_tangents(lines.points, lines.offsets)
         draws = []
         for k in np.unique(lines.entry):
@@ -413,8 +443,41 @@ class GLRenderer:
                                                         "in_arclength", "in_normal", "in_curve")], skip_errors=True)
             depth_vao = self.ctx.vertex_array(self.depth, [(vbo, "3f 3f 1f 3f 1i", "in_position", "in_tangent",
                                                             "in_arclength", "in_normal", "in_curve")], skip_errors=True)
-            draws.append((int(k), (vao, vbo, depth_vao), len(index)))
+            fly_vao = self.ctx.vertex_array(self.flyaway, [(vbo, "3f 3f 1f 3f 1i", "in_position", "in_tangent",
+                                                            "in_arclength", "in_normal", "in_curve")], skip_errors=True)
+            draws.append((int(k), (vao, vbo, depth_vao, fly_vao), len(index)))
         return draws
+
+    def _look_uniforms(self, program, k):
+        """Yarn entry k's uniforms and textures (``_upload_look``) on ``program``."""
+        uniforms, textures = self.looks[k]
+        for name, value in uniforms.items():
+            _set(program, name, value)
+        for unit, (name, tex) in enumerate(textures.items()):
+            tex.use(location=unit)
+            _set(program, name, unit)
+
+    def _variant_table(self, lines):
+        """The flyaway variant of every (period index, curve) a frame can show (``strip_shading.variant_of``, one
+        definition for both renderers), as an 8-bit integer texture: column p + VARIANT_OFFSET, row = curve; the view
+        phase moves u by less than a period, so indices from −2 cover every point."""
+        from knitrun.render.strip_shading import variant_of
+
+        periods = [float(self.cpu.looks[k].period) for k in lines.entry]
+        lengths = [float(lines.rest[lines.offsets[c + 1] - 1]) for c in range(len(lines.entry))]
+        width = max(int(math.floor(length / period)) for length, period in zip(lengths, periods)) + VARIANT_OFFSET + 3
+        table = np.array([[variant_of(c, p - VARIANT_OFFSET) for p in range(width)] for c in range(len(lines.entry))],
+                         np.uint8)
+        return self.ctx.texture((width, len(lines.entry)), 1, table.tobytes(), dtype="u1")
+
+    def _resolve(self, fbo, w, h):
+        """The MSAA resolve of ``fbo``'s first colour target as an (h, w, 3) float32 image, row 0 at the top."""
+        resolved = self.ctx.framebuffer(color_attachments=[self.ctx.renderbuffer((w, h), 4, dtype="f4")])
+        self.ctx.copy_framebuffer(resolved, fbo)
+        pixels = np.frombuffer(resolved.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
+        resolved.color_attachments[0].release()
+        resolved.release()
+        return np.ascontiguousarray(pixels[::-1, :, :3])
 
     @staticmethod
     def _depth_range(camera, lo, hi, radius_max):
@@ -459,7 +522,7 @@ class GLRenderer:
             ctx.viewport = (gx * size, gy * size, size, size)
             self._camera_uniforms(program, cam, 0.5 * sphere, 3.5 * sphere)
             for k, vao, count in draws:
-                _set(program, "radius", float(self.cpu.looks[k].radius))
+                _set(program, "strip_half_width", float(self.cpu.looks[k].radius))
                 vao[2].render(ctx.LINES_ADJACENCY, vertices=count)
             fwd, right, up = cam.basis()
             d_min = float(np.min((points - cam.position) @ fwd))

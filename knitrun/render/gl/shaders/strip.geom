@@ -35,7 +35,7 @@ uniform float tan_half;       // pinhole tan(fov/2)
 uniform float aspect;         // width / height
 uniform float near_plane;
 uniform float far_plane;
-uniform float radius;         // strip half-width of the yarn entry drawn
+uniform float strip_half_width;  // of the yarn entry drawn: its radius, or its flyaway strip's half-width
 
 const float DEGENERATE_SIN = 1e-6;
 
@@ -61,7 +61,7 @@ bool half_width_dir(vec3 p, vec3 t, out vec3 b) {
 }
 
 void emit(int i, vec3 b, float v) {
-    vec3 p = vin[i].position + radius * v * b;
+    vec3 p = vin[i].position + strip_half_width * v * b;
     gout.position = p;
     gout.tangent = vin[i].tangent;
     gout.arclength = vin[i].arclength;

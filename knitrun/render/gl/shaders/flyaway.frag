@@ -1,0 +1,115 @@
+// Strip renderer, GL backend: the flyaway pass (strip_shading.shade_flyaway), on the wider flyaway strips. The depth
+// buffer is the regular pass's; a fragment writes its depth less the yarn radius, so it passes where no regular
+// strip is nearer than that radius (the CPU's mask) and the nearest flyaway strip of each sample wins. Two targets:
+// A·L_fly and A·(1 − τ) per channel, τ the hair's forward fraction ā_f(θ_o^f); their MSAA resolves are composited
+// over the regular image as C ← Σ w A L + (1 − min(1, Σ w A (1 − τ)))·C (SHADING.md §6).
+
+layout(location = 0) out vec4 out_radiance;
+layout(location = 1) out vec4 out_cover;
+
+uniform float flyaway_half_width;
+uniform float depth_tolerance;      // the largest regular yarn radius (pipeline: the flyaway mask's tolerance)
+uniform sampler2D fly_tex0;         // the three variants: RGB premultiplied tangent, A coverage
+uniform sampler2D fly_tex1;
+uniform sampler2D fly_tex2;
+uniform int fly_levels;
+uniform usampler2D fly_variant;     // variant of (period index − VARIANT_OFFSET, curve): strip_shading.variant_of
+const int VARIANT_OFFSET = 2;
+
+vec4 fly_fetch(int layer, ivec2 texel, int level) {
+    return layer == 0 ? texelFetch(fly_tex0, texel, level)
+         : layer == 1 ? texelFetch(fly_tex1, texel, level) : texelFetch(fly_tex2, texel, level);
+}
+
+vec4 fly_bilinear(int layer, int level, float u, float v) {
+    ivec2 size = textureSize(fly_tex0, level);
+    int cols = size.x, rows = size.y;
+    float x = u * float(cols) - 0.5;
+    x = x - float(cols) * floor(x / float(cols));
+    int j0 = min(int(floor(x)), cols - 1);
+    int j1 = (j0 + 1) % cols;
+    float fx = x - float(j0);
+    float y = clamp((v + 1.0) * 0.5 * float(rows) - 0.5, 0.0, float(rows) - 1.0);
+    int i0 = int(floor(y));
+    int i1 = min(i0 + 1, rows - 1);
+    float fy = y - float(i0);
+    vec4 top = mix(fly_fetch(layer, ivec2(j0, i0), level), fly_fetch(layer, ivec2(j1, i0), level), fx);
+    vec4 bottom = mix(fly_fetch(layer, ivec2(j0, i1), level), fly_fetch(layer, ivec2(j1, i1), level), fx);
+    return mix(top, bottom, fy);
+}
+
+vec4 fly_sample(int layer, float level, float u, float v) {
+    level = clamp(level, 0.0, float(fly_levels) - 1.0);
+    int l0 = int(floor(level));
+    int l1 = min(l0 + 1, fly_levels - 1);
+    float f = level - float(l0);
+    vec4 out_ = (1.0 - f) * fly_bilinear(layer, l0, u, v);
+    if (f > 0.0)
+        out_ += f * fly_bilinear(layer, l1, u, v);
+    return out_;
+}
+
+// strip_shading._body_shadow: Ψ^Fiber_G (mean RGB) of the regular strip at v_strip toward w, 1 off the body
+float body_shadow(bool on_body, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
+    if (!on_body) return 1.0;
+    vec3 xi, psi;
+    corrections(v_strip, t, n, b, 0.0, w, xi, psi);
+    return fiber_lit(psi);
+}
+
+void main() {
+    StripPoint sp = strip_point();
+    gl_FragDepth = clamp((fin.depth - depth_tolerance) / far_plane, 0.0, 1.0);
+    out_radiance = vec4(0.0);
+    out_cover = vec4(0.0);
+    if (!sp.drawn) return;
+    ivec2 size0 = textureSize(fly_tex0, 0);
+    int period_index = int(floor(sp.u));
+    ivec2 vsize = textureSize(fly_variant, 0);
+    int column = clamp(period_index + VARIANT_OFFSET, 0, vsize.x - 1);
+    int layer = int(texelFetch(fly_variant, ivec2(column, fin.curve), 0).r);
+    float level = mip_level(sp.footprint, period / float(size0.x), 2.0 * flyaway_half_width / float(size0.y));
+    vec4 texel = fly_sample(layer, level, sp.u, sp.v);
+    vec3 tf = texel.x * sp.t + texel.y * sp.b + texel.z * sp.n;
+    if (length(tf) < 1e-6) return;
+    tf = normalize(tf);
+    float alpha = clamp(texel.a, 0.0, 1.0);
+    float theta_o_f = clamped_asin(dot(tf, sp.wo));
+    // forward fraction τ = ā_f(θ_o^f) (dual_scattering.forward_fraction)
+    int i0, i1;
+    float fr;
+    axis_cell(theta_o_f, -HALF_PI, HALF_PI, textureSize(ds_table, 0).x, false, i0, i1, fr);
+    vec3 tau = clamp(ds_row(R_A_F, i0, i1, fr), 0.0, 1.0);
+    out_cover = vec4(alpha * (1.0 - tau), 1.0);
+    // the hair's own frame: x along t_f, y toward the camera in its normal plane; a hair seen end-on covers but
+    // scatters nothing toward the camera
+    vec3 ny = sp.wo - dot(sp.wo, tf) * tf;
+    if (!(length(ny) >= DEGENERATE)) return;
+    float spread2 = tangent_spread(texel.rgb, texel.a);
+    float v_strip = sp.v * flyaway_half_width / radius;
+    bool on_body = abs(v_strip) <= 1.0;
+    Params p = yarn_params();
+    vec3 rgb = vec3(0.0);
+    for (int l = 0; l < n_lights; ++l) {
+        vec3 w = light_dir[l];
+        float phi_f = azimuth_difference(tf, sp.wo, w);
+        float theta_i_f = clamped_asin(dot(tf, w));
+        vec3 f = bcsdf_single(spread_params(p, spread2, phi_f), theta_i_f, theta_o_f, phi_f);
+        float lit = pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS)
+                  * body_shadow(on_body, v_strip, sp.t, sp.n, sp.b, w);
+        rgb += light_irradiance[l] * lit * f * cos(theta_i_f);
+    }
+    for (int j = 0; j < n_lobes; ++j) {
+        float vis = lobe_visibility(j, sp.position);
+        if (vis <= 0.0) continue;
+        vec3 w = lobe_dir[j];
+        float phi_f = azimuth_difference(tf, sp.wo, w);
+        Params wide = spread_params(p, spread2, phi_f);
+        float sigma_r = 2.0 * wide.beta_r;
+        float mu_r = lobe_centre_at(wide.alpha_r, sigma_r, theta_o_f);
+        vec3 i_m = im_kernel(wide, mu_r, sigma_r, cos2_normaliser(mu_r, sigma_r), theta_o_f, clamped_asin(dot(tf, w)),
+                             -phi_f, lobe_lambda[j]);
+        rgb += lobe_weight[j] * vis * body_shadow(on_body, v_strip, sp.t, sp.n, sp.b, w) * i_m;
+    }
+    out_radiance = vec4(alpha * rgb, 1.0);
+}

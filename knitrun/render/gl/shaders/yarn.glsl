@@ -1,0 +1,51 @@
+// Strip renderer, GL backend: what the regular and flyaway passes share about the yarn entry drawn (strip_shading's
+// Look) and the lights (SHADING.md §3–§5).
+
+// the yarn entry drawn (strip_shading's Look)
+uniform float p_a_r[3];
+uniform float p_a_tt[3];
+uniform float p_a_d[3];
+uniform float p_beta_r;
+uniform float p_beta_tt;
+uniform float p_gamma_tt;
+uniform float p_alpha_r;
+uniform float p_alpha_tt;
+uniform float radius;
+uniform float n_occluded;
+uniform float n_cross;
+uniform float yarn_albedo;     // ρ_Y of the yarn-level inter-reflection, 0 without it
+uniform float shadow_bias;     // SHADOW_BIAS_RADII · radius
+
+// directional lights
+uniform int n_lights;
+uniform vec3 light_dir[MAX_LIGHTS];
+uniform vec3 light_irradiance[MAX_LIGHTS];
+uniform ShadowMapInfo light_map[MAX_LIGHTS];
+uniform sampler2D light_atlas;
+
+// SRBF lobes and the multiple-scattering clusters (pipeline.ms_clusters: weights (C, J) in a texture)
+uniform int n_lobes;
+uniform vec3 lobe_dir[MAX_LOBES];
+uniform float lobe_lambda[MAX_LOBES];
+uniform vec3 lobe_weight[MAX_LOBES];
+uniform ShadowMapInfo lobe_map[MAX_LOBES];
+uniform sampler2D lobe_atlas;
+uniform int n_clusters;
+uniform vec3 cluster_dir[MAX_LOBES];
+uniform vec3 cluster_irradiance[MAX_LOBES];
+uniform sampler2D cluster_weights;
+
+Params yarn_params() {
+    return Params(vec3(p_a_r[0], p_a_r[1], p_a_r[2]), vec3(p_a_tt[0], p_a_tt[1], p_a_tt[2]),
+                  vec3(p_a_d[0], p_a_d[1], p_a_d[2]), p_beta_r, p_beta_tt, p_gamma_tt, p_alpha_r, p_alpha_tt);
+}
+
+// T̃_j: lobe j's PCSS visibility raised by the yarn-level inter-reflection (interreflection.interreflected_visibility)
+float lobe_visibility(int j, vec3 position) {
+    float vis = pcss(lobe_atlas, lobe_map[j], position, shadow_bias, PCF_RADIUS);
+    if (yarn_albedo > 0.0) {
+        float den = 1.0 - yarn_albedo * (1.0 - vis);
+        vis = den > 0.0 ? vis / den : 1.0;
+    }
+    return vis;
+}
