@@ -80,9 +80,11 @@ void main() {
     vec3 ba, bb;
     if (!half_width_dir(vin[1].position, vin[1].tangent, ba) || !half_width_dir(vin[2].position, vin[2].tangent, bb))
         return;
-    emit(1, ba, -1.0);
+    // the triangles (a+, a−, b+) and (a−, b+, b−): the quad split along a− b+ as strip_raster splits it, so that a
+    // quad that is not a parallelogram (a bend) interpolates its attributes as there
     emit(1, ba, 1.0);
-    emit(2, bb, -1.0);
+    emit(1, ba, -1.0);
     emit(2, bb, 1.0);
+    emit(2, bb, -1.0);
     EndPrimitive();
 }
