@@ -292,13 +292,19 @@ class Renderer:
                 progress("srbf_fit", self.setup_timings["srbf_fit"])
         self.fit = fit
 
+    def frame_index(self, frame: int | None) -> int:
+        """``frame`` as an index into the curves' frames (None: the scene's ``render.frame``); FormatError (one line)
+        when out of range."""
+        frame = self.scene.render.frame if frame is None else int(frame)
+        if not 0 <= frame < self.frame_count:
+            raise FormatError(f"frame {frame} is out of range: the scene's curves have {self.frame_count} frame(s)")
+        return frame
+
     def render(self, frame: int | None = None, progress=None) -> RenderResult:
         """Draw ``frame`` of the yarn curves (default: the scene's ``render.frame``); ``progress(name, seconds)`` is
         called as each pass ends. Timings are this frame's passes (``load``: evaluating its curves)."""
         scene, features, looks, fit = self.scene, self.features, self.looks, self.fit
-        frame = scene.render.frame if frame is None else int(frame)
-        if not 0 <= frame < self.frame_count:
-            raise FormatError(f"frame {frame} is out of range: the scene's curves have {self.frame_count} frame(s)")
+        frame = self.frame_index(frame)
         timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
         clock = [time.perf_counter()]
 

@@ -315,9 +315,7 @@ class GLRenderer:
         """Draw ``frame`` (default: the scene's ``render.frame``) through ``camera`` (default: the scene's; the
         viewer's orbit); timings per pass, as the CPU renderer's."""
         scene, ctx = self.scene, self.ctx
-        frame = scene.render.frame if frame is None else int(frame)
-        if not 0 <= frame < self.frame_count:
-            raise FormatError(f"frame {frame} is out of range: the scene's curves have {self.frame_count} frame(s)")
+        frame = self.cpu.frame_index(frame)
         timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
         clock = [time.perf_counter()]
 
