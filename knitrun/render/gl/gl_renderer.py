@@ -51,6 +51,7 @@ from knitrun.render.ablations import Features
 from knitrun.render.camera import Camera, scene_camera
 from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS
 from knitrun.render.strip_raster import SAMPLE_PATTERNS
+from knitrun.shading import fiber_bcsdf as fb
 
 SHADERS = Path(__file__).with_name("shaders")
 FRAGMENT_COMMON = ("shading.glsl", "shadow.glsl", "point.glsl", "yarn.glsl")  # what the shading passes share
@@ -285,8 +286,10 @@ class GLRenderer:
         p = kernel_look.params
         albedo = (look.yarn_albedo or 0.0) if self.features.interreflection else 0.0
         uniforms = {
-            "p_a_r": p[0:3], "p_a_tt": p[3:6], "p_a_d": p[6:9], "p_beta_r": float(p[9]), "p_beta_tt": float(p[10]),
-            "p_gamma_tt": float(p[11]), "p_alpha_r": float(p[12]), "p_alpha_tt": float(p[13]),
+            "p_a_r": p[fb.P_A_R:fb.P_A_R + 3], "p_a_tt": p[fb.P_A_TT:fb.P_A_TT + 3],
+            "p_a_d": p[fb.P_A_D:fb.P_A_D + 3], "p_beta_r": float(p[fb.P_BETA_R]), "p_beta_tt": float(p[fb.P_BETA_TT]),
+            "p_gamma_tt": float(p[fb.P_GAMMA_TT]), "p_alpha_r": float(p[fb.P_ALPHA_R]),
+            "p_alpha_tt": float(p[fb.P_ALPHA_TT]),
             "period": float(kernel_look.period), "radius": float(kernel_look.radius),
             "strip_half_width": float(kernel_look.radius),
             "n_occluded": float(kernel_look.n_occluded), "n_cross": float(kernel_look.n_cross),
