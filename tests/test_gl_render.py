@@ -56,7 +56,7 @@ def test_a_lit_straight_yarn_is_the_cpu_image(tmp_path, pack, lights):
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()  # per pixel: the same geometry, shaded at the same sample
 
 
-@pytest.mark.parametrize("ablation", ["plain_ds", "xi", "factored", "no_tables"])
+@pytest.mark.parametrize("ablation", ["plain_ds", "xi", "factored", "no_tables", "no_detail"])
 def test_ablations_follow_the_cpu_renderer(tmp_path, pack, ablation):
     gl, cpu = _both(write_scene(tmp_path, [straight()], camera=ORTHO, lights=SUN + "\n" + SKY), pack,
                     ABLATIONS[ablation])

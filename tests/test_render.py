@@ -23,7 +23,7 @@ from knitrun.render.pipeline import radius_mismatch, render
 from knitrun.render.strip_shading import resolve, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
-from knitrun.render.yarn_look import no_full_table, ones_factor
+from knitrun.render.yarn_look import no_detail, no_full_table, ones_factor
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
 from knitrun.shading.equirect import texel_directions
@@ -143,7 +143,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
         points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
         look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0)
-        shade_regular(np.arange(n), points, look, off, flat, full, no_lights(n),
+        shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
                       Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n), i_m, rgb, alpha)
         theta_o = np.arcsin(np.sum(view * tangent, axis=1))
         direct = np.zeros((n, 3))
@@ -419,3 +419,39 @@ def test_multiple_scattering_clusters_weigh_their_lobes():
     assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0) and np.all(irr > 0)
     vis = rng.uniform(0, 1, (9, 5))
     assert np.allclose(pipeline.ms_lights(d, lam, w, [vis])[2][0], weights @ vis)
+
+
+def test_fiber_detail_keeps_each_rows_brightness():
+    """``fiber_detail_chain``: over the covered texels of a row the detail averages to 1 (coverage-weighted), it is 1
+    where nothing is covered, and it stays within [0, DETAIL_MAX]."""
+    from knitrun.render.yarn_look import DETAIL_MAX, fiber_detail_chain
+
+    rng = np.random.default_rng(5)
+    ao = [rng.uniform(0.05, 1.0, (8, 32)), rng.uniform(0.05, 1.0, (4, 16))]
+    cov = [np.where(rng.uniform(size=(8, 32)) < 0.3, 0.0, rng.uniform(0.2, 1.0, (8, 32))), np.zeros((4, 16))]
+    detail = fiber_detail_chain(ao, cov)
+    assert [d.shape for d in detail] == [(8, 32), (4, 16)] and all(d.dtype == np.float32 for d in detail)
+    rows = (detail[0] * cov[0]).sum(axis=1) / cov[0].sum(axis=1)
+    assert np.allclose(rows, 1.0, atol=1e-6)
+    assert np.all(detail[0][cov[0] == 0] == 1.0) and np.all(detail[1] == 1.0)
+    spiky = fiber_detail_chain([np.array([[1.0, 1e-4, 1e-4, 1e-4, 1e-4, 1e-4]])], [np.ones((1, 6))])[0]
+    assert spiky.max() == DETAIL_MAX and spiky.min() >= 0.0
+
+
+def test_a_uniform_ao_texture_leaves_the_image_as_without_detail(tmp_path, pack):
+    """Detail is the AO texture's variation only: a pack whose AO is one value renders exactly as without detail."""
+    import shutil
+
+    import h5py
+
+    flat_pack = tmp_path / "flat_ao.h5"
+    shutil.copy(pack, flat_pack)
+    with h5py.File(flat_pack, "r+") as f:
+        for name in f["textures/ao"]:
+            f[f"textures/ao/{name}"][...] = 0.7
+    path = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.03, 0]], camera=FRONT, lights=SUN)
+    with_detail = _render(path, flat_pack).image
+    without = _render(path, flat_pack, features=Features(fiber_detail=False)).image
+    assert np.array_equal(with_detail, without)
+    textured = _render(path, pack).image  # the tiny pack's own AO does move the image
+    assert np.abs(textured - _render(path, pack, features=Features(fiber_detail=False)).image).max() > 1e-3

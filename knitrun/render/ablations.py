@@ -13,9 +13,15 @@ the body's light on"), it lowers the yarn-scale error on five of the seven examp
 straight yarn under the sky and back-lit, where the regular fibers alone are already 13–16 % brighter than the
 reference traced without flyaways and the hairs' light comes on top. ``flyaways`` draws it anyway.
 
+``fiber_detail`` multiplies the regular fibers' radiance by the fiber-level detail of the pack's AO texture
+(``yarn_look.fiber_detail_chain``: each texel's ambient visibility over its row's mean), the crevices between plies
+and fibers that Ψ^Fiber_G(v), a function of v alone, smooths away; it belongs with the fiber-level shadowing, so the
+rungs without Ψ^Fiber go without it too. Measured in BENCHMARKS.md, "Issue 13: fiber-level detail".
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
-plain DS, + ξ, + Ψ^Fiber, + yarn-level inter-reflection (= the full model, the default), + flyaways; then the full
-model without the tables and with the factored tables. ``ABLATION_LABELS`` gives each a label.
+plain DS, + ξ, + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection (= the full model, the
+default), + flyaways; then the full model without the tables, with the factored tables, and without the detail.
+``ABLATION_LABELS`` gives each a label.
 """
 
 from __future__ import annotations
@@ -32,18 +38,21 @@ class Features:
     flyaways: bool = False  # off by default: see the module docstring
     interreflection: bool = True
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
+    fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
 
 
 ABLATIONS = {
-    "plain_ds": Features(xi=False, fiber_shadowing=False, interreflection=False),
-    "xi": Features(fiber_shadowing=False, interreflection=False),
+    "plain_ds": Features(xi=False, fiber_shadowing=False, interreflection=False, fiber_detail=False),
+    "xi": Features(fiber_shadowing=False, interreflection=False, fiber_detail=False),
     "xi_shadowing": Features(interreflection=False),
     "full": Features(),
     "flyaways": Features(flyaways=True),
-    "no_tables": Features(xi=False, fiber_shadowing=False),  # the full model without ξ and Ψ^Fiber
+    "no_tables": Features(xi=False, fiber_shadowing=False, fiber_detail=False),  # the full model without ξ and Ψ^Fiber
     "factored": Features(full_tables=False),
+    "no_detail": Features(fiber_detail=False),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
                    "full": "+ inter-reflection (full)", "flyaways": "full + flyaways",
-                   "no_tables": "full without ξ, Ψ^Fiber", "factored": "full, rank-1 factored ξ, Ψ"}
+                   "no_tables": "full without ξ, Ψ^Fiber", "factored": "full, rank-1 factored ξ, Ψ",
+                   "no_detail": "full without the fiber-level detail"}

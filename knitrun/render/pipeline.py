@@ -255,7 +255,7 @@ class Renderer:
         environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
         looks = [load_look(_pack_path(k, e, packs), e, scene.units,
                            corrections=features.xi or features.fiber_shadowing, full_tables=features.full_tables,
-                           flyaways=features.flyaways, environment=environment)
+                           flyaways=features.flyaways, environment=environment, detail=features.fiber_detail)
                  for k, e in enumerate(scene.yarns)]
         for look in looks:
             if not features.xi:
@@ -380,7 +380,7 @@ class Renderer:
         for k, look in enumerate(looks):
             idx = np.flatnonzero(points["yarn"] == k)
             kernel_look, corrections, _ = self.kernel_looks[k]
-            shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage,
+            shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
                           Lights(light_dir, light_e, light_vis[0]),
                           Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]), Lights(ms_dir, ms_e, ms_vis[0]),
                           self.im_tables[k], rgb, alpha)

@@ -312,7 +312,7 @@ def _begin_point(q, points, period, t, wo, n, b, rgb, alpha):
 # --- regular fibers --------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
-def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lobes, ms, im, rgb, alpha):
+def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, rgb, alpha):
     """Shade the points ``idx`` (indices into ``points``) of one yarn; writes rgb[idx], alpha[idx]. ``points``,
     ``look``, ``corrections`` (ξ, Ψ^Fiber), the textures ``tangent`` and ``coverage``, ``lights`` (directional),
     ``lobes`` (SRBF), ``ms`` (the environment's multiple-scattering lights, module docstring) and ``im``: the named
@@ -326,7 +326,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
         vec = np.empty((_N_VEC, 3))
         t, wo, n, b, tf, tex = vec[_T], vec[_WO], vec[_N], vec[_B], vec[_TF], vec[_TEX]
         xi, psi, scratch, i_m, w = vec[_XI], vec[_PSI], vec[_SCRATCH], vec[_IM], vec[_W]
-        cov = np.empty(1)
+        cov, fiber_detail = np.empty(1), np.empty(1)
         comp, ds_work = ds_scratch()
         wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
         for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
@@ -338,6 +338,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
             sample_mip(coverage, 0, level, u, v, cov)
             sample_mip(tangent, 0, level, u, v, tex)
             alpha[q] = min(max(cov[0], 0.0), 1.0)
+            sample_mip(detail, 0, level, u, v, fiber_detail)
             _texture_tangent(tex, t, n, b, tf)
             spread2 = tangent_spread(tex, cov[0])
             theta_o = longitudinal_angle(t, wo)
@@ -384,6 +385,8 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, lights, lob
                 for ch in range(3):
                     multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
                     rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
+            for ch in range(3):
+                rgb[q, ch] *= fiber_detail[0]
 
 
 @njit(cache=True, inline='always')

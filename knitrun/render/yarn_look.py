@@ -38,6 +38,8 @@ FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs 
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 
 
+DETAIL_MAX = 4.0  # cap on the fiber-level detail D (a texel far brighter than its row: a lone lit fiber)
+
 @dataclass
 class YarnLook:
     """Runtime data of one yarn entry; lengths in scene units, tables float64 (textures float32)."""
@@ -53,6 +55,7 @@ class YarnLook:
     psi_gn: np.ndarray
     tangent: MipStack
     coverage: MipStack
+    detail: MipStack  # fiber-level detail (``fiber_detail_chain``), or one texel of 1 when not drawn
     flyaway: MipStack | None
     radius: float  # drawn yarn radius = regular strip half-width
     period: float  # texture period along the rest arc length
@@ -63,6 +66,11 @@ class YarnLook:
     yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
     im: IMTable | None  # the I_M^{TT,D} table for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
+
+
+def no_detail() -> MipStack:
+    """One texel of 1: the fiber-level detail switched off."""
+    return mip_stack([[np.ones((1, 1), np.float32)]])
 
 
 def ones_factor():
@@ -86,12 +94,28 @@ def _tinted_ds(tables, colour):
                         "dual_scattering/sigma_b": sigma_b})
 
 
+def fiber_detail_chain(ao_levels, coverage_levels) -> list:
+    """The fiber-level detail of each mip level: the texel's ambient visibility over the coverage-weighted mean of its
+    row, D = ao / ā(v) (1 where nothing is covered, at most ``DETAIL_MAX``). Along u it averages to 1 over the covered
+    texels of a row, so it adds the fibers' contrast (the crevices between plies and fibers the AO texture holds,
+    ASSET_PACK.md §8) without moving a row's brightness, which Ψ^Fiber_G(v) carries."""
+    out = []
+    for ao, cov in zip(ao_levels, coverage_levels):
+        ao, cov = np.asarray(ao, np.float64), np.asarray(cov, np.float64)
+        weight = cov.sum(axis=1, keepdims=True)
+        mean = np.where(weight > 0, (ao * cov).sum(axis=1, keepdims=True) / np.where(weight > 0, weight, 1.0), 1.0)
+        detail = np.where((cov > 0) & (mean > 0), ao / np.where(mean > 0, mean, 1.0), 1.0)
+        out.append(np.clip(detail, 0.0, DETAIL_MAX).astype(np.float32))
+    return out
+
+
 def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
-              environment=False) -> YarnLook:
+              environment=False, detail=True) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
-    ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors."""
+    ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors; ``detail``: the
+    fiber-level detail from the pack's AO texture (``fiber_detail_chain``)."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
@@ -102,6 +126,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
     if flyaways:
         names.append("textures/flyaway")
+    if detail:
+        names.append("textures/ao")
     if environment:
         names.append("environment/I_M_TT_D")
     stored = header.info
@@ -137,6 +163,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         psi_gm=tables.get("shadowing/psi_GM", ones_factor()), psi_gn=tables.get("shadowing/psi_GN", ones_factor()),
         tangent=mip_stack([pack.mip_chain("textures/tangent")]),
         coverage=mip_stack([pack.mip_chain("textures/coverage")]),
+        detail=mip_stack([fiber_detail_chain(pack.mip_chain("textures/ao"), pack.mip_chain("textures/coverage"))])
+        if detail else no_detail(),
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,

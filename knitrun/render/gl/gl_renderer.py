@@ -8,7 +8,7 @@ What runs where
   tables), the yarn curves and the environment's SRBF fit; the multiple-scattering clusters are formed once
   (``pipeline.ms_clusters``). Here every pack table becomes a GL texture: the DS tables (``ds_table``), ξ and Ψ^Fiber
   (3-D textures for the full tables, 2-D for the factors), the I_M^{TT,D} table (a 3-D texture, its second and third
-  axes merged into one), the tangent and coverage mip chains (each pack level uploaded as that GL mip level).
+  axes merged into one), the tangent, coverage and fiber-detail mip chains (each level uploaded as that GL mip level).
 * Per frame (``render``): the curves' polylines (``pipeline._polylines``) and their vertex tangents are uploaded as
   segments with their neighbours (GL_LINES_ADJACENCY); a geometry shader builds the camera-facing strips
   (``shaders/strip.geom``, the quads of ``strip_raster``). Pass 1, per directional light and per SRBF lobe: the
@@ -275,6 +275,7 @@ class GLRenderer:
         tangent, levels = _mip_texture(ctx, look.tangent)
         flyaway = [_mip_texture(ctx, look.flyaway, v) for v in range(3)] if look.flyaway is not None else None
         coverage, levels_c = _mip_texture(ctx, look.coverage)
+        detail, detail_levels = _mip_texture(ctx, look.detail)
         if levels_c != levels:
             raise FormatError(f"yarn {look.name}: tangent and coverage textures have {levels} and {levels_c} levels")
 
@@ -295,6 +296,7 @@ class GLRenderer:
             "n_occluded": float(kernel_look.n_occluded), "n_cross": float(kernel_look.n_cross),
             "twist_sign": float(look.twist_sign), "yarn_albedo": float(albedo),
             "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
+            "detail_levels": int(detail_levels),
             "use_xi_full": use_xi, "use_psi_full": use_psi,
             "im_lo": im.lo, "im_hi": im.hi, "im_repeat": [int(r) for r in im.repeat],
             "im_size": [na, nb, nc, nd], "im_code": [int(c) for c in im.codes],
@@ -304,7 +306,7 @@ class GLRenderer:
             "xi_full": xi_full, "xi_m": _texture2d(ctx, corr.xi_m), "xi_n": _texture2d(ctx, corr.xi_n),
             "psi_full": psi_full, "psi_gm": _texture2d(ctx, corr.psi_gm), "psi_gn": _texture2d(ctx, corr.psi_gn),
             "im_table": _texture3d(ctx, table.reshape(na, nb * nc, nd, 3)),
-            "tangent_tex": tangent, "coverage_tex": coverage,
+            "tangent_tex": tangent, "coverage_tex": coverage, "detail_tex": detail,
         }
         if flyaway is not None:  # the three variants
             uniforms.update(flyaway_half_width=float(kernel_look.flyaway_half_width), fly_levels=flyaway[0][1])

@@ -9,6 +9,8 @@ uniform vec3 background;
 uniform sampler2D tangent_tex;   // coverage-premultiplied strip-frame tangent (t, b, n), mip chain of the pack
 uniform sampler2D coverage_tex;
 uniform int texture_levels;
+uniform sampler2D detail_tex;    // fiber-level detail (yarn_look.fiber_detail_chain), or one texel of 1
+uniform int detail_levels;
 
 void main() {
     StripPoint sp = strip_point();
@@ -67,5 +69,6 @@ void main() {
                   lit, false, total, back_direct, f_scatter);
         rgb += cluster_irradiance[c] * xi * (lit * D_B * back_direct + f_scatter) * cos(theta_c_f);
     }
+    rgb *= sample_mip(detail_tex, detail_levels, level, u, v).r;
     out_colour = vec4(alpha * rgb + (1.0 - alpha) * background, 1.0);
 }
