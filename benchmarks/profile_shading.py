@@ -69,19 +69,19 @@ def main():
     args = parser.parse_args()
     for light in [args.light] if args.light else sorted(bench_render.LIGHTS):
         call = captured_call(args.pack, light)
-        idx, points, look, corrections, tangent, coverage, lights, lobes, ms, im, rgb, alpha = call
+        idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, rgb, alpha = call
         n = len(points.view_dir)
         off = Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
         no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)))
         print(f"## {light}: shade_regular on {len(idx)} shading points ({len(lights.direction)} directional, "
               f"{len(lobes.direction)} SRBF lobes, {len(ms.direction)} multiple-scattering clusters)")
-        base = call[:6]
-        rows = [("all lights", call), ("no light (frames, textures)", base + [off, no_lobes, off] + call[9:])]
+        base = call[:7]
+        rows = [("all lights", call), ("no light (frames, textures)", base + [off, no_lobes, off] + call[10:])]
         if len(lights.direction):
-            rows.append(("directional only", base + [lights, no_lobes, off] + call[9:]))
+            rows.append(("directional only", base + [lights, no_lobes, off] + call[10:]))
         if len(lobes.direction):
-            rows.append(("SRBF lobes only (I_M)", base + [off, lobes, off] + call[9:]))
-            rows.append(("multiple-scattering clusters only", base + [off, no_lobes, ms] + call[9:]))
+            rows.append(("SRBF lobes only (I_M)", base + [off, lobes, off] + call[10:]))
+            rows.append(("multiple-scattering clusters only", base + [off, no_lobes, ms] + call[10:]))
         for label, variant in rows:
             print(f"  {label}: {best_ms(variant):.0f} ms", flush=True)
     rng = np.random.default_rng(0)
