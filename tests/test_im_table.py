@@ -57,10 +57,21 @@ def rough_table():
 
 # --- the direct quadrature --------------------------------------------------------------------------------------
 
-def test_i0e_matches_scipy():
-    x = np.concatenate([np.linspace(0, 40, 401), np.geomspace(40, 1e6, 100)])
+def test_i0e_matches_scipy_and_the_power_series():
+    """The Chebyshev form against scipy (whose values it was interpolated from, at other points) and against the
+    power series e^{−x} Σ (x²/4)^k/(k!)², summed in Python, which shares nothing with it."""
+    x = np.concatenate([np.linspace(0, 40, 401), np.geomspace(40, 1e6, 100),
+                        np.random.default_rng(2).uniform(0, 30, 300)])
     ours = np.array([i0e(v) for v in x])
     assert np.max(np.abs(ours / special.i0e(x) - 1)) < 1e-13
+    for v in x[x <= 20]:
+        term = total = 1.0
+        k = 0
+        while term > 1e-18 * total:
+            k += 1
+            term *= 0.25 * v * v / (k * k)
+            total += term
+        assert i0e(v) == pytest.approx(total * math.exp(-v), rel=1e-13)
 
 
 @pytest.mark.parametrize("args", [(0.3, -0.2, 2.5, 0.5), (-1.2, 1.0, 3.0, 20.0), (1.5, 0.1, -2.0, 1.0),
@@ -105,7 +116,9 @@ def test_diffuse_lobe_along_the_fiber_axis_closed_form(lam):
     """D only, ω_j = t (θ_j = π/2): I_M = (2 A_D/π) ∫ exp(λ(sin θ − 1)) cos²θ dθ, for every view."""
     p = fb.params_from_values([0.0] * 3, [0.0] * 3, [0.2, 0.4, 0.6], 5 * DEG, 5 * DEG, 5 * DEG)
     edge = math.pi / 2 - min(1.0, 12 / math.sqrt(lam))
-    integrand = lambda t: math.exp(lam * (math.sin(t) - 1)) * math.cos(t) ** 2
+    def integrand(t):
+        return math.exp(lam * (math.sin(t) - 1)) * math.cos(t) ** 2
+
     expected = 2 / math.pi * sum(integrate.quad(integrand, a, b, epsabs=0, epsrel=1e-12, limit=200)[0]
                                  for a, b in [(-math.pi / 2, edge), (edge, math.pi / 2)])
     for theta_o in (-1.0, 0.3, math.pi / 2):
@@ -180,8 +193,8 @@ def test_r_lobe_rule_matches_direct_quadrature(beta_r_deg):
     assert np.all(ref[skipped] <= R_NEGLIGIBLE * p[fb.P_A_R:fb.P_A_R + 3])
     assert beta_r_deg > 20 or skipped.sum() > 100
     ends = np.array([-np.pi / 2, np.pi / 2])
-    t_o, t_j, l = np.meshgrid(ends, ends, [0.5, 1e4], indexing="ij")
-    edge = im_lookup(np.zeros((2, 2, 2, 2, 3)), axes, p, t_o, t_j, 0.0, l)
+    t_o, t_j, lams = np.meshgrid(ends, ends, [0.5, 1e4], indexing="ij")
+    edge = im_lookup(np.zeros((2, 2, 2, 2, 3)), axes, p, t_o, t_j, 0.0, lams)
     assert np.all(np.isfinite(edge)) and np.all(edge >= 0)
 
 
