@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numba import njit, prange
 
 from data_formats.conventions import LUMINANCE
 from data_formats.curve_eval import yarn_frame
@@ -134,23 +135,42 @@ def _polylines(scene: Scene, entry_curves: list, frame: int, samples_per_segment
 
 def view_phase_arclength(points, lines, looks):
     """Rest arc length shifted so the texture shows the yarn as seen from the view's azimuth (module docstring)."""
-    seg = points["segment"].astype(np.int64)
-    s = points["arclength"].astype(np.float64)
-    if len(seg) == 0:
-        return s
-    s_a, s_b = lines.rest[seg], lines.rest[seg + 1]
-    ds = s_b - s_a
-    f = np.clip(np.where(ds > 0, (s - s_a) / np.where(ds > 0, ds, 1.0), 0.0), 0.0, 1.0)[:, None]
-    t = points["tangent"]
-    n = (1.0 - f) * lines.normal[seg] + f * lines.normal[seg + 1]
-    n -= np.sum(n * t, axis=1, keepdims=True) * t
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    n = np.where(norm > 1e-9, n / np.maximum(norm, 1e-300), lines.normal[seg])
-    wo = points["view_dir"]
-    gamma = np.arctan2(np.sum(wo * np.cross(t, n), axis=1), np.sum(wo * n, axis=1))
-    sign = np.array([look.twist_sign for look in looks])[points["yarn"]]
-    period = np.array([look.period for look in looks])[points["yarn"]]
-    return s - sign * gamma / (2.0 * np.pi) * period
+    s = np.ascontiguousarray(points["arclength"], np.float64)
+    out = np.empty_like(s)
+    if len(s) == 0:
+        return out
+    sign = np.array([look.twist_sign for look in looks], np.float64)
+    period = np.array([look.period for look in looks], np.float64)
+    _view_phase(np.ascontiguousarray(points["segment"], np.int64), s, np.ascontiguousarray(points["yarn"], np.int64),
+                np.ascontiguousarray(points["tangent"], np.float64), np.ascontiguousarray(points["view_dir"]),
+                lines.rest, np.ascontiguousarray(lines.normal, np.float64), sign, period, out)
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _view_phase(segment, s, yarn, tangent, view_dir, rest, normal, sign, period, out):
+    """``view_phase_arclength`` per point: the curve frame's N at the point (interpolated along its segment by arc
+    length, made normal to the tangent t; the segment's N where that vanishes), γ = atan2(ω_o·(t × N), ω_o·N),
+    s − sign·γ/(2π)·period."""
+    for k in prange(s.shape[0]):
+        i = segment[k]
+        ds = rest[i + 1] - rest[i]
+        f = min(max((s[k] - rest[i]) / ds, 0.0), 1.0) if ds > 0.0 else 0.0
+        t0, t1, t2 = tangent[k, 0], tangent[k, 1], tangent[k, 2]
+        n0 = (1.0 - f) * normal[i, 0] + f * normal[i + 1, 0]
+        n1 = (1.0 - f) * normal[i, 1] + f * normal[i + 1, 1]
+        n2 = (1.0 - f) * normal[i, 2] + f * normal[i + 1, 2]
+        c = n0 * t0 + n1 * t1 + n2 * t2
+        n0, n1, n2 = n0 - c * t0, n1 - c * t1, n2 - c * t2
+        norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if norm > 1e-9:
+            n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
+        else:
+            n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        w0, w1, w2 = view_dir[k, 0], view_dir[k, 1], view_dir[k, 2]
+        b0, b1, b2 = t1 * n2 - t2 * n1, t2 * n0 - t0 * n2, t0 * n1 - t1 * n0
+        gamma = math.atan2(w0 * b0 + w1 * b1 + w2 * b2, w0 * n0 + w1 * n1 + w2 * n2)
+        out[k] = s[k] - sign[yarn[k]] * gamma / (2.0 * math.pi) * period[yarn[k]]
 
 
 def ms_clusters(lobe_dir, lobe_lambda, lobe_w, merge_deg: float = MS_MERGE_DEG):
