@@ -3,7 +3,7 @@
 1. The `shade_regular` call of the bench_render frame (1280×960, 60,540 control points, MSAA 4) is captured from
    the pipeline and timed alone (best of 3 after a warm-up), with all lights, with none (frames and texture
    lookups), and with one kind of light at a time (directional; SRBF lobes' I_M terms; multiple-scattering
-   clusters).
+   clusters). A kind of light the scene lacks is None, as the pipeline passes it.
 2. Per-call costs on 1M random inputs, 2 threads: one DS evaluation (``dual_scattering._ds_batch``, D inside
    (0, 1), D = 0, D = 1) and one I_M evaluation (view context + table + R rule, ``im_lookup._im_batch``) at the
    sky's sun-sized λ and at wide ones.
@@ -28,7 +28,7 @@ from knitrun.render import pipeline  # noqa: E402
 from knitrun.render.shading_inputs import Lights, Lobes  # noqa: E402
 from knitrun.render.strip_shading import shade_regular  # noqa: E402
 from knitrun.shading.dual_scattering import D_B, D_F, _ds_batch  # noqa: E402
-from knitrun.shading.im_lookup import _im_batch  # noqa: E402
+from knitrun.shading.im_lookup import _im_batch, no_im_table  # noqa: E402
 from knitrun.sim.crane_stockinette import stockinette_curves  # noqa: E402
 
 
@@ -62,6 +62,11 @@ def best_ms(args, repeats=3):
     return 1e3 * min(times)
 
 
+def _count(lights):
+    """Lights (or lobes) in a kernel argument that may be None."""
+    return 0 if lights is None else len(lights.direction)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pack", required=True)
@@ -73,15 +78,15 @@ def main():
         n = len(points.view_dir)
         off = Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
         no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)))
-        print(f"## {light}: shade_regular on {len(idx)} shading points ({len(lights.direction)} directional, "
-              f"{len(lobes.direction)} SRBF lobes, {len(ms.direction)} multiple-scattering clusters)")
+        print(f"## {light}: shade_regular on {len(idx)} shading points ({_count(lights)} directional, "
+              f"{_count(lobes)} SRBF lobes, {_count(ms)} multiple-scattering clusters)")
         base = call[:7]
-        rows = [("all lights", call), ("no light (frames, textures)", base + [off, no_lobes, off] + call[10:])]
-        if len(lights.direction):
-            rows.append(("directional only", base + [lights, no_lobes, off] + call[10:]))
-        if len(lobes.direction):
-            rows.append(("SRBF lobes only (I_M)", base + [off, lobes, off] + call[10:]))
-            rows.append(("multiple-scattering clusters only", base + [off, no_lobes, ms] + call[10:]))
+        rows = [("all lights", call), ("no light (frames, textures)", base + [None, None, None, None] + call[11:])]
+        if lights is not None and lobes is not None:
+            rows.append(("directional only", base + [lights, None, None, None] + call[11:]))
+        if lobes is not None:
+            rows.append(("SRBF lobes only (I_M)", base + [None, lobes, off, im] + call[11:]))
+            rows.append(("multiple-scattering clusters only", base + [None, no_lobes, ms, im] + call[11:]))
         for label, variant in rows:
             print(f"  {label}: {best_ms(variant):.0f} ms", flush=True)
     rng = np.random.default_rng(0)
@@ -94,6 +99,7 @@ def main():
         start = time.perf_counter()
         _ds_batch(look.params, look.ds, theta_i, theta_o, phi, n_front, direct, D_F, D_B)
         print(f"  DS evaluation, {label}: {(time.perf_counter() - start) / m * 1e9:.0f} ns")
+    im = im if im is not None else no_im_table()
     for lam in (6600.0, 10.0, 0.7):
         lams = np.full(m, lam)
         _im_batch(im, look.params, theta_o, theta_i, phi, lams)

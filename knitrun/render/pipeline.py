@@ -400,10 +400,11 @@ class Renderer:
         for k, look in enumerate(looks):
             idx = np.flatnonzero(points["yarn"] == k)
             kernel_look, corrections, _ = self.kernel_looks[k]
+            environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]), Lights(ms_dir, ms_e, ms_vis[0]),
+                           self.im_tables[k]) if len(lobe_dir) else (None, None, None)
             shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
-                          Lights(light_dir, light_e, light_vis[0]),
-                          Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]), Lights(ms_dir, ms_e, ms_vis[0]),
-                          self.im_tables[k], rgb, alpha)
+                          Lights(light_dir, light_e, light_vis[0]) if len(light_dir) else None, *environment, rgb,
+                          alpha)
         if fly_points is not None:
             n_fly = len(fly_points["weight"])
             fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))

@@ -314,9 +314,12 @@ def _begin_point(q, points, period, t, wo, n, b, rgb, alpha):
 @njit(parallel=True, cache=True)
 def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, rgb, alpha):
     """Shade the points ``idx`` (indices into ``points``) of one yarn; writes rgb[idx], alpha[idx]. ``points``,
-    ``look``, ``corrections`` (ξ, Ψ^Fiber), the textures ``tangent`` and ``coverage``, ``lights`` (directional),
-    ``lobes`` (SRBF), ``ms`` (the environment's multiple-scattering lights, module docstring) and ``im``: the named
-    tuples of ``knitrun.render.shading_inputs``."""
+    ``look``, ``corrections`` (ξ, Ψ^Fiber), the textures ``tangent``, ``coverage`` and ``detail``, ``lights``
+    (directional), ``lobes`` (SRBF), ``ms`` (the environment's multiple-scattering lights, module docstring) and
+    ``im``: the named tuples of ``knitrun.render.shading_inputs``. ``lights`` is None for a scene without
+    directional lights, and ``lobes``, ``ms``, ``im`` are None without an environment: Numba prunes the branch of a
+    None argument before it compiles, so a scene never compiles the terms of a kind of light it lacks (the I_M and
+    multiple-scattering terms are ~40 % of this kernel's compile time)."""
     params, ds, period = look.params, look.ds, look.period
     n_occluded, n_cross = look.n_occluded, look.n_cross
     texel_u = period / tangent.cols[0, 0]
@@ -345,46 +348,48 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
             theta_o_f = longitudinal_angle(tf, wo)
             xi[:] = 1.0
             psi[:] = 1.0
-            for light in range(lights.direction.shape[0]):
-                _copy_row(lights.direction, light, w)
-                _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
-                fiber_lit = _fiber_lit(psi)
-                vis = lights.visibility[light, q]
-                n_front = n_occluded + (1.0 - vis) * n_cross
-                phi_f = azimuth_difference(tf, wo, w)
-                spread_params(params, spread2, phi_f, wide)
-                ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, D_F, D_B, vis * fiber_lit,
-                          comp, ds_work)
-                for ch in range(3):
-                    rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
-            for j in range(lobes.direction.shape[0]):
-                vis = lobes.visibility[j, q]
-                if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
-                    continue
-                _copy_row(lobes.direction, j, w)
-                _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
-                theta_j_f = longitudinal_angle(tf, w)
-                phi_f = azimuth_difference(tf, wo, w)
-                spread_params(params, spread2, phi_f, wide)
-                # the R lobe of the fiber-frame view, for I_M's R rule
-                r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
-                im_kernel(im, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
-                for ch in range(3):
-                    rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
-            for c in range(ms.direction.shape[0]):  # multiple scattering: clusters of lobes as distant lights
-                _copy_row(ms.direction, c, w)
-                _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
-                vis = ms.visibility[c, q]
-                lit = vis * _fiber_lit(psi)
-                theta_c_f = longitudinal_angle(tf, w)
-                phi_f = azimuth_difference(tf, wo, w)
-                spread_params(params, spread2, phi_f, wide)
-                ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit,
-                          comp, ds_work, False)  # f itself is in the lobes' I_M
-                cos_c = math.cos(theta_c_f)
-                for ch in range(3):
-                    multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
-                    rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
+            if lights is not None:
+                for light in range(lights.direction.shape[0]):
+                    _copy_row(lights.direction, light, w)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                    fiber_lit = _fiber_lit(psi)
+                    vis = lights.visibility[light, q]
+                    n_front = n_occluded + (1.0 - vis) * n_cross
+                    phi_f = azimuth_difference(tf, wo, w)
+                    spread_params(params, spread2, phi_f, wide)
+                    ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, D_F, D_B, vis * fiber_lit,
+                              comp, ds_work)
+                    for ch in range(3):
+                        rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
+            if lobes is not None:
+                for j in range(lobes.direction.shape[0]):
+                    vis = lobes.visibility[j, q]
+                    if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
+                        continue
+                    _copy_row(lobes.direction, j, w)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                    theta_j_f = longitudinal_angle(tf, w)
+                    phi_f = azimuth_difference(tf, wo, w)
+                    spread_params(params, spread2, phi_f, wide)
+                    # the R lobe of the fiber-frame view, for I_M's R rule
+                    r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
+                    im_kernel(im, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
+                    for ch in range(3):
+                        rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
+                for c in range(ms.direction.shape[0]):  # multiple scattering: clusters of lobes as distant lights
+                    _copy_row(ms.direction, c, w)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                    vis = ms.visibility[c, q]
+                    lit = vis * _fiber_lit(psi)
+                    theta_c_f = longitudinal_angle(tf, w)
+                    phi_f = azimuth_difference(tf, wo, w)
+                    spread_params(params, spread2, phi_f, wide)
+                    ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit,
+                              comp, ds_work, False)  # f itself is in the lobes' I_M
+                    cos_c = math.cos(theta_c_f)
+                    for ch in range(3):
+                        multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
+                        rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
             for ch in range(3):
                 rgb[q, ch] *= fiber_detail[0]
 
