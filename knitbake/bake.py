@@ -10,7 +10,7 @@ Stages (each a function ``(spec, settings, seed, progress) -> StageResult``; ``p
 | textures | ``textures/{normal,tangent,ao,coverage}/mip*`` | always |
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
-| interreflection | ``interreflection/albedo`` (the yarn's hull albedo ρ_Y) | always |
+| interreflection | ``interreflection/albedo``, ``interreflection/transmittance`` (the yarn tube's ρ_Y, T_Y) | always |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
 stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
@@ -43,7 +43,7 @@ from knitbake.stages.ds_precompute import bake_dual_scattering_stage
 from knitbake.stages.im_table import bake_environment_stage
 from knitbake.stages.stage_result import StageResult
 from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage, flyaway_periods
-from knitbake.stages.yarn_albedo import bake_yarn_albedo_stage
+from knitbake.stages.yarn_hull import bake_yarn_hull_stage
 from knitrun.render.camera import pixel_size, scene_camera
 
 STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment", "interreflection")
@@ -85,9 +85,10 @@ QUALITY = {
 # correction 4: ξ divides by the DS the renderer evaluates (n_occluded for shadowed hits);
 # environment 2: the table holds the TT and D lobes (schema 2.0), finer grids, measured lookup error; 3: scalar
 # quadrature error; correction 5, shadowing 3, interreflection 2, textures 2, flyaway 2: the fibers traced as Embree
-# curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn
+# curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn;
+# interreflection 4: the yarn's transmittance T_Y as well
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 6, "shadowing": 3, "environment": 3,
-                 "interreflection": 3, "textures": 2, "flyaway": 2}
+                 "interreflection": 4, "textures": 2, "flyaway": 2}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64
@@ -148,7 +149,7 @@ def _load_stage(path: Path) -> tuple[StageResult | None, str | None]:
 
 STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
           "shadowing": bake_shadowing_stage, "textures": bake_regular_stage, "flyaway": bake_flyaway_stage,
-          "environment": bake_environment_stage, "interreflection": bake_yarn_albedo_stage}
+          "environment": bake_environment_stage, "interreflection": bake_yarn_hull_stage}
 
 
 def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None = None) -> list[str]:

@@ -13,7 +13,7 @@ import numpy as np
 from ..conventions import HALF_PI, LENGTH_UNITS, PHI_RANGE, THETA_RANGE
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "2.1"
+SCHEMA_VERSION = "2.2"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
@@ -138,6 +138,9 @@ TABLES = (
     TableSpec("interreflection/albedo", "interreflection", (3,), ("channel",), "1",
               "ρ_Y: the yarn's hull albedo, mean radiance leaving the yarn tube under a uniform environment of "
               "radiance 1 (since schema 2.1, §10)", value_range=(0.0, 1.0)),
+    TableSpec("interreflection/transmittance", "interreflection", (3,), ("channel",), "1",
+              "T_Y: the yarn tube's transmittance, mean radiance leaving the tube toward a camera when only the "
+              "hemisphere behind the yarn has radiance 1 (since schema 2.2, §10)", value_range=(0.0, 1.0)),
     TableSpec("textures/normal/mip{k}", "textures", ("H", "W", 3), ("v_tex", "u_tex", "channel"), "1",
               "coverage-premultiplied fiber normal in the strip frame (t, b, n)", channel_ranges=_UNIT_VEC,
               vector=3, mip=True),
