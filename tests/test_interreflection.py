@@ -1,7 +1,9 @@
-"""Yarn-level inter-reflection: the visibility transform's limits and fixed point, the baked hull albedo ρ_Y against
-the white furnace, and what the renderer does with a pack that has no ρ_Y (schema < 2.1)."""
+"""Yarn-level light transport: the visibility transform's limits and fixed point, the baked hull albedo ρ_Y and
+transmittance T_Y against the white furnace, the fiber count T_Y gives, and what the renderer does with a pack that
+has no ρ_Y (schema < 2.1) or no T_Y (schema < 2.2)."""
 
 import dataclasses
+import math
 import shutil
 
 import h5py
@@ -9,10 +11,11 @@ import numpy as np
 import pytest
 
 from data_formats.yarn_spec import load_preset
-from knitbake.stages.yarn_albedo import TABLE, bake_yarn_albedo
+from knitbake.stages.yarn_hull import TABLE, TRANSMITTANCE_TABLE, bake_yarn_hull, hemisphere_env, hull_radiance
 from knitrun.render.ablations import Features
 from knitrun.render.interreflection import interreflected_visibility
-from tests.helpers import FRONT, SKY, straight, write_scene
+from knitrun.shading.dual_scattering import transmittance_count
+from tests.helpers import FRONT, SKY, SUN, straight, write_scene
 from tests.test_render import _render
 
 
@@ -39,17 +42,70 @@ def _lossless(spec):
 def test_yarn_albedo_is_one_for_lossless_fibers_and_below_the_fiber_albedo_otherwise():
     """White furnace of the bake: with non-absorbing fibers every path leaves the tube, ρ_Y = 1 (within its standard
     error: Russian roulette is unbiased). Cotton's fibers absorb 5–10 % per event and its dense yarn (225 fibers)
-    scatters most paths several times, so ρ_Y lies clearly below the fiber albedo, with a finite, positive error."""
+    scatters most paths several times, so ρ_Y lies clearly below the fiber albedo, with a finite, positive error;
+    its transmittance T_Y, the part of ρ_Y that leaves on the far side, lies below ρ_Y and well above what
+    evenly spread fibers would pass (ā_f^{n_cross} ≈ 0.06)."""
     cotton = load_preset("cotton1")
     settings = {"n_views": 3, "rows": 8, "spp": 2, "batches": 2}
-    tables, errors = bake_yarn_albedo(_lossless(cotton), seed=3, **settings)
+    tables, errors = bake_yarn_hull(_lossless(cotton), seed=3, **settings)
     assert np.all(np.abs(tables[TABLE] - 1.0) < 4 * errors[TABLE] + 0.01), (tables[TABLE], errors[TABLE])
-    tables, errors = bake_yarn_albedo(cotton, seed=3, **settings)
+    tables, errors = bake_yarn_hull(cotton, seed=3, **settings)
     fiber = np.add(cotton.optics.r_color, cotton.optics.tt_color) + cotton.optics.d_color
     assert np.all((tables[TABLE] > 0.3) & (tables[TABLE] < fiber - 0.05)), (tables[TABLE], fiber)
-    assert np.all(np.isfinite(errors[TABLE]) & (errors[TABLE] > 0))
+    t = tables[TRANSMITTANCE_TABLE]
+    assert np.all((t > 0.2) & (t < tables[TABLE] - 0.1)), (t, tables[TABLE])
+    for name in (TABLE, TRANSMITTANCE_TABLE):
+        assert np.all(np.isfinite(errors[name]) & (errors[name] > 0))
     with pytest.raises(ValueError, match="batches = 1"):
-        bake_yarn_albedo(cotton, batches=1)
+        bake_yarn_hull(cotton, batches=1)
+
+
+def test_transmittance_and_reflectance_of_a_lossless_yarn_add_up_to_one():
+    """The two hemispheres split the uniform environment: T_Y (radiance 1 behind the yarn) + R_Y (on the camera's
+    side) = ρ_Y, and = 1 for non-absorbing fibers (every path leaves the tube on one side or the other), within the
+    standard errors. A hemisphere switched the wrong way round, or a map that lights less than half the sphere,
+    fails."""
+    lossless = _lossless(load_preset("cotton1"))
+    settings = {"n_views": 3, "rows": 8, "spp": 4, "batches": 3}
+    far = hull_radiance(lossless, lambda wo: hemisphere_env(wo, far=True), seed=5, **settings)
+    near = hull_radiance(lossless, lambda wo: hemisphere_env(wo, far=False), seed=5, **settings)
+    total = far.mean(axis=0) + near.mean(axis=0)
+    error = (far.std(axis=0, ddof=1) + near.std(axis=0, ddof=1)) / math.sqrt(3)
+    assert np.all(np.abs(total - 1.0) < 4 * error + 0.02), (total, error)
+    assert np.all(far.mean(axis=0) > 0.3) and np.all(near.mean(axis=0) > 0.1)  # both sides carry light
+
+
+def test_transmittance_count_limits():
+    """n_T = ln T_Y / ln ā_f: the count that passes T_Y; none for a clear yarn; the geometric count at most."""
+    a = np.array([0.7, 0.69, 0.67])
+    for n in (0.5, 2.0, 5.0):
+        assert transmittance_count(a ** n, a, 7.7) == pytest.approx(n, rel=1e-12)
+    assert transmittance_count([1.0, 1.0, 1.0], a, 7.7) == 0.0
+    assert transmittance_count([0.0, 0.0, 0.0], a, 7.7) == pytest.approx(7.7, rel=1e-12)
+    geometric = pytest.approx(7.7, rel=1e-12)
+    assert transmittance_count(a ** 20, a, 7.7) == geometric  # darker than evenly spread fibers: clipped
+    assert transmittance_count([0.5, 0.5, 0.5], [1.0, 1.0, 1.0], 7.7) == geometric  # no count passes 0.5
+
+
+def test_a_yarn_in_another_yarns_shadow_gets_the_light_the_yarn_lets_through(tmp_path, pack):
+    """Two crossing yarns under the sun, the far one partly in the near one's shadow: with the pack's T_Y the fiber
+    count for the crossing is the one that passes T_Y (facts say so), and the image is brighter where light crosses
+    the near yarn, never darker; a schema-2.1 pack (no T_Y) and the switched-off term give the geometric count."""
+    old = tmp_path / "old.h5"
+    shutil.copy(pack, old)
+    with h5py.File(old, "a") as f:
+        del f[TRANSMITTANCE_TABLE], f[TRANSMITTANCE_TABLE + "_stderr"]
+        f.attrs["schema_version"] = "2.1"
+    crossing = [straight(z=0.0), straight(z=0.12)[:, [1, 0, 2]]]
+    scene = write_scene(tmp_path, crossing, camera=FRONT, lights=SUN, name="crossing")
+    without = _render(scene, old)
+    assert without.facts["n_cross"]["cotton1"].startswith("geometry (no transmittance")
+    switched_off = _render(scene, pack, features=Features(interreflection=False))
+    assert switched_off.facts["n_cross"]["cotton1"].startswith("geometry (switched off")
+    np.testing.assert_array_equal(without.image, switched_off.image)
+    with_term = _render(scene, pack)
+    assert with_term.facts["n_cross"]["cotton1"].startswith("transmittance")
+    assert np.all(with_term.image >= without.image - 1e-6) and with_term.image.mean() > without.image.mean()
 
 
 def test_renderer_reports_and_skips_inter_reflection_for_a_pack_without_yarn_albedo(tmp_path, pack):
@@ -58,7 +114,8 @@ def test_renderer_reports_and_skips_inter_reflection_for_a_pack_without_yarn_alb
     old = tmp_path / "old.h5"
     shutil.copy(pack, old)
     with h5py.File(old, "a") as f:
-        del f[TABLE], f[TABLE + "_stderr"]
+        for name in (TABLE, TRANSMITTANCE_TABLE):
+            del f[name], f[name + "_stderr"]
         f.attrs["schema_version"] = "2.0"
     crossing = [straight(z=0.0), straight(z=0.12)[:, [1, 0, 2]]]
     scene = write_scene(tmp_path, crossing, camera=FRONT, lights=SKY, name="crossing")

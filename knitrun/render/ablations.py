@@ -4,7 +4,9 @@ Plain Python, no kernels: the command line imports it for its ``--ablation`` cho
 
 ``Features`` switch the baked terms off: without ``xi`` the correction is 1, without ``fiber_shadowing``
 Ψ^Fiber_G = 1 (and no fiber lies between a visible fiber and the light), without ``flyaways`` no flyaway layer;
-without ``interreflection`` no yarn-level inter-reflection (``knitrun.render.interreflection``); ``full_tables``
+without ``interreflection`` no yarn-level light transport: no inter-reflection (``knitrun.render.interreflection``)
+and the geometric fiber count for light crossing a yarn instead of the one from the pack's transmittance T_Y
+(``yarn_look``, ``dual_scattering.transmittance_count``); ``full_tables``
 False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N} (the paper's) instead of the pack's unfactorized
 tables.
 
@@ -36,7 +38,7 @@ class Features:
     xi: bool = True
     fiber_shadowing: bool = True
     flyaways: bool = False  # off by default: see the module docstring
-    interreflection: bool = True
+    interreflection: bool = True  # yarn-level inter-reflection (ρ_Y) and transmission (T_Y)
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
     fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
 

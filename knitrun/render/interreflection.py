@@ -3,7 +3,7 @@
 The yarn-level shadow maps (``knitrun.render.shadow_map``) give the fraction V of a light that reaches a receiver
 past the other yarns, treating them as opaque tubes. A cotton fiber scatters 95 % of what it meets, so a blocking
 yarn sends most of that light on: between its fibers, and scattered, in every direction, toward the receiver too.
-The pack's hull albedo ρ_Y (``/interreflection/albedo``, ``knitbake.stages.yarn_albedo``: the mean radiance leaving
+The pack's hull albedo ρ_Y (``/interreflection/albedo``, ``knitbake.stages.yarn_hull``: the mean radiance leaving
 a yarn tube in a uniform environment of radiance 1) says how much.
 
 Model (a self-similar, infinite-bounce approximation, derived here): every
@@ -17,8 +17,10 @@ It is applied per SRBF lobe of an environment (the light the neighbours pass on 
 direction, which forward-scattering fibers make plausible) and, through the lobes, to the environment's
 multiple-scattering lights. It is not applied to directional lights: there V is 0 or 1 but for the penumbra, and the
 blocked light reaches the receiver from the lit side of the blocker, a different light path this term does not
-model. The scene colour c tints ρ_Y (ρ_Y·c, a first-order approximation: ρ_Y is not linear in the fiber albedo),
-and one ρ per receiver, the luminance of ρ_Y·c, scales every channel.
+model; the part of it the blocker lets through enters the dual-scattering estimate instead, through the fiber count
+for light crossing a yarn (``dual_scattering.transmittance_count``, from the pack's transmittance T_Y). The scene
+colour c tints ρ_Y (ρ_Y·c, a first-order approximation: ρ_Y is not linear in the fiber albedo), and one ρ per
+receiver, the luminance of ρ_Y·c, scales every channel.
 """
 
 from __future__ import annotations

@@ -275,7 +275,8 @@ class Renderer:
         environment = any(isinstance(light, EnvironmentLight) for light in scene.lights)
         looks = [load_look(_pack_path(k, e, packs), e, scene.units,
                            corrections=features.xi or features.fiber_shadowing, full_tables=features.full_tables,
-                           flyaways=features.flyaways, environment=environment, detail=features.fiber_detail)
+                           flyaways=features.flyaways, environment=environment, detail=features.fiber_detail,
+                           transmission=features.interreflection)
                  for k, e in enumerate(scene.yarns)]
         for look in looks:
             if not features.xi:
@@ -284,6 +285,7 @@ class Renderer:
                 look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
                 look.n_occluded = 0.0
         self.looks = looks
+        self.setup_facts["n_cross"] = {look.name: look.n_cross_from for look in looks}
         self.kernel_looks = [shading_look(look) for look in looks]
         self.im_tables = [look.im if look.im is not None else no_im_table() for look in looks]
         self.environment = environment

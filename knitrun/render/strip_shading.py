@@ -21,6 +21,7 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
     Ψ^Fiber_G   = mean_RGB Ψ(v, θ_i, φ), or Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ); clamped to [0, 1]
     D           = V · Ψ^Fiber_G                                           fraction lit directly
     n           = n_occluded + (1 − V) n_cross                            fibers toward the light when not lit
+                  (n_cross: the count that lets the pack's yarn transmittance T_Y through, ``yarn_look``)
     L_o        += E · ξ · DS(θ_i^f, θ_o^f, φ^f; n, D)                    ``dual_scattering.ds_kernel``, fiber frame
 
 with θ^f, φ^f against t_f. Tangent spread: a texel averages fibers whose tangents scatter; the length of its

@@ -14,7 +14,10 @@ flyaways, environment) and converts everything to the scene:
   to its luminance, the ρ of ``knitrun.render.interreflection``; 0 (no inter-reflection) for a pack baked before
   schema 2.1, which ``RenderResult.facts["interreflection"]`` then reports.
 * Fiber counts for the dual-scattering estimate at run time: ``dual_scattering.fiber_counts`` (n_cross, n_occluded)
-  from the yarn spec stored in the pack's provenance.
+  from the yarn spec stored in the pack's provenance. With ``transmission`` and a pack that has the yarn's
+  transmittance T_Y (``/interreflection/transmittance``, schema 2.2), n_cross, the count for light crossing another
+  yarn, becomes ``dual_scattering.transmittance_count`` (the count that lets T_Y through; n_occluded stays, ξ was
+  baked with it); ``YarnLook.n_cross_from`` says which.
 """
 
 from __future__ import annotations
@@ -29,13 +32,16 @@ from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
 from knitrun.render.shading_inputs import Corrections, Look
 from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
-from knitrun.shading.dual_scattering import DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables
+from knitrun.shading.dual_scattering import (DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables,
+                                             transmittance_count)
+from knitrun.shading.table_lookup import lookup_theta
 from knitrun.shading.fiber_bcsdf import params_from_pack, tinted
 from knitrun.shading.im_lookup import IMTable, im_table_from
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
+TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
 
 
 DETAIL_MAX = 4.0  # cap on the fiber-level detail D (a texel far brighter than its row: a lone lit fiber)
@@ -60,7 +66,8 @@ class YarnLook:
     radius: float  # drawn yarn radius = regular strip half-width
     period: float  # texture period along the rest arc length
     flyaway_half_width: float
-    n_cross: float
+    n_cross: float  # fibers a beam crossing another yarn meets (``transmittance_count`` or geometric)
+    n_cross_from: str  # where n_cross came from, for RenderResult.facts
     n_occluded: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
     yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
@@ -110,12 +117,13 @@ def fiber_detail_chain(ao_levels, coverage_levels) -> list:
 
 
 def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
-              environment=False, detail=True) -> YarnLook:
+              environment=False, detail=True, transmission=True) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
     ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors; ``detail``: the
-    fiber-level detail from the pack's AO texture (``fiber_detail_chain``)."""
+    fiber-level detail from the pack's AO texture (``fiber_detail_chain``); ``transmission``: n_cross from the
+    pack's transmittance T_Y when it has one (module docstring)."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
@@ -133,6 +141,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     stored = header.info
     if environment and ALBEDO_TABLE in stored:
         names.append(ALBEDO_TABLE)
+    if transmission and TRANSMITTANCE_TABLE in stored:
+        names.append(TRANSMITTANCE_TABLE)
     missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
     if corrections and full_tables:
         names += [n for n in FULL_TABLES if n in stored]
@@ -147,6 +157,14 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     scale = entry.radius / pack_radius
     geometry = spec.geometry
     n_cross, n_occluded = fiber_counts(geometry, spec.radius)
+    n_cross_from = (f"geometry ({'switched off' if not transmission else 'no transmittance in the pack, schema < 2.2'}"
+                    f"): {n_cross:.2f}")
+    if TRANSMITTANCE_TABLE in names:
+        transmittance = np.asarray(pack.tables[TRANSMITTANCE_TABLE], np.float64)
+        geometric, n_cross = n_cross, transmittance_count(
+            transmittance, lookup_theta(pack.tables["dual_scattering/a_f"], 0.0), n_cross)
+        n_cross_from = (f"transmittance T_Y = {float(transmittance @ LUMINANCE):.3f}: {n_cross:.2f} "
+                        f"(geometric {geometric:.2f})")
     tables = {n: np.asarray(pack.tables[n], np.float64) for n in names if n in CORRECTION_TABLES + FULL_TABLES}
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
@@ -168,7 +186,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
-        n_cross=n_cross, n_occluded=n_occluded, twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
+        n_cross=n_cross, n_cross_from=n_cross_from, n_occluded=n_occluded,
+        twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
         yarn_albedo=yarn_albedo, im=im, residuals=residuals)
 
 

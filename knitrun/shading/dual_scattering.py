@@ -51,7 +51,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from data_formats.conventions import HALF_PI, THETA_RANGE
+from data_formats.conventions import HALF_PI, LUMINANCE, THETA_RANGE
 from knitrun.shading.fiber_bcsdf import (INV_PI2, N_CONTEXT, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R,
                                          P_BETA_TT, P_GAMMA_TT, context_into, cos2_normaliser, evaluate, gauss,
                                          lobe_centre_at, tt_logistic_scale)
@@ -249,6 +249,25 @@ def fiber_counts(geometry, radius: float) -> tuple:
       where ξ is not applied."""
     n_cross = 4.0 * geometry.plies * geometry.fibers_per_ply * geometry.fiber_radius / (math.pi * radius)
     return n_cross, max(1.0, 0.5 * n_cross)
+
+
+def transmittance_count(transmittance, a_f0, n_cross: float) -> float:
+    """The fiber count n_T for light crossing a yarn that gives the yarn's measured transmittance T_Y (ASSET_PACK.md
+    §10): ā_f^{n_T} = T_Y, n_T = ln T_Y / ln ā_f(θ = 0) per channel (RGB arrays ``transmittance`` and ``a_f0``, the
+    untinted pack's), luminance-weighted over the channels and clipped to [0, ``n_cross``] (a yarn lets through at
+    least what evenly spread fibers would). A channel with T_Y ≥ 1 counts 0 fibers; one whose ā_f is 0 or 1 (no
+    count reproduces T_Y) counts ``n_cross``.
+
+    Why: ``fiber_counts``' n_cross assumes fibers that fill the tube evenly, so a beam through a yarn meets ~8 of them
+    (cotton1) and keeps ā_f^8 ≈ 6 % of its light; the path-traced yarn lets ~44 % through, mostly between fibers and
+    plies (``knitbake.stages.yarn_hull``), and a yarn in another's shadow was drawn near black."""
+    t = np.asarray(transmittance, np.float64).reshape(3)
+    a = np.asarray(a_f0, np.float64).reshape(3)
+    count = np.full(3, float(n_cross))
+    count[t >= 1.0] = 0.0
+    solvable = (t > 0.0) & (t < 1.0) & (a > 0.0) & (a < 1.0)
+    count[solvable] = np.log(t[solvable]) / np.log(a[solvable])
+    return float(np.clip(count @ LUMINANCE, 0.0, n_cross))
 
 
 # --- Python entry points -----------------------------------------------------------------------------------------
