@@ -56,8 +56,11 @@ def test_precompute_matches_brute_force_quadrature(rough):
         ref = brute_force(p, centres[k])
         for name, value in ref.items():
             table, err = tables[f"dual_scattering/{name}"]
-            # stated (quadrature) error + the brute-force rule's own (< 3e-10 here: refining it 2× moves it less)
-            np.testing.assert_allclose(table[k], value, rtol=0, atol=err[k].max() + 1e-9, err_msg=f"{name} θ#{k}")
+            # stated (quadrature) error + the brute-force rule's own (< 3e-10 here: refining it 2× moves it less);
+            # the precompute integrates exactly normalised lobes, the brute force the evaluated f, whose lobes carry
+            # their energy to the normaliser table's bound (``fiber_bcsdf.NORMALISER_TABLE_ERROR``)
+            bound = err[k].max() + 1e-9 + fb.NORMALISER_TABLE_ERROR * np.abs(value)
+            np.testing.assert_array_less(np.abs(table[k] - value), bound, err_msg=f"{name} θ#{k}")
 
 
 @pytest.mark.parametrize("rough", ROUGHNESS)
@@ -141,8 +144,9 @@ def sphere_integral(tables, p, theta_o, n_front, d_b, n_t=200, n_p=48):
     return (val * np.cos(tt)[..., None]).sum(axis=(0, 1)) * (math.pi / n_t) * (2 * math.pi / n_p)
 
 
-def test_runtime_lobes_carry_exactly_their_energy():
-    """∫ F cos θ_i dω_i: direct = albedo + d_b Ā_b; scattered (constant tables) = T_f (albedo + d_b Ā_b)."""
+def test_runtime_lobes_carry_their_energy():
+    """∫ F cos θ_i dω_i: direct = albedo + d_b Ā_b; scattered (constant tables) = T_f (albedo + d_b Ā_b), to the
+    normaliser table's bound (``fiber_bcsdf.NORMALISER_TABLE_ERROR``: every lobe is normalised to it)."""
     p = params(COLOURS, *ROUGHNESS[1])
     tables = constant_tables()
     albedo = np.sum(COLOURS, axis=0)
@@ -150,7 +154,7 @@ def test_runtime_lobes_carry_exactly_their_energy():
         direct = sphere_integral(tables, p, theta_o, 0.0, 0.7)
         np.testing.assert_allclose(direct, albedo + 0.7 * 0.2, rtol=1e-5)  # midpoint error ≈1.3e-6 (N_b's edges)
         scattered = sphere_integral(tables, p, theta_o, 3.0, 0.7)
-        np.testing.assert_allclose(scattered, ds.D_F * (albedo + 0.7 * 0.2), rtol=1e-8)
+        np.testing.assert_allclose(scattered, ds.D_F * (albedo + 0.7 * 0.2), rtol=1e-8 + fb.NORMALISER_TABLE_ERROR)
 
 
 def test_global_azimuthal_functions_are_the_convolutions():

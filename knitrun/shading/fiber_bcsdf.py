@@ -65,7 +65,8 @@ NORMALISER_WIDE_SIGMA = 0.5  # rad: wider lobes cut at both ends by the 16-node 
 _WIDE_X, _WIDE_W = np.polynomial.legendre.leggauss(16)
 _WIDE_X, _WIDE_W = HALF_PI * _WIDE_X, HALF_PI * _WIDE_W * np.cos(HALF_PI * _WIDE_X) ** 2  # nodes, weights × cos²
 NORMALISER_TABLE_SIGMA = (0.1, 8.0)  # rad: lobes of σ in this range are normalised from a table of log Z
-NORMALISER_TABLE_SHAPE = (129, 129)  # nodes in a = |μ|/(π/2 + 4σ) ∈ [0, 1] and in log σ (6e-7 relative)
+NORMALISER_TABLE_SHAPE = (129, 129)  # nodes in a = |μ|/(π/2 + 4σ) ∈ [0, 1] and in log σ
+NORMALISER_TABLE_ERROR = 7e-7  # bound on the table's relative error (5.7e-7 measured): a lobe's ∫ M cos²θ dθ is 1 to it
 
 
 def params_from_optics(optics) -> np.ndarray:
