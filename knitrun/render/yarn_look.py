@@ -34,9 +34,9 @@ from knitrun.render.shading_inputs import Corrections, Look
 from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
 from knitrun.shading.dual_scattering import (DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables,
                                              transmittance_count)
-from knitrun.shading.table_lookup import lookup_theta
 from knitrun.shading.fiber_bcsdf import params_from_pack, tinted
 from knitrun.shading.im_lookup import IMTable, im_table_from
+from knitrun.shading.table_lookup import lookup_theta
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them

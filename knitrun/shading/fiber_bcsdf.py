@@ -62,6 +62,7 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(32)  # Z to < 1e-9 relative for e
 FADDEEVA_TERMS = 32  # Weideman's expansion: |w| to 3e-13 relative over the half plane the normaliser uses
 NORMALISER_CLOSED_SIGMA = 0.03  # rad: narrower lobes cut by an end are normalised by quadrature
 NORMALISER_WIDE_SIGMA = 0.5  # rad: wider lobes cut at both ends by the 16-node rule on [−π/2, π/2] (4e-11 relative)
+# where the table below does not reach them (σ > 8 rad, or a centre beyond the clamp of ``lobe_centre``)
 _WIDE_X, _WIDE_W = np.polynomial.legendre.leggauss(16)
 _WIDE_X, _WIDE_W = HALF_PI * _WIDE_X, HALF_PI * _WIDE_W * np.cos(HALF_PI * _WIDE_X) ** 2  # nodes, weights × cos²
 NORMALISER_TABLE_SIGMA = (0.1, 8.0)  # rad: lobes of σ in this range are normalised from a table of log Z
@@ -224,6 +225,7 @@ def _weideman_coefficients(n):
 
 
 _W_COEF, _W_L = _weideman_coefficients(FADDEEVA_TERMS)
+_INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 
 
 def _normaliser_table(shape=NORMALISER_TABLE_SHAPE):
@@ -275,7 +277,6 @@ def _tabulated_normaliser(a, log_sigma):
             row += _lagrange4(tb, j) * _LOG_Z[ia + i, ib + j]
         log_z += _lagrange4(ta, i) * row
     return math.exp(log_z)
-_INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 
 
 @njit(cache=True)
