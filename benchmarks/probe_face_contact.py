@@ -37,8 +37,8 @@ def face_points(model, vertices, f):
     code = int(m.stitch_type[f])
     frame, fmat, knots, theta, ws = np.empty((4, 3)), np.empty((2, 2)), np.empty((2, 2)), np.empty(4), \
         np.zeros((st.MAX_POINTS, W_SIZE))
-    face_setup(v, b - a, code, st.TEMPLATE_INT, st.TEMPLATE_FLOAT, model.rest[f].copy(), model.params[4], frame, fmat,
-               knots, theta, ws)
+    face_setup(v, b - a, code, st.TEMPLATE_INT, st.TEMPLATE_FLOAT, model.rest[f].copy(), model.params[4],
+               model.radius, frame, fmat, knots, theta, ws)
     return code, frame, knots, theta, ws
 
 

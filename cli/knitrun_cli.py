@@ -234,10 +234,11 @@ def templates():
                    "which the simulator reads].")
 @click.option("--json", "as_json", is_flag=True, help="Print the result (figures per stitch type) as JSON.")
 def relax(output, as_json):
-    """Relax the stitch templates: knit (and so purl) on a periodic tile, then yarn-over, k2tog and ssk in an
-    eyelet context: yarns as elastic rods with bending, stretching and contact at 2r (knitrun/sim/template_relax.py,
-    patch_relax.py; about 45 s on 2 cores). Prints each round and the tile's contact before
-    and after. The simulator reads the package's file at import, so a new file takes effect in a new process.
+    """Relax the stitch templates: knit (and so purl) on a periodic tile, at rest and its shape on a sheared face,
+    then yarn-over, k2tog and ssk in an eyelet context: yarns as elastic rods with bending, stretching and contact at
+    2r (knitrun/sim/template_relax.py, patch_relax.py; about 55 s on 2 cores). Prints each round and the tile's
+    contact before and after. The simulator reads the package's file at import, so a new file takes effect in a new
+    process.
 
     Example: knitrun templates relax -o my_templates.json --json
     """
@@ -264,6 +265,14 @@ def relax(output, as_json):
         if not result["converged"]:
             click.echo(f"warning: {label} stopped after {result['rounds']} rounds without converging: the file "
                        "depends on this machine's rounding", err=True)
+    shear = document["stitch_types"]["knit"]["shear"]
+    before, after = shear["before"], shear["after"]
+    click.echo(f"knit shear shape (face sheared {shear['deformation'][0][1]:g}): contact p5 {before['p5']:.3f} → "
+               f"{after['p5']:.3f}, control-segment length error {before['segment_error']:.3f} → "
+               f"{after['segment_error']:.3f}; {shear['rounds']} rounds, {shear['seconds']:.1f} s")
+    if not shear["converged"]:
+        click.echo("warning: the knit's shear shape did not converge: the file depends on this machine's rounding",
+                   err=True)
     click.echo(f"wrote {path}")
 
 

@@ -11,10 +11,11 @@ from data_formats.errors import FormatError
 from data_formats.stitch_mesh import LOOPS_CONSUMED, STITCH_TYPES, make_stitch_mesh
 from knitrun.sim.deformations import deform, deformation_frames
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
-from knitrun.sim.knot_solver import R_KNOTS, W_SIZE, damped_solve, knot_points
+from knitrun.sim.knot_solver import R_KNOTS, W_SIZE, damped_solve, face_shear, knot_points, shear_weights
 from knitrun.sim.simulate import face_problem, knot_centres, prepare, solve_frame
-from knitrun.sim.stitch_templates import (F_A, F_C, F_S, I_KNOT, K2TOG, KNIT, MAX_POINTS, N_POINTS, PURL, SSK,
-                                          TEMPLATE_FLOAT, TEMPLATE_INT, YARN_OVER, piece_ranges)
+from knitrun.sim.stitch_templates import (F_A, F_C, F_DS_NEG, F_DS_POS, F_S, F_SHEAR, I_KNOT, K2TOG, KNIT, MAX_POINTS,
+                                          N_POINTS, PURL, SSK, TEMPLATE_FLOAT, TEMPLATE_INT, YARN_OVER, piece_ranges)
+from tests.helpers import without_shear_shape
 
 MIXED_CHART = """
 ppk\\k
@@ -59,9 +60,11 @@ def test_template_sizes_and_pieces():
 
 def test_purl_is_knit_mirrored_through_the_plane():
     assert np.array_equal(TEMPLATE_INT[PURL], TEMPLATE_INT[KNIT])
-    rows = [r for r in range(TEMPLATE_FLOAT.shape[1]) if r != F_S]
+    lifts = (F_S, F_DS_POS, F_DS_NEG)  # the lifts and the shear shape's lift changes flip; knots and shifts stay
+    rows = [r for r in range(TEMPLATE_FLOAT.shape[1]) if r not in lifts]
     assert np.array_equal(TEMPLATE_FLOAT[PURL, rows], TEMPLATE_FLOAT[KNIT, rows])
-    assert np.array_equal(TEMPLATE_FLOAT[PURL, F_S], -TEMPLATE_FLOAT[KNIT, F_S])
+    assert np.array_equal(TEMPLATE_FLOAT[PURL, lifts], -TEMPLATE_FLOAT[KNIT, lifts])
+    assert TEMPLATE_FLOAT[KNIT, F_SHEAR, 0] > 0 and np.abs(TEMPLATE_FLOAT[KNIT, F_DS_POS]).max() > 0
 
 
 @pytest.mark.parametrize("code", range(len(STITCH_TYPES)))
@@ -196,6 +199,41 @@ def test_beta_blends_knot_spacing_between_rest_and_interpolated():
         k, k0 = knot_centres(model, solve_frame(model, v).points), knot_centres(model, model.rest_points)
         ratio = np.linalg.norm(k[:, 1] - k[:, 0], axis=1) / np.linalg.norm(k0[:, 1] - k0[:, 0], axis=1)
         np.testing.assert_allclose(ratio, expected, rtol=1e-12)  # d = d_0 + β (d_1 − d_0)
+
+
+# --- the templates' shear shape -------------------------------------------------------------------------------------
+
+def test_face_shear_is_the_cosine_between_the_deformed_course_and_wale():
+    turn = np.array([[np.cos(0.7), -np.sin(0.7)], [np.sin(0.7), np.cos(0.7)]])
+    for gamma in (0.0, 0.3, -0.5, 2.0):
+        simple = np.array([[1.0, gamma], [0.0, 1.0]])
+        expected = gamma / np.sqrt(1 + gamma ** 2)
+        for f in (simple, turn @ simple, 3.0 * simple):  # turning or scaling the face leaves its shear
+            assert face_shear(f) == pytest.approx(expected, abs=1e-15)
+    for f in (np.eye(2), np.diag([1.5, 0.7]), turn, np.diag([2.0, 2.0]) @ turn):  # rest, stretch, rotation
+        assert abs(face_shear(f)) < 1e-15
+    for f in (np.zeros((2, 2)), np.array([[1.0, 0.0], [0.0, 0.0]]), np.full((2, 2), np.nan),
+              np.array([[np.inf, 1.0], [0.0, 1.0]])):  # collapsed or not finite: no shear, never NaN
+        assert face_shear(f) == 0.0
+    kappa = face_shear(np.array([[1.0, 0.3], [0.0, 1.0]]))
+    assert shear_weights(np.array([[1.0, 0.15], [0.0, 1.0]]), kappa) == pytest.approx((0.52, 0.0), abs=0.01)
+    assert shear_weights(np.array([[1.0, -0.3], [0.0, 1.0]]), kappa) == pytest.approx((0.0, 1.0), abs=1e-12)
+    assert shear_weights(np.array([[1.0, 0.9], [0.0, 1.0]]), kappa) == (1.0, 0.0)  # held beyond the relaxed shear
+    assert shear_weights(np.array([[1.0, 0.3], [0.0, 1.0]]), 0.0) == (0.0, 0.0)  # a template without a shape
+
+
+def test_the_shear_shape_moves_only_sheared_faces():
+    """Rest, stretch and bending leave the points as without the shape; shear moves them (knots and lifts)."""
+    model = prepare(chart_to_mesh(pattern_chart("rib1x1", 4, 4)))
+    frames = {spec: deformation_frames(model.mesh.vertices, [spec])[0]
+              for spec in ("stretch-x=1.5", "stretch-y=1.5", "cylinder=0.5", "shear=0.3")}
+    frames["rest"] = model.mesh.vertices
+    shaped = {name: solve_frame(model, v).points for name, v in frames.items()}
+    with without_shear_shape():
+        plain = {name: solve_frame(model, v).points for name, v in frames.items()}
+    for name in frames:
+        moved = np.abs(shaped[name] - plain[name]).max() / model.radius
+        assert (moved > 0.1) if name == "shear=0.3" else (moved < 1e-9), (name, moved)
 
 
 # --- extremes -------------------------------------------------------------------------------------------------------

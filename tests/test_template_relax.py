@@ -13,8 +13,10 @@ from data_formats.errors import FormatError
 from knitrun.sim import stitch_templates as st
 from knitrun.sim import template_relax as tr
 from knitrun.sim.contact import contact_statistic
+from knitrun.sim.deformations import deformation_frames
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.sim.simulate import simulate
+from tests.helpers import without_shear_shape
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +74,39 @@ def test_relaxation_lowers_the_energy_and_reaches_contact_in_the_tile(document):
         assert contact["after"]["p5"] >= 0.8 > contact["before"]["p5"], name
 
 
+def test_the_shear_shape_relaxes_the_sheared_tile_without_stretching_its_segments(document):
+    """The knit's shear shape (knot shifts and lift changes for a face sheared by 0.3): the sheared tile's 5th
+    percentile goes from 0.80 to ≥ 0.85 while its control segments stay as close to their rest lengths as without
+    the shape; half the shape at half the shear keeps contact; the mirrored shape under the mirrored shear is the
+    same tile mirrored."""
+    shear = document["stitch_types"]["knit"]["shear"]
+    assert shear["converged"] and shear["solver_status"] > 0
+    assert shear["kappa"] == pytest.approx(0.3 / np.sqrt(1.09), rel=1e-12)
+    assert shear["before"]["p5"] < 0.81 and shear["after"]["p5"] >= 0.85 and shear["after"]["min"] > 0.8
+    assert shear["after"]["segment_error"] <= shear["before"]["segment_error"]
+    assert shear["half"]["p5"] >= 0.85
+    assert shear["mirrored"] == pytest.approx(shear["after"], abs=1e-4)
+    shipped = st.load_relaxed()["knit"]["shear"]
+    np.testing.assert_allclose(shipped[1], shear["knots"], rtol=0, atol=MACHINE_SPREAD)
+    for role, lifts in shear["lifts"].items():
+        np.testing.assert_allclose(shipped[2][int(role)], lifts, rtol=0, atol=MACHINE_SPREAD)
+
+
+@pytest.mark.parametrize("pattern", ["stockinette", "rib1x1"])
+def test_simulated_knits_touch_when_sheared(pattern):
+    """The issue-14 targets under shear 0.3 either way on the product path, and without the shear shape the 5th
+    percentile falls below 0.8 (0.77 on 12 × 12 before the shape existed)."""
+    mesh = chart_to_mesh(pattern_chart(pattern, 8, 8))
+    for spec in ("shear=0.3", "shear=-0.3"):
+        frames = deformation_frames(mesh.vertices, [spec], 1)
+        curves, report = simulate(mesh, frames)
+        stats = contact_statistic(curves, report["yarn_radius"])
+        assert stats["p5"] >= 0.8 and 0.95 <= stats["p50"] <= 1.10, (spec, stats)
+        with without_shear_shape():
+            curves, report = simulate(mesh, frames)
+        assert contact_statistic(curves, report["yarn_radius"])["p5"] < 0.8, spec
+
+
 def test_relaxed_knit_keeps_eq4_in_the_plane_and_is_mirror_symmetric():
     pieces = st.template_pieces(st.KNIT)
     seed = st.template_pieces(st.KNIT, relaxed=False)
@@ -114,7 +149,12 @@ def test_relaxed_file_errors_are_one_line(tmp_path):
                                        "stitch_types": {"knit": {"knots": [[0.3, 0.4, 0.1, 0.1]], "points": {}}}}),
              "nan.json": json.dumps({"format": "knit-relaxed-templates", "version": "1.0",
                                      "stitch_types": {"knit": {"knots": [[0.3, 0.4, 0.1, 0.1], [0.7, 0.4, -0.1, 0.1]],
-                                                               "points": {"0": [[1.0, 0.0, float("nan")]]}}}})}
+                                                               "points": {"0": [[1.0, 0.0, float("nan")]]}}}}),
+             "shear.json": json.dumps({"format": "knit-relaxed-templates", "version": "1.1",
+                                       "stitch_types": {"knit": {"knots": [[0.3, 0.4, 0.1, 0.1], [0.7, 0.4, -0.1, 0.1]],
+                                                                 "points": {"0": [[1.0, 0.0, 0.5]]},
+                                                                 "shear": {"kappa": 0.29, "knots": [[0.0, 0.0]],
+                                                                           "lifts": {"0": [0.1]}}}}})}
     for name, text in cases.items():
         (tmp_path / name).write_text(text)
         with pytest.raises(FormatError) as info:
@@ -144,11 +184,12 @@ def test_cli_relax_writes_the_document(tmp_path, document):
 
 
 def test_cli_relax_prints_the_tile_and_the_context(tmp_path, document, monkeypatch):
-    """Without --json: one line for the knit tile and one for the stitch types relaxed in their chart (the patch
-    types carry no tile figures of their own: printing them per type failed)."""
+    """Without --json: one line for the knit tile, one for the stitch types relaxed in their chart (the patch types
+    carry no tile figures of their own: printing them per type failed) and one for the knit's shear shape."""
     monkeypatch.setattr(tr, "relax_templates", lambda progress=None: document)
     result = CliRunner().invoke(knitrun, ["templates", "relax", "-o", str(tmp_path / "t.json")])
     assert result.exit_code == 0, result.output
     lines = result.stdout.strip().splitlines()
     assert lines[0].startswith("knit (periodic tile): contact p5")
-    assert lines[1].startswith("yarn_over, k2tog, ssk (in a 8×8 eyelet chart): contact p5") and "wrote" in lines[2]
+    assert lines[1].startswith("yarn_over, k2tog, ssk (in a 8×8 eyelet chart): contact p5")
+    assert lines[2].startswith("knit shear shape (face sheared 0.3): contact p5") and "wrote" in lines[3]

@@ -8,17 +8,19 @@ Per face, per frame
    the face has no area), e1 = the course direction (TR − TL) + (BR − BL) projected off n, e2 = n × e1. Vertices,
    boundary points and knot points are expressed in this frame (u, v, z). The rest face gets the same frame.
 2. **Deformation gradient** (2-D): F = argmin Σ_i |x_i − F X_i|² over the face's vertices (x deformed, X rest,
-   both centred), F = (Σ x Xᵀ)(Σ X Xᵀ)⁻¹. R = the rotation of F's polar decomposition.
+   both centred), F = (Σ x Xᵀ)(Σ X Xᵀ)⁻¹. R = the rotation of F's polar decomposition. F's shear sets how much of
+   the template's shear shape (knot shifts, lift changes; ``stitch_templates``, "Shear shape") the face takes.
 3. **Knot centres** x_k = (R + β (F − R)) X_k: the spacing blend d = d_0 + β (d_1 − d_0) of §6.1 applied to every knot
    offset from the centroid (d_0 = R X_k, the rest spacing turned with the face; d_1 = F X_k, the interpolated one).
-   β = 1 (default) interpolates knots uniformly; β = 0 keeps their rest spacing.
+   β = 1 (default) interpolates knots uniformly; β = 0 keeps their rest spacing. On a sheared face X_k first moves by
+   the template's shear shape, w⁺ ΔX⁺_k + w⁻ ΔX⁻_k (``shear_weights``).
 4. **Boundary points** (template points on edges) are interpolated along their edge, in 3-D, from the edge's two
    vertices: the same point for both faces of the edge. They are fixed.
 5. **Unknowns** Θ = (θ1, θ2, l1, l2): the two knots' tilt angles (direction d = (cos θ, sin θ) in the (e1, e2) plane)
    and half-lengths. Eq. 1-2 give every knot point from Θ (``stitch_templates``), so eq. 4 holds by construction.
    Initial guess ("uniform interpolation"): each knot's rest axis c0 − c1 mapped by F.
 6. **Energy** (eqs. 3, 5, 6) over the face's own yarn pieces (polylines of template points, boundary points at their
-   ends), with positions in the face frame in 3-D (knot points at z = s·r, boundary points at their true height):
+   ends), with positions in the face frame in 3-D (knot points at their lift z, step 8; boundary points at their own):
    E = Σ_segments w_length ((L − L_0)/h)² + Σ_interior points w_angle (cos − cos_0)², L the segment length, cos the
    cosine between consecutive segments, L_0 and cos_0 those of the rest template of this face. h is the mesh's
    ``length_scale`` (the median rest length of its faces' top edges, one stitch width): lengths are measured in
@@ -34,7 +36,8 @@ Per face, per frame
    ``iterations`` (default 3) counts accepted-or-abandoned steps; λ starts at ``LAMBDA0`` = 1e-2 for every face:
    on random stretch and shear this small first damping gives E_3 closer to the converged energy than plain
    Gauss-Newton, whose full first step overshoots on strongly deformed faces (figures in BENCHMARKS.md).
-8. **Output**: knot points c + u e1 + v e2 + s r n, boundary points the exact 3-D edge points.
+8. **Output**: knot points c + u e1 + v e2 + z n (z = s r, with the face's shear lifts), boundary points the exact
+   3-D edge points.
 
 Modes: ``iterations = 0`` is "knot interpolation without optimisation" (Fig. 9 middle); ``naive = True`` maps every
 rest template point by x = F X (boundary points still on their edges): "naive interpolation of control points".
@@ -43,7 +46,8 @@ and a face whose result is not finite falls back to its initial guess, then to i
 
 Layout (speed): each chunk of faces copies the templates, and each face its vertices and its row of the rest array
 (``REST_SIZE`` floats: ``R_XY`` rest 2-D vertices, ``R_MINV`` (Σ X Xᵀ)⁻¹, ``R_KNOTS`` x, y, θ_0, l_0 per knot,
-``R_NORMAL``, ``R_TARGETS`` the rest value of every residual: segment lengths then cosines), into thread-local
+``R_NORMAL``, ``R_SHEAR`` the template's knot shifts under shear (Δx, Δy per knot, one way then the other, in the
+rest frame), ``R_TARGETS`` the rest value of every residual: segment lengths then cosines), into thread-local
 arrays before calling the helpers: Numba reference-counts every array passed to a function, and counting shared
 arrays from two threads costs more than the solve. A face's points live in a workspace ``ws`` (point, ``W_*``
 column) and its residuals with their Jacobian rows in ``rj`` (residual, [r, ∂r/∂θ1, ∂r/∂θ2, ∂r/∂l1, ∂r/∂l2]).
@@ -57,8 +61,8 @@ import numpy as np
 from numba import njit, prange
 
 from data_formats.numba_setup import FASTMATH
-from knitrun.sim.stitch_templates import (F_A, F_C, F_KNOTS, F_S, F_T, I_KNOT, I_PIECES, I_V0, I_V1, MAX_ANGLES,
-                                          MAX_POINTS, MAX_SEGMENTS, N_UNKNOWNS)
+from knitrun.sim.stitch_templates import (F_A, F_C, F_DS_NEG, F_DS_POS, F_KNOTS, F_S, F_T, I_KNOT, I_PIECES, I_V0,
+                                          I_V1, F_SHEAR, MAX_ANGLES, MAX_POINTS, MAX_SEGMENTS, N_UNKNOWNS)
 
 MAX_TRIES = 8  # damped solves per iteration before giving up on the iteration
 LAMBDA0 = 1e-2  # initial Levenberg damping (relative to tr(S A S)/4, see damped_solve)
@@ -66,7 +70,7 @@ LAMBDA_MIN = 1e-9
 EPS_LENGTH = 1e-9  # length smoothing, in units of length_scale
 MAX_RESIDUALS = MAX_SEGMENTS + MAX_ANGLES
 P_RADIUS, P_SCALE, P_W_ANGLE, P_W_LENGTH, P_BETA = range(5)  # layout of the ``params`` vector
-R_XY, R_MINV, R_KNOTS, R_NORMAL, R_TARGETS = 0, 10, 14, 22, 25  # layout of a face's rest row
+R_XY, R_MINV, R_KNOTS, R_NORMAL, R_SHEAR, R_TARGETS = 0, 10, 14, 22, 25, 33  # layout of a face's rest row
 REST_SIZE = R_TARGETS + MAX_RESIDUALS
 W_X, W_DTH, W_DLN, W_SEG = 0, 3, 5, 7  # workspace columns: point (3), ∂/∂θ (2), ∂/∂l (2), segment unit + 1/L (4)
 W_SIZE = 11
@@ -161,9 +165,9 @@ def boundary_points(v, code, ti, tf, frame, ws):
 
 @njit(cache=True, fastmath=FASTMATH)
 def knot_points(theta, knots, code, ti, tf, radius, ws):
-    """Eqs. 1-2: local positions of the knot points of stitch type ``code`` for Θ = ``theta`` (θ1, θ2, l1, l2) and
-    knot centres ``knots`` (2, 2), with their in-plane derivatives w.r.t. their own knot's θ and l, into ``ws``
-    (boundary points are left as they are)."""
+    """Eq. 1: in-plane positions of the knot points of stitch type ``code`` for Θ = ``theta`` (θ1, θ2, l1, l2) and
+    knot centres ``knots`` (2, 2), with their derivatives w.r.t. their own knot's θ and l, into ``ws`` (their lifts,
+    ``knot_lifts``, and boundary points are left as they are)."""
     n_points = ti[code, I_PIECES, 1 + ti[code, I_PIECES, 0]]
     c0, s0, c1, s1 = math.cos(theta[0]), math.sin(theta[0]), math.cos(theta[1]), math.sin(theta[1])
     for i in range(n_points):
@@ -175,9 +179,40 @@ def knot_points(theta, knots, code, ti, tf, radius, ws):
         al, cr = a * theta[2 + j], tf[code, F_C, i] * radius
         ws[i, W_X] = knots[j, 0] + al * ct + cr * st
         ws[i, W_X + 1] = knots[j, 1] + al * st - cr * ct
-        ws[i, W_X + 2] = tf[code, F_S, i] * radius
         ws[i, W_DTH], ws[i, W_DTH + 1] = -al * st + cr * ct, al * ct + cr * st
         ws[i, W_DLN], ws[i, W_DLN + 1] = a * ct, a * st
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def face_shear(fmat):
+    """Shear κ = C₁₂/√(C₁₁C₂₂), C = FᵀF, of a face with deformation gradient ``fmat`` (2, 2) in its (course, wale)
+    frame: the cosine of the angle between the deformed course and wale directions (0 at rest, under stretch and
+    rotation; F = [[1, γ], [0, 1]] gives γ/√(1 + γ²)); 0 for a face collapsed along an axis."""
+    c11 = fmat[0, 0] * fmat[0, 0] + fmat[1, 0] * fmat[1, 0]
+    c22 = fmat[0, 1] * fmat[0, 1] + fmat[1, 1] * fmat[1, 1]
+    c12 = fmat[0, 0] * fmat[0, 1] + fmat[1, 0] * fmat[1, 1]
+    kappa = c12 / math.sqrt(c11 * c22) if c11 * c22 > 0.0 else 0.0
+    return kappa if abs(kappa) <= 1.0 else 0.0
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def shear_weights(fmat, kappa_ref):
+    """(w⁺, w⁻) = (κ/κ_ref, −κ/κ_ref) clamped to [0, 1] of a face's shear κ (``face_shear``) for a template shear
+    shape relaxed at ``kappa_ref`` (``stitch_templates``, "Shear shape"); (0, 0) without one (κ_ref = 0)."""
+    if not kappa_ref > 0.0:
+        return 0.0, 0.0
+    w = face_shear(fmat) / kappa_ref
+    return min(max(w, 0.0), 1.0), min(max(-w, 0.0), 1.0)
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def knot_lifts(code, ti, tf, radius, w_pos, w_neg, ws):
+    """Eq. 2: the lift z = (s + w⁺Δs⁺ + w⁻Δs⁻)·r of every knot point of stitch type ``code`` into ``ws``; it does not
+    depend on Θ, so a face sets it once (``face_setup``)."""
+    n_points = ti[code, I_PIECES, 1 + ti[code, I_PIECES, 0]]
+    for i in range(n_points):
+        if ti[code, I_KNOT, i] >= 0:
+            ws[i, W_X + 2] = (tf[code, F_S, i] + w_pos * tf[code, F_DS_POS, i] + w_neg * tf[code, F_DS_NEG, i]) * radius
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -347,9 +382,10 @@ def gauss_newton(theta, knots, code, ti, tf, radius, targets, weights, iteration
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def face_setup(v, nv, code, ti, tf, rest, beta, frame, fmat, knots, theta, ws):
+def face_setup(v, nv, code, ti, tf, rest, beta, radius, frame, fmat, knots, theta, ws):
     """Steps 1-5 of the module docstring for one face (vertices ``v``, rest row ``rest``): frame, F (``fmat``),
-    knot centres, boundary points (in ``ws``), initial Θ. Returns (cos, sin) of R's angle."""
+    knot centres, boundary points and the knot points' lifts (in ``ws``), initial Θ. Returns (cos, sin) of R's
+    angle."""
     face_frame(v, nv, rest[R_NORMAL:R_NORMAL + 3], frame)
     s00 = s01 = s10 = s11 = 0.0
     for i in range(nv):
@@ -369,21 +405,26 @@ def face_setup(v, nv, code, ti, tf, rest, beta, frame, fmat, knots, theta, ws):
     cp, sp = (cp / norm, sp / norm) if norm > 0.0 else (1.0, 0.0)
     g00, g01 = cp + beta * (fmat[0, 0] - cp), -sp + beta * (fmat[0, 1] + sp)
     g10, g11 = sp + beta * (fmat[1, 0] - sp), cp + beta * (fmat[1, 1] - cp)
+    w_pos, w_neg = shear_weights(fmat, tf[code, F_SHEAR, 0])
     for j in range(2):
         kx, ky, th0, l0 = rest[R_KNOTS + 4 * j], rest[R_KNOTS + 4 * j + 1], rest[R_KNOTS + 4 * j + 2], \
             rest[R_KNOTS + 4 * j + 3]
+        kx += w_pos * rest[R_SHEAR + 2 * j] + w_neg * rest[R_SHEAR + 4 + 2 * j]
+        ky += w_pos * rest[R_SHEAR + 2 * j + 1] + w_neg * rest[R_SHEAR + 4 + 2 * j + 1]
         knots[j, 0], knots[j, 1] = g00 * kx + g01 * ky, g10 * kx + g11 * ky
         ax, ay = math.cos(th0), math.sin(th0)
         fx, fy = fmat[0, 0] * ax + fmat[0, 1] * ay, fmat[1, 0] * ax + fmat[1, 1] * ay
         theta[j] = math.atan2(fy, fx)
         theta[2 + j] = l0 * math.sqrt(fx * fx + fy * fy)
     boundary_points(v, code, ti, tf, frame, ws)
+    knot_lifts(code, ti, tf, radius, w_pos, w_neg, ws)
     return cp, sp
 
 
 @njit(cache=True, fastmath=FASTMATH)
 def naive_points(code, ti, tf, rest, radius, fmat, ws):
-    """Naive interpolation: every rest knot point X mapped by x = F X, lifted by s·r (boundary points untouched)."""
+    """Naive interpolation: every rest knot point X mapped by x = F X, lifted by its rest s·r (no shear lifts: the
+    rest template mapped as it is; boundary points untouched)."""
     n_points = ti[code, I_PIECES, 1 + ti[code, I_PIECES, 0]]
     for i in range(n_points):
         j = ti[code, I_KNOT, i]
@@ -457,7 +498,7 @@ def solve_faces(vertices, face_offsets, face_vertices, stitch_type, point_offset
             nv = gather_face(vertices, face_offsets, face_vertices, f, v)
             for k in range(REST_SIZE):
                 rest_f[k] = rest[f, k]
-            cp, sp = face_setup(v, nv, code, ti, tf, rest_f, beta, frame, fmat, knots, theta, ws)
+            cp, sp = face_setup(v, nv, code, ti, tf, rest_f, beta, radius, frame, fmat, knots, theta, ws)
             if naive:
                 naive_points(code, ti, tf, rest_f, radius, fmat, ws)
                 history[:] = 0.0
@@ -534,7 +575,13 @@ def prepare_faces(vertices, face_offsets, face_vertices, stitch_type, template_i
             theta[2 + j] = 0.5 * math.sqrt((px - mx) ** 2 + (py - my) ** 2)
             rest[f, R_KNOTS + 4 * j], rest[f, R_KNOTS + 4 * j + 1] = knots[j, 0], knots[j, 1]
             rest[f, R_KNOTS + 4 * j + 2], rest[f, R_KNOTS + 4 * j + 3] = theta[j], theta[2 + j]
+            for way in range(2):  # the shear shape's knot shift, face coordinates → rest frame
+                k = 1 + 4 * way + 2 * j
+                sx, sy = ruled_point(xy, nv, u + tf[code, F_SHEAR, k], w + tf[code, F_SHEAR, k + 1])
+                rest[f, R_SHEAR + 4 * way + 2 * j] = sx - knots[j, 0]
+                rest[f, R_SHEAR + 4 * way + 2 * j + 1] = sy - knots[j, 1]
         boundary_points(v, code, ti, tf, frame, ws)
+        knot_lifts(code, ti, tf, radius, 0.0, 0.0, ws)
         knot_points(theta, knots, code, ti, tf, radius, ws)
         residuals(code, ti, ws, zeros, 1.0, 1.0, 1.0, 0.0, rj, False)
         for k in range(MAX_RESIDUALS):

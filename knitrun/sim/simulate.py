@@ -232,7 +232,7 @@ def face_problem(model, vertices, f):
     frame, fmat, knots, theta, ws = np.empty((4, 3)), np.empty((2, 2)), np.empty((2, 2)), np.empty(4), \
         np.zeros((MAX_POINTS, W_SIZE))
     radius, h, w_angle, w_length, beta = model.params
-    face_setup(v, stop - start, code, TEMPLATE_INT, TEMPLATE_FLOAT, rest, beta, frame, fmat, knots, theta, ws)
+    face_setup(v, stop - start, code, TEMPLATE_INT, TEMPLATE_FLOAT, rest, beta, radius, frame, fmat, knots, theta, ws)
     n_pieces = TEMPLATE_INT[code, I_PIECES, 0]
     n_res = 2 * int(TEMPLATE_INT[code, I_PIECES, 1 + n_pieces]) - 3 * n_pieces
 

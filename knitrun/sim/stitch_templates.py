@@ -58,11 +58,26 @@ relaxes its templates, §5.1), which keep every (a, c) below, so eq. 4 holds, bu
 the yarns need room. Yarn-over, k2tog and ssk take theirs from a relaxation in an eyelet context (``patch_relax``),
 which may also move their knots and a decrease's outer-loop points. ``template_pieces(code, relaxed=False)`` and
 ``knots_of(code, relaxed=False)`` give the hand-drawn seed.
+
+Shear shape
+-----------
+A sheared face squeezes the legs of neighbouring loops together in the plane, where the knots cannot move them apart
+(their four unknowns do not reach the spans that touch). The relaxation therefore also gives the knit a shape for its
+face sheared by κ_ref (``template_relax.relax_shear_shape``): a shift (Δu, Δv) of each knot centre, in face
+coordinates, and a lift change Δs per knot point, both added on a face sheared that way. The face's shear is
+κ = C₁₂/√(C₁₁C₂₂), C = FᵀF of its deformation gradient in the (course, wale) frame (``knot_solver.face_shear``): the
+cosine of the angle between the deformed course and wale directions, 0 at rest, under stretch and under rotation.
+The runtime adds w⁺ × the shape for shear one way and w⁻ × the shape for the other, w± = clamp(±κ/κ_ref, 0, 1); the
+second shape is the first mirrored about the face's centre line (knot 0 ↔ knot 1 with Δu negated, IN ↔ OUT reversed,
+the loop reversed), as the knit itself is mirror-symmetric. Purl keeps the knot shifts and negates the lift changes
+with s. Types without a relaxed shear shape (yarn-over and the decreases, relaxed at rest in their context) have
+κ_ref = 0 and no change.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -98,8 +113,9 @@ def _knot(j, a, c, s):
 
 
 def load_relaxed(path=RELAXED_PATH):
-    """{stitch type name: {"knots": ((centre, axis), (centre, axis)), "points": {role: [(a, c, s), ...]}}} from a
-    relaxed-template document (``template_relax``); {} when the file is absent (the hand-drawn templates then stand).
+    """{stitch type name: {"knots": ((centre, axis), (centre, axis)), "points": {role: [(a, c, s), ...]}, "shear":
+    (κ_ref, ((Δu, Δv), (Δu, Δv)), {role: [Δs, ...]}) or None}} from a relaxed-template document (``template_relax``;
+    the shear shape since format 1.1); {} when the file is absent (the hand-drawn templates then stand).
     ``FormatError`` for a file that is not one."""
     if not Path(path).is_file():
         return {}
@@ -118,7 +134,21 @@ def load_relaxed(path=RELAXED_PATH):
                               + [x for spec in points.values() for abc in spec for x in abc])
             if not np.isfinite(values).all():
                 raise FormatError(f"stitch type {name!r}: a value is not finite")
-            out[name] = {"knots": knots, "points": points}
+            shear = entry.get("shear")
+            if shear is not None:
+                kappa = float(shear["kappa"])
+                shifts = tuple((float(k[0]), float(k[1])) for k in shear["knots"])
+                lifts = {int(role): [float(x) for x in spec] for role, spec in shear["lifts"].items()}
+                if not (math.isfinite(kappa) and kappa > 0) or len(shifts) != N_KNOTS or \
+                        not np.isfinite([x for k in shifts for x in k] + [x for v in lifts.values() for x in v]).all():
+                    raise FormatError(f"stitch type {name!r}: a shear shape needs κ > 0, {N_KNOTS} finite knot shifts "
+                                      "and finite lifts")
+                if {role: len(spec) for role, spec in lifts.items()} != {role: len(spec) for role, spec in
+                                                                         points.items()}:
+                    raise FormatError(f"stitch type {name!r}: shear lifts must match the relaxed points piece by "
+                                      "piece")
+                shear = (kappa, shifts, lifts)
+            out[name] = {"knots": knots, "points": points, "shear": shear}
     except (ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
         raise FormatError(f"{path}: {exc}, expected a knit-relaxed-templates file (knitrun templates relax)") from None
     return out
@@ -183,7 +213,7 @@ def _with_relaxed(points, coefficients):
 
 # Packed layout read by the kernels (plain arrays, first index the stitch-type code, last the point index i):
 I_KNOT, I_V0, I_V1, I_PIECES, I_ROLES = range(5)  # rows of TEMPLATE_INT
-F_T, F_A, F_C, F_S, F_KNOTS = range(5)  # rows of TEMPLATE_FLOAT
+F_T, F_A, F_C, F_S, F_KNOTS, F_DS_POS, F_DS_NEG, F_SHEAR = range(8)  # rows of TEMPLATE_FLOAT
 
 
 def pack_templates(relaxed=True):
@@ -195,11 +225,13 @@ def pack_templates(relaxed=True):
     * ``TEMPLATE_FLOAT[c, F_T, i]``: a boundary point's edge fraction t; ``F_A``, ``F_C``, ``F_S``: a knot point's
       eq. 1-2 coefficients a, c, s; ``F_KNOTS``: [u_0, v_0, du_0, dv_0, u_1, v_1, du_1, dv_1], each knot's rest centre
       and c0 − centre in face coordinates.
+    * The shear shape (module docstring, "Shear shape"): ``F_DS_POS``, ``F_DS_NEG``: a knot point's lift changes for
+      shear either way; ``F_SHEAR``: [κ_ref (0: no shape), (Δu_0, Δv_0, Δu_1, Δv_1) either way] (9 numbers).
     """
     all_pieces = [template_pieces(code, relaxed) for code in range(len(STITCH_TYPES))]
     max_points = max(sum(len(p) for _, p in pieces) for pieces in all_pieces)
     ints = np.zeros((len(all_pieces), 5, max_points), np.int64)
-    floats = np.zeros((len(all_pieces), 5, max_points), np.float64)
+    floats = np.zeros((len(all_pieces), 8, max_points), np.float64)
     for code, pieces in enumerate(all_pieces):
         ints[code, I_KNOT] = -1
         ints[code, I_PIECES, 0] = len(pieces)
@@ -216,7 +248,34 @@ def pack_templates(relaxed=True):
         ints[code, I_PIECES, 1 + len(pieces)] = i
         (uv0, axis0), (uv1, axis1) = knots_of(code, relaxed)
         floats[code, F_KNOTS, :8] = [*uv0, *axis0, *uv1, *axis1]
+        kappa, shifts, lifts = shear_shape(code, pieces, relaxed)
+        floats[code, F_SHEAR, :9] = [kappa, *shifts[0], *shifts[1]]
+        floats[code, F_DS_POS, :len(lifts[0])], floats[code, F_DS_NEG, :len(lifts[1])] = lifts
     return ints, floats
+
+
+def shear_shape(code, pieces, relaxed=True):
+    """(κ_ref, knot shifts (2, 4): [Δu_0, Δv_0, Δu_1, Δv_1] for shear one way and the other, lift changes (2, n) over
+    ``pieces``' points in order, 0 at boundary points) of stitch type ``code``: the relaxed knit's shear shape and its
+    mirror image, purl's lifts negated (module docstring, "Shear shape"); zeros for a type without one."""
+    n = sum(len(points) for _, points in pieces)
+    name = "knit" if code == PURL else STITCH_TYPES[code]
+    shear = RELAXED.get(name, {}).get("shear") if relaxed else None
+    if shear is None:
+        return 0.0, np.zeros((2, 4)), np.zeros((2, n))
+    kappa, ((du0, dv0), (du1, dv1)), lifts = shear
+    mirror = {ROLE_IN: ROLE_OUT, ROLE_OUT: ROLE_IN}
+    sign = -1.0 if code == PURL else 1.0
+    pos, neg = [], []
+    for role, points in pieces:
+        knots = [i for i, p in enumerate(points) if p[0] == "knot"]
+        here, there = np.zeros(len(points)), np.zeros(len(points))
+        here[knots] = sign * np.asarray(lifts[role])
+        there[knots] = sign * np.asarray(lifts[mirror.get(role, role)])[::-1]
+        pos.append(here)
+        neg.append(there)
+    shifts = np.array([[du0, dv0, du1, dv1], [-du1, dv1, -du0, dv0]])
+    return kappa, shifts, np.array([np.concatenate(pos), np.concatenate(neg)])
 
 
 TEMPLATE_INT, TEMPLATE_FLOAT = pack_templates()

@@ -38,7 +38,25 @@ plane: knot centres and axes mapped by F, eqs. 1-2 on them, ``template_positions
 too, with weight ``W_DEFORMED``. That weight is a trade (BENCHMARKS.md, "Contact between simulated yarns"): more of it
 keeps sheared knits apart, but tilts the knots so that the knot solver preserves yarn lengths under stretch-y no
 better than naive interpolation (Huang et al. 2025 Fig. 9; the test asks for ≥ 10 % better). 0.1 keeps that test;
-shear 0.3 then leaves a 5th percentile of 0.77 where 0.5 would give 0.80.
+shear 0.3 then leaves a 5th percentile of 0.77 where 0.5 would give 0.80, which the shear shape (below) closes.
+
+The shear shape
+---------------
+Whatever that weight, a face sheared by 0.3 squeezes the legs of neighbouring loops together in the plane (5th
+percentile 0.77 in the simulated knits). So the knit gets a second set of unknowns for its face sheared by ``SHEAR``
+(``relax_shear_shape``, run after the rest tile): a shift (Δu, Δv) of each knot centre (face coordinates) and a lift
+change Δs of each of the 12 knot points, 16 in all, no mirror symmetry (the shear breaks it; shear the other way takes
+the mirror image, ``stitch_templates``, "Shear shape"). On the tile laid out on the sheared face (knot interpolation,
+as above) with x the unknowns in radii, L_i the control polygon's segment lengths and L_i⁰ the rest tile's:
+
+    E_shear = W_CONTACT Σ_pairs max(0, D − d_pq)²/r² + W_BEND Σ_i α_i² r / Δs_i + W_LENGTH ((ℓ − ℓ_F)/r)²
+            + W_SEGMENTS Σ_i ((L_i − L_i⁰)/r)² + W_ANCHOR |x|²
+
+ℓ_F the sheared tile's yarn length before the change. The segment term is what keeps the knot solver's length error
+(Huang et al. 2025 Fig. 9, per control segment against the rest template) from growing: lifts alone meet the contact
+but lengthen the short segments round the knots (RMS error at shear 0.3: 0.034 → 0.108 after the knot solve); with
+the knot shifts and ``W_SEGMENTS`` the knots move instead. The runtime blends the shape in linearly with the face's
+shear up to ``SHEAR``'s and keeps it beyond (``knot_solver.shear_weights``).
 
 The contact pairs are those closer than ``PAIR_RADII`` r at the start of a round; a round is one scipy
 ``least_squares`` solve (trust region reflective, finite-difference Jacobian) with that fixed set; rounds repeat
@@ -51,9 +69,9 @@ another (the order along the normal at a crossing swapped). Purl is the knit tem
 (``stitch_templates``), so it is relaxed with it. Yarn-over, k2tog and ssk are relaxed next, in
 an eyelet context around the relaxed knit (``patch_relax``); ``relax_templates`` runs both.
 
-The result is the knit template's two knots (u, v, du, dv) and every knot point's (a, c, s) by piece role; the
-runtime maps them as before (eqs. 1-2 of ``stitch_templates``), so a deformed face moves the relaxed points with its
-knots. Measured before/after: BENCHMARKS.md, "Contact between simulated yarns".
+The result is the knit template's two knots (u, v, du, dv), every knot point's (a, c, s) by piece role and the knit's
+shear shape (format 1.1); the runtime maps them as before (eqs. 1-2 of ``stitch_templates``), so a deformed face
+moves the relaxed points with its knots. Measured before/after: BENCHMARKS.md, "Contact between simulated yarns".
 """
 
 from __future__ import annotations
@@ -76,18 +94,22 @@ COMPRESSION = 0.0  # contact distance 2r (1 − COMPRESSION): 0 = the yarns do n
 PAIR_RADII = 3.0
 W_CONTACT, W_BEND, W_LENGTH, W_ANCHOR = 100.0, 1.0, 100.0, 0.01
 W_DEFORMED = 0.1  # weight of each sheared tile's contact term, relative to the rest tile's (see the module docstring)
+W_SEGMENTS = 1000.0  # the shear shape's hold on each control segment's rest length (module docstring)
 ANCHOR_SCALE = np.array([WIDTH, ASPECT * WIDTH, WIDTH, ASPECT * WIDTH] + [RADIUS] * 6) / RADIUS  # unknowns → radii
+SHAPE_SCALE = np.array([WIDTH, ASPECT * WIDTH] * 2 + [RADIUS] * 12) / RADIUS  # the shear shape's unknowns → radii
 MAX_ROUNDS = 8
 SOLVER_TOL = 1e-10  # least_squares' ftol, xtol and gtol (see the module docstring)
 IDENTITY = np.eye(2)
 # The tile is relaxed at rest and, for its contact term only, under these affine deformations of the face plane
 # (knot interpolation of the runtime: ``template_positions``), each with its weight; the rest tile comes first.
+SHEAR = np.array([[1.0, 0.3], [0.0, 1.0]])  # the sheared face the knit's shear lifts are relaxed for
+MIRROR = np.diag([-1.0, 1.0])  # the face mirrored about its centre line: shear the other way is MIRROR·SHEAR·MIRROR
 DEFORMATIONS = {"rest": (IDENTITY, 1.0),
-                "shear 0.3": (np.array([[1.0, 0.3], [0.0, 1.0]]), W_DEFORMED),
-                "shear -0.3": (np.array([[1.0, -0.3], [0.0, 1.0]]), W_DEFORMED)}
+                "shear 0.3": (SHEAR, W_DEFORMED),
+                "shear -0.3": (MIRROR @ SHEAR @ MIRROR, W_DEFORMED)}
 SHIFTS = [(i, j) for i in range(-2, 3) for j in range(-2, 3)]
 FORMAT = "knit-relaxed-templates"
-VERSION = "1.0"
+VERSION = "1.1"  # 1.1: the knit's shear lifts
 
 
 # --- the knit tile, at rest or under an affine deformation F of the face plane ----------------------------------------
@@ -216,16 +238,21 @@ def _residuals(y, pieces, roles, pairs, seed, length0):
     contact = [math.sqrt(W_CONTACT) * _contact(dense, pairs[0], IDENTITY)]
     for (F, weight), pp in zip(list(DEFORMATIONS.values())[1:], pairs[1:]):
         contact.append(math.sqrt(W_CONTACT * weight) * _contact(dense_period(_polygon(y, pieces, roles, F), F), pp, F))
-    _, length, seg = _arc(dense)
-    e_in = np.diff(np.concatenate([dense, dense[:1] + _shift(IDENTITY, 1, 0)]), axis=0)
+    return np.concatenate(contact + _rod_residuals(dense, length0) + [math.sqrt(W_ANCHOR) * (y - seed) * ANCHOR_SCALE])
+
+
+def _rod_residuals(dense, length0, F=IDENTITY):
+    """[bending residuals (per dense sample), [stretching residual]] of the period's yarn ``dense`` (laid out under F)
+    against the yarn length ``length0``: the rod terms of the energy (module docstring)."""
+    _, length, seg = _arc(dense, F)
+    e_in = np.diff(np.concatenate([dense, dense[:1] + _shift(F, 1, 0)]), axis=0)
     e_prev = np.roll(e_in, 1, axis=0)
     cos = np.einsum("ij,ij->i", e_prev, e_in) / np.maximum(np.linalg.norm(e_prev, axis=1) *
                                                            np.linalg.norm(e_in, axis=1), 1e-300)
     angle = np.arccos(np.clip(cos, -1.0, 1.0))
     ds = 0.5 * (seg + np.roll(seg, 1))
     bend = angle * np.sqrt(RADIUS / np.maximum(ds, 1e-12))
-    return np.concatenate(contact + [math.sqrt(W_BEND) * bend, [math.sqrt(W_LENGTH) * (length - length0) / RADIUS],
-                                     math.sqrt(W_ANCHOR) * (y - seed) * ANCHOR_SCALE])
+    return [math.sqrt(W_BEND) * bend, [math.sqrt(W_LENGTH) * (length - length0) / RADIUS]]
 
 
 def _all_pairs(y, pieces, roles):
@@ -308,6 +335,90 @@ def relax_knit(pieces, knots, roles, progress=None):
             "solver_status": status, "converged": converged, "seconds": time.perf_counter() - t0}
 
 
+def _with_lift_changes(pieces, ds):
+    """``pieces`` with ``ds`` (one per knot point, pieces in order) added to their knot points' lifts s."""
+    it = iter(ds)
+    return [(role, [p if p[0] == "edge" else p[:4] + (p[4] + float(next(it)),) for p in points])
+            for role, points in pieces]
+
+
+def _with_knot_shifts(knots, shifts):
+    """``knots`` with their centres moved by ``shifts`` [Δu_0, Δv_0, Δu_1, Δv_1] (face coordinates)."""
+    return tuple(((u + shifts[2 * j], v + shifts[2 * j + 1]), axis) for j, ((u, v), axis) in enumerate(knots))
+
+
+def _segment_lengths(polygon, F=IDENTITY):
+    """Lengths of the period polygon's control segments, the closing one (to the next period) last."""
+    closing = polygon[0] + _shift(F, 1, 0)
+    return np.linalg.norm(np.diff(np.concatenate([polygon, closing[None]]), axis=0), axis=1)
+
+
+def _shaped_polygon(x, pieces, knots, roles, F):
+    """Period polygon of the tile laid out on a face deformed by F with the shear shape x = (4 knot shifts, lift
+    changes)."""
+    return period_polygon(template_positions(_with_lift_changes(pieces, x[4:]), _with_knot_shifts(knots, x[:4]), F),
+                          roles, F)
+
+
+def _shape_residuals(x, pieces, knots, roles, pairs, length0, segments0, F):
+    polygon = _shaped_polygon(x, pieces, knots, roles, F)
+    dense = dense_period(polygon, F)
+    return np.concatenate([math.sqrt(W_CONTACT) * _contact(dense, pairs, F)] + _rod_residuals(dense, length0, F)
+                          + [math.sqrt(W_SEGMENTS) * (_segment_lengths(polygon, F) - segments0) / RADIUS,
+                             math.sqrt(W_ANCHOR) * x * SHAPE_SCALE])
+
+
+def relax_shear_shape(pieces, knots, roles, F=SHEAR, progress=None):
+    """The knit's shear shape (``stitch_templates``, "Shear shape"): the knot shifts (Δu, Δv) and lift changes Δs
+    that relax the tile laid out on a face deformed by ``F`` (knot interpolation, ``template_positions``) from the
+    rest template ``pieces``, ``knots``. Energy (module docstring, "The shear shape") on the deformed tile; 16
+    unknowns, no mirror symmetry (the shear breaks it); rounds of fixed contact pairs as ``relax_knit``. Returns a
+    dict: ``kappa`` (F's shear κ, ``knot_solver.face_shear``), ``knots`` [[Δu, Δv], …], ``lifts`` {role: [Δs, …]},
+    the deformed tile's contact and control-segment RMS length error (against the rest tile) before/after, both at
+    half the shape on a face sheared half as much and the mirrored shape on the face sheared the other way; rounds,
+    solver status, seconds."""
+    from knitrun.sim.knot_solver import face_shear
+
+    t0 = time.perf_counter()
+    n = 4 + sum(p[0] == "knot" for _, points in pieces for p in points)
+    segments0 = _segment_lengths(period_polygon(template_positions(pieces, knots), roles))
+
+    def polygon(x, FF=F):
+        return _shaped_polygon(x, pieces, knots, roles, FF)
+
+    def figures(x, FF):
+        p = polygon(x, FF)
+        rms = float(np.sqrt(np.mean((_segment_lengths(p, FF) / segments0 - 1.0) ** 2)))
+        return {**tile_contact(p, FF), "segment_error": round(rms, 4)}
+
+    length0 = _arc(dense_period(polygon(np.zeros(n)), F), F)[1]
+    x, pairs_prev, status, converged = np.zeros(n), None, None, False
+    for rounds in range(1, MAX_ROUNDS + 1):
+        pairs = candidate_pairs(dense_period(polygon(x), F), PAIR_RADII * RADIUS, F)
+        if pairs_prev is not None and np.array_equal(pairs, pairs_prev) and status is not None and status > 0:
+            converged = True
+            break
+        result = least_squares(_shape_residuals, x, args=(pieces, knots, roles, pairs, length0, segments0, F),
+                               method="trf", x_scale=1.0 / SHAPE_SCALE, max_nfev=400,
+                               ftol=SOLVER_TOL, xtol=SOLVER_TOL, gtol=SOLVER_TOL)
+        x, status, pairs_prev = result.x, int(result.status), pairs
+        if progress is not None:
+            progress(rounds, float(result.cost), len(pairs))
+    lifts, it = {}, iter(x[4:])
+    for role, points in pieces:
+        lifts[str(role)] = [float(next(it)) for p in points if p[0] == "knot"]
+    shaped = _with_lift_changes(pieces, x[4:])
+    check_crossings(pieces, {str(role): [list(p[2:]) for p in spec if p[0] == "knot"] for role, spec in shaped})
+    mirror = np.concatenate([[-x[2], x[3], -x[0], x[1]], lifts[str(roles[1])][::-1], lifts[str(roles[0])][::-1],
+                             lifts[str(roles[2])][::-1]])
+    half = IDENTITY + 0.5 * (F - IDENTITY)
+    return {"kappa": float(face_shear(F)), "deformation": F.tolist(), "knots": x[:4].reshape(2, 2).tolist(),
+            "lifts": lifts, "before": figures(np.zeros(n), F), "after": figures(x, F),
+            "half": figures(x * min(1.0, face_shear(half) / face_shear(F)), half),
+            "mirrored": figures(mirror, MIRROR @ F @ MIRROR),
+            "rounds": rounds, "solver_status": status, "converged": converged, "seconds": time.perf_counter() - t0}
+
+
 def relax_templates(progress=None) -> dict:
     """The relaxed-template document (``relaxed_templates.json``): format, version, the tile and energy parameters
     and, per relaxed stitch type, its knot points' (a, c, s) by piece role, with the before/after figures.
@@ -326,14 +437,21 @@ def _relax_templates(progress):
     from knitrun.sim.patch_relax import relax_in_patch
 
     pieces = st.template_pieces(st.KNIT, relaxed=False)
-    result = relax_knit(pieces, st.STITCH_KNOTS, (st.ROLE_IN, st.ROLE_OUT, st.ROLE_LOOP), progress)
+    roles = (st.ROLE_IN, st.ROLE_OUT, st.ROLE_LOOP)
+    result = relax_knit(pieces, st.STITCH_KNOTS, roles, progress)
+    new_pieces = [(role, st._with_relaxed(points, [tuple(p) for p in result["points"][str(role)]]))
+                  for role, points in pieces]
+    new_knots = tuple((tuple(k[:2]), tuple(k[2:])) for k in result["knots"])
+    result["shear"] = relax_shear_shape(new_pieces, new_knots, roles, SHEAR, progress)
     # the other types are relaxed around the relaxed knit: pack it for the while, then put everything back
     saved = dict(st.RELAXED), st.TEMPLATE_INT.copy(), st.TEMPLATE_FLOAT.copy()
     try:
         st.RELAXED.clear()
-        st.RELAXED["knit"] = {"knots": tuple((tuple(k[:2]), tuple(k[2:])) for k in result["knots"]),
+        st.RELAXED["knit"] = {"knots": new_knots,
                               "points": {int(role): [tuple(abc) for abc in spec]
-                                         for role, spec in result["points"].items()}}
+                                         for role, spec in result["points"].items()},
+                              "shear": (result["shear"]["kappa"], tuple(map(tuple, result["shear"]["knots"])),
+                                        {int(role): spec for role, spec in result["shear"]["lifts"].items()})}
         st.TEMPLATE_INT[...], st.TEMPLATE_FLOAT[...] = st.pack_templates(True)
         others = relax_in_patch(progress)
     finally:
