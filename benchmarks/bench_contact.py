@@ -3,7 +3,8 @@ deformations: the 5th percentile and the median of d / 2r (1 = touching, below 1
 the fraction of samples below 0.8. Target (issue 14): 5th percentile ≥ 0.80 and median in [0.95, 1.10] in every
 cell. ``--hand-drawn`` measures the templates before the relaxation (``stitch_templates.pack_templates(False)``);
 ``--images DIR --pack PACK`` renders 6 × 6 stockinette, 1×1 rib and eyelet patches at rest with both templates side
-by side (DIR/templates_<pattern>.png: hand-drawn | relaxed; strip renderer, one directional light). ``--weights W,…``
+by side (DIR/templates_<pattern>.png: hand-drawn | relaxed; strip renderer, one directional light), and stockinette
+and 1×1 rib sheared 0.3 without and with the knit's shear shape (DIR/templates_<pattern>_sheared.png). ``--weights W,…``
 relaxes the templates in-process with each weight of the sheared tiles' contact (``template_relax.W_DEFORMED``) and
 prints the trade it sets: the worst 5th percentile over the knit/purl patterns at rest, sheared 0.3 and stretched
 1.5 either way, against the Fig. 9 ratio (knot solver's RMS control-segment length error / naive interpolation's,
@@ -146,6 +147,7 @@ def images(folder, pack):
     from data_formats.images import write_png
     from data_formats.scene import load_scene
     from data_formats.stitch_mesh import write_stitch_mesh
+    from data_formats.yarn_curves import write_yarn_curves
     from knitrun.render.pipeline import render
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -167,7 +169,33 @@ def images(folder, pack):
             out.paste(halves[1], (halves[0].width, 0))
             out.save(folder / f"templates_{pattern}.png")
             print(f"wrote {folder / f'templates_{pattern}.png'} (hand-drawn | relaxed)")
-    use_templates(True)
+        use_templates(True)
+        for pattern in ("stockinette", "rib1x1"):  # sheared 0.3: relaxed at rest only | with the shear shape
+            mesh = chart_to_mesh(pattern_chart(pattern, 6, 6))
+            frames = deformation_frames(mesh.vertices, ["shear=0.3"], 1)
+            halves = []
+            for shaped in (False, True):
+                saved = stitch_templates.TEMPLATE_FLOAT[:, stitch_templates.F_SHEAR, 0].copy()
+                if not shaped:
+                    stitch_templates.TEMPLATE_FLOAT[:, stitch_templates.F_SHEAR, 0] = 0.0
+                try:
+                    curves, _ = simulate(mesh, frames)
+                finally:
+                    stitch_templates.TEMPLATE_FLOAT[:, stitch_templates.F_SHEAR, 0] = saved
+                curves_path = tmp / f"{pattern}_sheared_{shaped}.h5"
+                write_yarn_curves(curves_path, curves)
+                scene_path = tmp / f"{pattern}_sheared_{shaped}.toml"
+                scene_path.write_text(SCENE.format(mesh=curves_path, pack=Path(pack).resolve())
+                                      .replace("stitch_mesh =", "curves =")
+                                      .replace("fov_deg = 25.0", "fov_deg = 31.0"))  # the parallelogram is wider
+                png = tmp / f"{pattern}_sheared_{shaped}.png"
+                write_png(png, render(load_scene(scene_path)).image)
+                halves.append(Image.open(png).convert("RGB"))
+            out = Image.new("RGB", (halves[0].width * 2, halves[0].height))
+            out.paste(halves[0], (0, 0))
+            out.paste(halves[1], (halves[0].width, 0))
+            out.save(folder / f"templates_{pattern}_sheared.png")
+            print(f"wrote {folder / f'templates_{pattern}_sheared.png'} (shear 0.3: without | with the shear shape)")
 
 
 def main():
