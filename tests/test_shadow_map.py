@@ -22,7 +22,7 @@ def yarns(*heights, half_length=2.0, n=21):
 def shadow_map(heights, size=256, direction=UP):
     pts, offsets, rest = yarns(*heights)
     lo, hi = pts.min(axis=0) - R, pts.max(axis=0) + R
-    return build_shadow_map(pts, offsets, False, rest, R, np.arange(len(heights)), direction, size, lo, hi)
+    return build_shadow_map(pts, offsets, False, rest, R, direction, size, lo, hi)
 
 
 def across(y, zs, x=0.3):
@@ -100,7 +100,7 @@ def test_identical_for_any_thread_count():
 
 
 def test_empty_scene_and_degenerate_receivers():
-    sm = build_shadow_map(np.zeros((0, 3)), [0], [], np.zeros(0), [], [], [1.0, 2.0, 3.0], 16, [0, 0, 0],
+    sm = build_shadow_map(np.zeros((0, 3)), [0], [], np.zeros(0), [], [1.0, 2.0, 3.0], 16, [0, 0, 0],
                           [0, 0, 0])
     assert sm.depth.shape == (16, 16) and np.all(sm.depth == np.inf)
     assert np.all(shadow_visibility(sm, np.random.default_rng(0).normal(size=(50, 3)), 0.0, 0.1) == 1.0)
@@ -118,11 +118,11 @@ def test_bad_input_raises():
     pts, offsets, rest = yarns(0.0)
     for direction in ([0, 0, 0], [np.nan, 1, 0]):
         with pytest.raises(ValueError, match="direction"):
-            build_shadow_map(pts, offsets, False, rest, R, [0], direction, 64, [-2, -1, -1], [2, 1, 1])
+            build_shadow_map(pts, offsets, False, rest, R, direction, 64, [-2, -1, -1], [2, 1, 1])
     with pytest.raises(ValueError, match="size"):
-        build_shadow_map(pts, offsets, False, rest, R, [0], UP, 0, [-2, -1, -1], [2, 1, 1])
+        build_shadow_map(pts, offsets, False, rest, R, UP, 0, [-2, -1, -1], [2, 1, 1])
     with pytest.raises(ValueError, match="bounds"):
-        build_shadow_map(pts, offsets, False, rest, R, [0], UP, 64, [2, -1, -1], [-2, 1, 1])
+        build_shadow_map(pts, offsets, False, rest, R, UP, 64, [2, -1, -1], [-2, 1, 1])
     sm = shadow_map([0.0])
     with pytest.raises(ValueError, match="bias"):
         shadow_visibility(sm, [[0, 0, 0]], np.nan, 0.0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from knitrun.render.camera import Camera, project, tan_half_fov
-from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
+from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_depth, rasterize_strips
 
 Z_UP = np.array([0.0, 0.0, 1.0])
 Y_UP = np.array([0.0, 1.0, 0.0])
@@ -140,6 +140,31 @@ def test_deterministic_across_thread_counts():
     for field in ("coverage", "depth", "curve", "yarn", "segment", "arclength", "v", "tangent"):
         assert np.array_equal(getattr(results[0], field), getattr(results[1], field)), field
     assert results[0].coverage.mean() > 0.2
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_depth_alone_is_the_g_buffers_depth_and_reused_buffers_are_overwritten(ortho):
+    """``rasterize_depth`` (shadow maps) writes the G-buffer's msaa-1 depth bit for bit and +inf where no strip is;
+    drawing another scene into buffers of a previous one (``out``) gives what fresh buffers give."""
+    cam = ortho_camera(80, 60) if ortho else Camera(np.array([0.4, 0.3, 2.5]), np.array([0.0, 0.1, 0.0]), Y_UP, 80,
+                                                   60, fov_deg=45.0)
+    xs = np.linspace(-1, 1, 30)
+    scenes = [(np.stack([xs, np.full(30, y), 0.2 * np.sin(7 * xs + y)], 1), 0.15) for y in (-0.5, 0.0, 0.4)]
+    scenes.append((np.stack([np.full(30, 0.3), xs, 0.1 * xs], 1), 0.3))
+    depth_out, g_out = None, None
+    for pts, radius in scenes:
+        rest = np.linspace(0, 2, 30)
+        g = rasterize_strips(pts, [0, 30], [False], rest, radius, [0], cam)
+        depth = rasterize_depth(pts, [0, 30], [False], rest, radius, cam)
+        assert depth.dtype == np.float32 and depth.shape == (60, 80)
+        assert np.array_equal(depth, np.where(g.coverage[:, :, 0], g.depth[:, :, 0], np.float32(np.inf)))
+        assert np.isfinite(depth).any() and not np.isfinite(depth).all()
+        depth_out = rasterize_depth(pts, [0, 30], [False], rest, radius, cam, out=depth_out)
+        g_out = rasterize_strips(pts, [0, 30], [False], rest, radius, [0], cam, msaa=4, out=g_out)
+        fresh = rasterize_strips(pts, [0, 30], [False], rest, radius, [0], cam, msaa=4)
+        assert np.array_equal(depth_out, depth)
+        for field in ("coverage", "depth", "curve", "yarn", "segment", "arclength", "v", "tangent"):
+            assert np.array_equal(getattr(g_out, field), getattr(fresh, field)), field
 
 
 def test_project_matches_the_camera_rays():

@@ -6,9 +6,10 @@ Units and conventions:
   orthographic, square, looks along −direction at the centre of the bounding sphere (radius R_s) of the scene box
   grown by the largest yarn radius, and sits at distance 2·R_s from that centre (outside the sphere, so every yarn
   lies at view depth in [R_s, 3·R_s]); ortho_height = 2·R_s.
-* The map is rendered by ``rasterize_strips`` (msaa 1): strips face the light camera, so each yarn covers its tube
-  silhouette of half-width radius, at the depth of the tube's axis plane. ``depth`` is that view depth (scene units
-  along fwd from the camera plane) of the nearest strip, +inf where no yarn covers the texel centre.
+* The map is rendered by ``rasterize_depth`` (``rasterize_strips``' depth at msaa 1): strips face the light camera,
+  so each yarn covers its tube silhouette of half-width radius, at the depth of the tube's axis plane. ``depth`` is
+  that view depth (scene units along fwd from the camera plane) of the nearest strip, +inf where no yarn covers the
+  texel centre.
 * Texel (row i, column j) covers light-view x ∈ [−h/2 + j·τ, −h/2 + (j + 1)·τ) and y ∈ (h/2 − (i + 1)·τ, h/2 − i·τ]
   (h = ortho_height, τ = h / size the texel size); row 0 is the top (+up). Its centre, where the depth was taken, is
   x = −h/2 + (j + ½)τ, y = h/2 − (i + ½)τ. Continuous texel coordinates of view point (x, y): u = x/τ + size/2
@@ -39,7 +40,7 @@ from numba import njit, prange
 
 from data_formats.conventions import HALF_PI
 from knitrun.render.camera import Camera, view_matrix
-from knitrun.render.strip_raster import rasterize_strips
+from knitrun.render.strip_raster import rasterize_depth
 
 MAX_FILTER_TEXELS = 32.0  # cap on the blocker-search and PCF half-widths
 MAX_TAPS = 8  # taps per axis of each filter grid
@@ -56,12 +57,12 @@ class ShadowMap:
     depth: np.ndarray  # (size, size) float32 view depth of the nearest yarn strip, +inf where none
 
 
-def build_shadow_map(points, offsets, closed, rest_arclength, radius, yarn_id, direction, size, bounds_lo,
-                     bounds_hi, closing_length=None) -> ShadowMap:
+def build_shadow_map(points, offsets, closed, rest_arclength, radius, direction, size, bounds_lo, bounds_hi,
+                     closing_length=None, out=None) -> ShadowMap:
     """Render the yarn curves (as in ``rasterize_strips``; ``radius`` (C,) or a scalar) into a ``size`` × ``size``
     shadow map for a light toward unit-izable ``direction`` (3,), framing the box [bounds_lo, bounds_hi] (yarn
-    beyond it may fall off the map and cast no shadow). ValueError for size < 1, a zero or non-finite direction, or
-    bad bounds."""
+    beyond it may fall off the map and cast no shadow); ``out`` a (size, size) float32 array to reuse for the depth.
+    ValueError for size < 1, a zero or non-finite direction, or bad bounds."""
     direction = np.asarray(direction, np.float64).reshape(3)
     norm = np.linalg.norm(direction)
     if not (np.isfinite(direction).all() and norm > 0):
@@ -80,9 +81,8 @@ def build_shadow_map(points, offsets, closed, rest_arclength, radius, yarn_id, d
     centre = 0.5 * (lo + hi)
     up = np.eye(3)[int(np.argmin(np.abs(direction)))]  # the axis least aligned with the light: never parallel
     camera = Camera(centre + 2 * sphere * direction, centre, up, size, size, ortho_height=2 * sphere)
-    g = rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera, msaa=1,
-                         near=0.5 * sphere, closing_length=closing_length)
-    depth = np.where(g.coverage[:, :, 0], g.depth[:, :, 0], np.float32(np.inf)).astype(np.float32)
+    depth = rasterize_depth(points, offsets, closed, rest_arclength, radius, camera, near=0.5 * sphere,
+                            closing_length=closing_length, out=out)
     return ShadowMap(view_matrix(camera), np.asarray(camera.position, np.float64), 2 * sphere, size, depth)
 
 

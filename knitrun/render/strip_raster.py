@@ -35,8 +35,9 @@ triangles belongs to exactly one of them.
 
 Pipeline: ``_vertex_frames`` (per point) and ``_setup`` (per segment: cull, build, clip, project; up to 4
 triangles) in parallel; ``_bin`` (serial, in triangle order) lists the triangles overlapping each square tile of
-``tile`` px; ``_raster`` (parallel over tiles, each tile owns its pixels) depth-tests and resolves. Buffers are
-identical for any thread count.
+``tile`` px; ``_raster`` (parallel over tiles, each tile owns its pixels) depth-tests (``_depth_test``) and resolves.
+``rasterize_depth`` runs the same depth test and writes the depth alone (``_raster_depth``: shadow maps). Buffers
+are identical for any thread count.
 """
 
 import math
@@ -95,20 +96,51 @@ def rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, c
     segment (default: its current length); ``tile`` the tile size in px; ``out`` a ``StripGBuffer`` of the right
     shape to reuse. ValueError for non-finite points (naming the curve) or bad arguments.
     """
+    if msaa not in SAMPLE_PATTERNS:
+        raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
+    n_curves = len(offsets) - 1
+    yarn_id = np.broadcast_to(np.asarray(yarn_id, dtype=np.int32), (max(n_curves, 0),))
+    tri, tile_start, tile_tris, seg_a, seg_curve = _triangles(points, offsets, closed, rest_arclength, radius, camera,
+                                                              near, far, closing_length, tile)
+    w, h = int(camera.width), int(camera.height)
+    if out is None or out.coverage.shape != (h, w, msaa):
+        out = empty_gbuffer(h, w, msaa)
+    _raster(tri, tile_start, tile_tris, seg_a.astype(np.int32), seg_curve.astype(np.int32),
+            np.ascontiguousarray(yarn_id), w, h, tile, -(-w // tile), SAMPLE_PATTERNS[msaa],
+            float(camera.ortho_height) > 0, tan_half_fov(camera), out.coverage, out.depth, out.curve, out.yarn,
+            out.segment, out.arclength, out.v, out.tangent)
+    return out
+
+
+def rasterize_depth(points, offsets, closed, rest_arclength, radius, camera: Camera, near=1e-3, far=math.inf,
+                    closing_length=None, tile=32, out=None):
+    """The ``depth`` of ``rasterize_strips`` at msaa 1 alone, as a (camera.height, camera.width) float32 map with
+    +inf where no strip covers the pixel centre: what a shadow map needs, without writing the other attributes
+    (the same depth test, so the same values bit for bit). ``out`` an array of that shape and dtype to reuse."""
+    tri, tile_start, tile_tris, _, _ = _triangles(points, offsets, closed, rest_arclength, radius, camera, near, far,
+                                                  closing_length, tile)
+    w, h = int(camera.width), int(camera.height)
+    if out is None or out.shape != (h, w) or out.dtype != np.float32:
+        out = np.empty((h, w), np.float32)
+    _raster_depth(tri, tile_start, tile_tris, w, h, tile, -(-w // tile), SAMPLE_PATTERNS[1],
+                  float(camera.ortho_height) > 0, tan_half_fov(camera), out)
+    return out
+
+
+def _triangles(points, offsets, closed, rest_arclength, radius, camera, near, far, closing_length, tile):
+    """Validate the arguments (``rasterize_strips``) and build, clip, project and bin the strips' triangles:
+    (tri, tile_start, tile_tris, seg_a, seg_curve)."""
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     offsets = np.asarray(offsets, dtype=np.int64)
     n_curves = len(offsets) - 1
     closed = np.broadcast_to(np.asarray(closed, dtype=np.bool_), (n_curves,))
     rest = np.ascontiguousarray(rest_arclength, dtype=np.float64)
     radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n_curves,))
-    yarn_id = np.broadcast_to(np.asarray(yarn_id, dtype=np.int32), (n_curves,))
     if n_curves < 0 or offsets.ndim != 1 or offsets[0] != 0 or offsets[-1] != len(points) \
             or np.any(np.diff(offsets) < 0):
         raise ValueError(f"offsets must run non-decreasing from 0 to the point count {len(points)}")
     if rest.shape != (len(points),):
         raise ValueError(f"rest_arclength has shape {rest.shape}, expected ({len(points)},)")
-    if msaa not in SAMPLE_PATTERNS:
-        raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
     if not (near > 0 and far > near) or tile < 1:
         raise ValueError(f"near = {near}, far = {far}, tile = {tile}: expected 0 < near < far and tile >= 1")
     bad = np.flatnonzero(~(np.isfinite(radius) & (radius > 0)))
@@ -151,14 +183,8 @@ def rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, c
     boxes = np.empty((4 * n_seg, 4), np.int64)
     _setup(points, seg_a, seg_b, s_a, s_b, radius[seg_curve].copy(), tangent, bvec, ok, view, pos, float(near),
            float(far), ortho_h, tan_half, w, h, tile, tri, count, boxes)
-    tiles_x, tiles_y = -(-w // tile), -(-h // tile)
-    tile_start, tile_tris = _bin(count, boxes, tiles_x, tiles_y)
-    if out is None or out.coverage.shape != (h, w, msaa):
-        out = empty_gbuffer(h, w, msaa)
-    _raster(tri, tile_start, tile_tris, seg_a.astype(np.int32), seg_curve.astype(np.int32),
-            np.ascontiguousarray(yarn_id), w, h, tile, tiles_x, SAMPLE_PATTERNS[msaa], ortho_h > 0, tan_half,
-            out.coverage, out.depth, out.curve, out.yarn, out.segment, out.arclength, out.v, out.tangent)
-    return out
+    tile_start, tile_tris = _bin(count, boxes, -(-w // tile), -(-h // tile))
+    return tri, tile_start, tile_tris, seg_a, seg_curve
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -379,6 +405,82 @@ def _bin(count, boxes, tiles_x, tiles_y):
     return tile_start, tile_tris
 
 
+@njit(cache=True, error_model="numpy")
+def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, best_z, best_tri, best_l):
+    """Depth-test triangles tile_tris[first:stop] at the ``pattern`` samples of the pixels [x_lo, x_hi) × [y_lo,
+    y_hi): for each sample the nearest view z (1/q-interpolated), its triangle slot (−1: none) and barycentrics."""
+    k_samples = pattern.shape[0]
+    best_z[:] = np.inf
+    best_tri[:] = -1
+    for idx in range(first, stop):
+        slot = tile_tris[idx]
+        rec = tri[slot]
+        x0, y0, x1, y1, x2, y2 = rec[0, 0], rec[0, 1], rec[1, 0], rec[1, 1], rec[2, 0], rec[2, 1]
+        bx0, by0, dx0, dy0, sg0, tie0 = _edge_setup(x1, y1, x2, y2)  # edges 1→2, 2→0, 0→1
+        bx1, by1, dx1, dy1, sg1, tie1 = _edge_setup(x2, y2, x0, y0)
+        bx2, by2, dx2, dy2, sg2, tie2 = _edge_setup(x0, y0, x1, y1)
+        inv_area = 1.0 / (sg2 * ((x2 - bx2) * dy2 - (y2 - by2) * dx2))
+        slope0 = dx0 / dy0 if dy0 != 0.0 else 0.0
+        slope1 = dx1 / dy1 if dy1 != 0.0 else 0.0
+        slope2 = dx2 / dy2 if dy2 != 0.0 else 0.0
+        px_lo, px_hi = _pixel_span(x0, x1, x2, x_lo, x_hi)
+        py_lo, py_hi = _pixel_span(y0, y1, y2, y_lo, y_hi)
+        for py in range(py_lo, py_hi):
+            lo, hi = float(px_lo), float(px_hi)
+            lo, hi = _row_limit(lo, hi, bx0, by0, slope0, sg0 * dy0, py)
+            lo, hi = _row_limit(lo, hi, bx1, by1, slope1, sg1 * dy1, py)
+            lo, hi = _row_limit(lo, hi, bx2, by2, slope2, sg2 * dy2, py)
+            for px in range(int(math.floor(lo)), min(int(math.floor(hi)) + 1, px_hi)):
+                for s in range(k_samples):
+                    sx, sy = px + pattern[s, 0], py + pattern[s, 1]
+                    e0 = sg0 * ((sx - bx0) * dy0 - (sy - by0) * dx0)
+                    if e0 < 0.0 or (e0 == 0.0 and not tie0):
+                        continue
+                    e1 = sg1 * ((sx - bx1) * dy1 - (sy - by1) * dx1)
+                    if e1 < 0.0 or (e1 == 0.0 and not tie1):
+                        continue
+                    e2 = sg2 * ((sx - bx2) * dy2 - (sy - by2) * dx2)
+                    if e2 < 0.0 or (e2 == 0.0 and not tie2):
+                        continue
+                    l0, l1, l2 = e0 * inv_area, e1 * inv_area, e2 * inv_area
+                    z = (l0 * rec[0, 3] + l1 * rec[1, 3] + l2 * rec[2, 3]) / \
+                        (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
+                    j, i = px - x_lo, py - y_lo
+                    if z < best_z[i, j, s]:
+                        best_z[i, j, s] = z
+                        best_tri[i, j, s] = slot
+                        best_l[i, j, s, 0], best_l[i, j, s, 1], best_l[i, j, s, 2] = l0, l1, l2
+
+
+@njit(cache=True, error_model="numpy")
+def _sample_depth(z, px, py, pattern_s, width, height, ortho, tan_half):
+    """Depth of a sample at view z: z itself orthographic, the distance to the camera for a pinhole."""
+    if ortho:
+        return z
+    sx = (2.0 * (px + pattern_s[0]) - width) / height * tan_half
+    sy = (1.0 - 2.0 * (py + pattern_s[1]) / height) * tan_half
+    return z * math.sqrt(1.0 + sx * sx + sy * sy)
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, pattern, ortho, tan_half, depth):
+    """``_raster``'s depth test alone: depth[py, px] of the nearest strip at the pixel's single sample, +inf where
+    none covers it."""
+    n_tiles = tile_start.shape[0] - 1
+    for t in prange(n_tiles):
+        x_lo, y_lo = (t % tiles_x) * tile, (t // tiles_x) * tile
+        x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
+        best_z = np.empty((y_hi - y_lo, x_hi - x_lo, 1))
+        best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, 1), np.int64)
+        best_l = np.empty((y_hi - y_lo, x_hi - x_lo, 1, 3))
+        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, best_z,
+                    best_tri, best_l)
+        for i in range(y_hi - y_lo):
+            for j in range(x_hi - x_lo):
+                depth[y_lo + i, x_lo + j] = np.inf if best_tri[i, j, 0] < 0 else \
+                    _sample_depth(best_z[i, j, 0], x_lo + j, y_lo + i, pattern[0], width, height, ortho, tan_half)
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _raster(tri, tile_start, tile_tris, seg_first, seg_curve, yarn_id, width, height, tile, tiles_x,
             pattern, ortho, tan_half, coverage, depth, curve, yarn, segment, arclength, v, tangent):
@@ -388,47 +490,11 @@ def _raster(tri, tile_start, tile_tris, seg_first, seg_curve, yarn_id, width, he
     for t in prange(n_tiles):
         x_lo, y_lo = (t % tiles_x) * tile, (t // tiles_x) * tile
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
-        best_z = np.full((y_hi - y_lo, x_hi - x_lo, k_samples), np.inf)
-        best_tri = np.full((y_hi - y_lo, x_hi - x_lo, k_samples), -1, np.int64)
+        best_z = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples))
+        best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples), np.int64)
         best_l = np.zeros((y_hi - y_lo, x_hi - x_lo, k_samples, 3))
-        for idx in range(tile_start[t], tile_start[t + 1]):
-            slot = tile_tris[idx]
-            rec = tri[slot]
-            x0, y0, x1, y1, x2, y2 = rec[0, 0], rec[0, 1], rec[1, 0], rec[1, 1], rec[2, 0], rec[2, 1]
-            bx0, by0, dx0, dy0, sg0, tie0 = _edge_setup(x1, y1, x2, y2)  # edges 1→2, 2→0, 0→1
-            bx1, by1, dx1, dy1, sg1, tie1 = _edge_setup(x2, y2, x0, y0)
-            bx2, by2, dx2, dy2, sg2, tie2 = _edge_setup(x0, y0, x1, y1)
-            inv_area = 1.0 / (sg2 * ((x2 - bx2) * dy2 - (y2 - by2) * dx2))
-            slope0 = dx0 / dy0 if dy0 != 0.0 else 0.0
-            slope1 = dx1 / dy1 if dy1 != 0.0 else 0.0
-            slope2 = dx2 / dy2 if dy2 != 0.0 else 0.0
-            px_lo, px_hi = _pixel_span(x0, x1, x2, x_lo, x_hi)
-            py_lo, py_hi = _pixel_span(y0, y1, y2, y_lo, y_hi)
-            for py in range(py_lo, py_hi):
-                lo, hi = float(px_lo), float(px_hi)
-                lo, hi = _row_limit(lo, hi, bx0, by0, slope0, sg0 * dy0, py)
-                lo, hi = _row_limit(lo, hi, bx1, by1, slope1, sg1 * dy1, py)
-                lo, hi = _row_limit(lo, hi, bx2, by2, slope2, sg2 * dy2, py)
-                for px in range(int(math.floor(lo)), min(int(math.floor(hi)) + 1, px_hi)):
-                    for s in range(k_samples):
-                        sx, sy = px + pattern[s, 0], py + pattern[s, 1]
-                        e0 = sg0 * ((sx - bx0) * dy0 - (sy - by0) * dx0)
-                        if e0 < 0.0 or (e0 == 0.0 and not tie0):
-                            continue
-                        e1 = sg1 * ((sx - bx1) * dy1 - (sy - by1) * dx1)
-                        if e1 < 0.0 or (e1 == 0.0 and not tie1):
-                            continue
-                        e2 = sg2 * ((sx - bx2) * dy2 - (sy - by2) * dx2)
-                        if e2 < 0.0 or (e2 == 0.0 and not tie2):
-                            continue
-                        l0, l1, l2 = e0 * inv_area, e1 * inv_area, e2 * inv_area
-                        z = (l0 * rec[0, 3] + l1 * rec[1, 3] + l2 * rec[2, 3]) / \
-                            (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
-                        j, i = px - x_lo, py - y_lo
-                        if z < best_z[i, j, s]:
-                            best_z[i, j, s] = z
-                            best_tri[i, j, s] = slot
-                            best_l[i, j, s, 0], best_l[i, j, s, 1], best_l[i, j, s, 2] = l0, l1, l2
+        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, best_z,
+                    best_tri, best_l)
         for i in range(y_hi - y_lo):
             for j in range(x_hi - x_lo):
                 for s in range(k_samples):
@@ -444,13 +510,8 @@ def _raster(tri, tile_start, tile_tris, seg_first, seg_curve, yarn_id, width, he
                     rec = tri[slot]
                     l0, l1, l2 = best_l[i, j, s, 0], best_l[i, j, s, 1], best_l[i, j, s, 2]
                     inv_q = 1.0 / (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
-                    z = best_z[i, j, s]
-                    if ortho:
-                        depth[py, px, s] = z
-                    else:
-                        sx = (2.0 * (px + pattern[s, 0]) - width) / height * tan_half
-                        sy = (1.0 - 2.0 * (py + pattern[s, 1]) / height) * tan_half
-                        depth[py, px, s] = z * math.sqrt(1.0 + sx * sx + sy * sy)
+                    depth[py, px, s] = _sample_depth(best_z[i, j, s], px, py, pattern[s], width, height, ortho,
+                                                     tan_half)
                     g = slot % seg_first.shape[0]
                     curve[py, px, s] = seg_curve[g]
                     yarn[py, px, s] = yarn_id[seg_curve[g]]
