@@ -244,14 +244,14 @@ def _environment(scene: Scene, use_cache: bool):
                       scene.render.seed, use_cache)
 
 
-def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers, buffers):
+def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers, depth_maps):
     """Yarn-level visibility of each receiver set (position, bias) toward ``direction``; the shadow map's depth is
-    drawn into ``buffers[("shadow", size)]`` (kept there for the next map of that size)."""
+    drawn into ``depth_maps[size]`` (kept there for the next map of that size)."""
     if len(lines.entry) == 0:
         return [np.ones(len(p)) for p, _ in receivers]
     sm = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius_of_curve, direction, size,
-                          lines.points.min(axis=0), lines.points.max(axis=0), out=buffers.get(("shadow", size)))
-    buffers[("shadow", size)] = sm.depth
+                          lines.points.min(axis=0), lines.points.max(axis=0), out=depth_maps.get(size))
+    depth_maps[size] = sm.depth
     return [shadow_visibility(sm, p, bias, angular_radius) for p, bias in receivers]
 
 
@@ -315,7 +315,7 @@ class Renderer:
             if progress is not None:
                 progress("srbf_fit", self.setup_timings["srbf_fit"])
         self.fit = fit
-        self.buffers = {}  # the G-buffers and shadow maps of the last frame, drawn over by the next (no fresh pages)
+        self.shadow_depth = {}  # shadow maps by size, drawn over by the next map of that size
 
     def frame_index(self, frame: int | None) -> int:
         """``frame`` as an index into the curves' frames (None: the scene's ``render.frame``); FormatError (one line)
@@ -350,17 +350,14 @@ class Renderer:
         pattern = SAMPLE_PATTERNS[msaa]
         radius = np.array([looks[k].radius for k in lines.entry])
         fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
-        buffers = self.buffers
-        gbuffer = buffers["camera"] = rasterize_strips(lines.points, lines.offsets, False, lines.rest, radius,
-                                                       lines.entry, camera, msaa, out=buffers.get("camera"))
+        gbuffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
         points = shading_points(gbuffer, camera, pattern)
         drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
         fly_points = None
         if drawn_fly and len(lines.entry):
             fly_curves = np.isin(lines.entry, drawn_fly)
-            fly_buffer = buffers["flyaway"] = rasterize_strips(lines.points, lines.offsets, False, lines.rest,
-                                                               np.where(fly_curves, fly_radius, 1e-9), lines.entry,
-                                                               camera, msaa, out=buffers.get("flyaway"))
+            fly_buffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest,
+                                          np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
             tolerance = float(radius.max())
             mask = ~gbuffer.coverage | (fly_buffer.depth <= gbuffer.depth + tolerance)
             mask &= np.isin(fly_buffer.yarn, drawn_fly)
@@ -378,7 +375,7 @@ class Renderer:
         size = scene.render.shadow_map_size
         light_vis = [np.empty((len(light_dir), len(s["weight"]))) for s in sets]
         for i, d in enumerate(light_dir):
-            for out, vis in zip(light_vis, _visibility(lines, radius, d, size, 0.0, receivers, buffers)):
+            for out, vis in zip(light_vis, _visibility(lines, radius, d, size, 0.0, receivers, self.shadow_depth)):
                 out[i] = vis
         lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
         lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
@@ -387,7 +384,7 @@ class Renderer:
         for j, d in enumerate(lobe_dir):
             angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
             for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
-                                                      receivers, buffers)):
+                                                      receivers, self.shadow_depth)):
                 out[j] = vis
         albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
             np.zeros(len(looks))

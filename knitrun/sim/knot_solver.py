@@ -61,8 +61,8 @@ import numpy as np
 from numba import njit, prange
 
 from data_formats.numba_setup import FASTMATH
-from knitrun.sim.stitch_templates import (F_A, F_C, F_DS_NEG, F_DS_POS, F_KNOTS, F_S, F_T, I_KNOT, I_PIECES, I_V0,
-                                          I_V1, F_SHEAR, MAX_ANGLES, MAX_POINTS, MAX_SEGMENTS, N_UNKNOWNS)
+from knitrun.sim.stitch_templates import (F_A, F_C, F_DS_NEG, F_DS_POS, F_KNOTS, F_S, F_SHEAR, F_T, I_KNOT, I_PIECES,
+                                          I_V0, I_V1, MAX_ANGLES, MAX_POINTS, MAX_SEGMENTS, N_UNKNOWNS)
 
 MAX_TRIES = 8  # damped solves per iteration before giving up on the iteration
 LAMBDA0 = 1e-2  # initial Levenberg damping (relative to tr(S A S)/4, see damped_solve)
