@@ -141,10 +141,15 @@ def weight_scan(weights):
                   f"{knit['length_after'] / knit['length_before']:.3f} |")
 
 
-def images(folder, pack):
-    from PIL import Image
-
+def side_by_side(images, path, label):
+    """Write linear HDR ``images`` (each (H, W, 3+)) side by side as one PNG (``data_formats.images.write_png``)."""
     from data_formats.images import write_png
+
+    write_png(path, np.concatenate(images, axis=1))
+    print(f"wrote {path} ({label})")
+
+
+def images(folder, pack):
     from data_formats.scene import load_scene
     from data_formats.stitch_mesh import write_stitch_mesh
     from data_formats.yarn_curves import write_yarn_curves
@@ -161,14 +166,8 @@ def images(folder, pack):
             halves = []
             for relaxed in (False, True):
                 use_templates(relaxed)
-                png = tmp / f"{pattern}_{relaxed}.png"
-                write_png(png, render(load_scene(scene_path)).image)
-                halves.append(Image.open(png).convert("RGB"))
-            out = Image.new("RGB", (halves[0].width * 2, halves[0].height))
-            out.paste(halves[0], (0, 0))
-            out.paste(halves[1], (halves[0].width, 0))
-            out.save(folder / f"templates_{pattern}.png")
-            print(f"wrote {folder / f'templates_{pattern}.png'} (hand-drawn | relaxed)")
+                halves.append(render(load_scene(scene_path)).image)
+            side_by_side(halves, folder / f"templates_{pattern}.png", "hand-drawn | relaxed")
         use_templates(True)
         for pattern in ("stockinette", "rib1x1"):  # sheared 0.3: relaxed at rest only | with the shear shape
             mesh = chart_to_mesh(pattern_chart(pattern, 6, 6))
@@ -188,14 +187,9 @@ def images(folder, pack):
                 scene_path.write_text(SCENE.format(mesh=curves_path, pack=Path(pack).resolve())
                                       .replace("stitch_mesh =", "curves =")
                                       .replace("fov_deg = 25.0", "fov_deg = 31.0"))  # the parallelogram is wider
-                png = tmp / f"{pattern}_sheared_{shaped}.png"
-                write_png(png, render(load_scene(scene_path)).image)
-                halves.append(Image.open(png).convert("RGB"))
-            out = Image.new("RGB", (halves[0].width * 2, halves[0].height))
-            out.paste(halves[0], (0, 0))
-            out.paste(halves[1], (halves[0].width, 0))
-            out.save(folder / f"templates_{pattern}_sheared.png")
-            print(f"wrote {folder / f'templates_{pattern}_sheared.png'} (shear 0.3: without | with the shear shape)")
+                halves.append(render(load_scene(scene_path)).image)
+            side_by_side(halves, folder / f"templates_{pattern}_sheared.png",
+                         "shear 0.3: without | with the shear shape")
 
 
 def main():
