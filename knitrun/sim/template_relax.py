@@ -102,14 +102,14 @@ SOLVER_TOL = 1e-10  # least_squares' ftol, xtol and gtol (see the module docstri
 IDENTITY = np.eye(2)
 # The tile is relaxed at rest and, for its contact term only, under these affine deformations of the face plane
 # (knot interpolation of the runtime: ``template_positions``), each with its weight; the rest tile comes first.
-SHEAR = np.array([[1.0, 0.3], [0.0, 1.0]])  # the sheared face the knit's shear lifts are relaxed for
+SHEAR = np.array([[1.0, 0.3], [0.0, 1.0]])  # the sheared face the knit's shear shape is relaxed for
 MIRROR = np.diag([-1.0, 1.0])  # the face mirrored about its centre line: shear the other way is MIRROR·SHEAR·MIRROR
 DEFORMATIONS = {"rest": (IDENTITY, 1.0),
                 "shear 0.3": (SHEAR, W_DEFORMED),
                 "shear -0.3": (MIRROR @ SHEAR @ MIRROR, W_DEFORMED)}
 SHIFTS = [(i, j) for i in range(-2, 3) for j in range(-2, 3)]
 FORMAT = "knit-relaxed-templates"
-VERSION = "1.1"  # 1.1: the knit's shear lifts
+VERSION = "1.1"  # 1.1: the knit's shear shape
 
 
 # --- the knit tile, at rest or under an affine deformation F of the face plane ----------------------------------------
