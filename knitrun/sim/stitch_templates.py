@@ -182,7 +182,7 @@ def template_pieces(code, relaxed=True):
         pieces = legs + [loop(inner, 0), loop(1 - inner, 2)]
     name = "knit" if code == PURL else STITCH_TYPES[code]
     if relaxed and name in RELAXED:
-        pieces = [(role, _with_relaxed(points, RELAXED[name]["points"].get(role))) for role, points in pieces]
+        pieces = [(role, with_relaxed_points(points, RELAXED[name]["points"].get(role))) for role, points in pieces]
     if code == PURL:  # knit mirrored through the fabric plane
         pieces = [(role, [p[:4] + (-p[4],) if p[0] == "knot" else p for p in points]) for role, points in pieces]
     return pieces
@@ -197,7 +197,7 @@ def knots_of(code, relaxed=True):
     return YARN_OVER_KNOTS if code == YARN_OVER else STITCH_KNOTS
 
 
-def _with_relaxed(points, coefficients):
+def with_relaxed_points(points, coefficients):
     """The piece's points with its knot points' (a, c, s) replaced, in order, by ``coefficients`` (if given)."""
     if coefficients is None:
         return points

@@ -439,7 +439,7 @@ def _relax_templates(progress):
     pieces = st.template_pieces(st.KNIT, relaxed=False)
     roles = (st.ROLE_IN, st.ROLE_OUT, st.ROLE_LOOP)
     result = relax_knit(pieces, st.STITCH_KNOTS, roles, progress)
-    new_pieces = [(role, st._with_relaxed(points, [tuple(p) for p in result["points"][str(role)]]))
+    new_pieces = [(role, st.with_relaxed_points(points, [tuple(p) for p in result["points"][str(role)]]))
                   for role, points in pieces]
     new_knots = tuple((tuple(k[:2]), tuple(k[2:])) for k in result["knots"])
     result["shear"] = relax_shear_shape(new_pieces, new_knots, roles, SHEAR, progress)
