@@ -19,6 +19,7 @@ deformation (the default 3 Gauss-Newton iterations) and measures that frame with
 """
 
 import argparse
+import contextlib
 import tempfile
 import time
 from pathlib import Path
@@ -174,13 +175,8 @@ def images(folder, pack):
             frames = deformation_frames(mesh.vertices, ["shear=0.3"], 1)
             halves = []
             for shaped in (False, True):
-                saved = stitch_templates.TEMPLATE_FLOAT[:, stitch_templates.F_SHEAR, 0].copy()
-                if not shaped:
-                    stitch_templates.TEMPLATE_FLOAT[:, stitch_templates.F_SHEAR, 0] = 0.0
-                try:
+                with contextlib.nullcontext() if shaped else stitch_templates.shear_shape_off():
                     curves, _ = simulate(mesh, frames)
-                finally:
-                    stitch_templates.TEMPLATE_FLOAT[:, stitch_templates.F_SHEAR, 0] = saved
                 curves_path = tmp / f"{pattern}_sheared_{shaped}.h5"
                 write_yarn_curves(curves_path, curves)
                 scene_path = tmp / f"{pattern}_sheared_{shaped}.toml"

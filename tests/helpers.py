@@ -1,9 +1,7 @@
 """Test data and builders shared by several test modules (fixtures are in ``conftest.py``, the χ² test in
 ``chi2.py``): tiny bake settings, an asset pack's attribute groups and a pack with every table, the BCSDF of a
-rough fiber for the I_M tests, scene files around straight yarns, a hand-built stitch mesh, and the knot simulator's
-templates without their shear shape."""
+rough fiber for the I_M tests, scene files around straight yarns, and a hand-built stitch mesh."""
 
-import contextlib
 import dataclasses
 import math
 
@@ -193,19 +191,3 @@ def assert_same(a, b):
             np.testing.assert_array_equal(x, y, err_msg=field.name)
         else:
             assert x == y, field.name
-
-
-# --- the knot simulator ---------------------------------------------------------------------------------------------
-
-@contextlib.contextmanager
-def without_shear_shape():
-    """The packed stitch templates with every type's shear shape off (κ_ref = 0) while the block runs (the kernels
-    read ``TEMPLATE_FLOAT`` at every call)."""
-    from knitrun.sim import stitch_templates as st
-
-    saved = st.TEMPLATE_FLOAT[:, st.F_SHEAR, 0].copy()
-    st.TEMPLATE_FLOAT[:, st.F_SHEAR, 0] = 0.0
-    try:
-        yield
-    finally:
-        st.TEMPLATE_FLOAT[:, st.F_SHEAR, 0] = saved

@@ -14,8 +14,8 @@ from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.sim.knot_solver import R_KNOTS, W_SIZE, damped_solve, face_shear, knot_points, shear_weights
 from knitrun.sim.simulate import face_problem, knot_centres, prepare, solve_frame
 from knitrun.sim.stitch_templates import (F_A, F_C, F_DS_NEG, F_DS_POS, F_S, F_SHEAR, I_KNOT, K2TOG, KNIT, MAX_POINTS,
-                                          N_POINTS, PURL, SSK, TEMPLATE_FLOAT, TEMPLATE_INT, YARN_OVER, piece_ranges)
-from tests.helpers import without_shear_shape
+                                          N_POINTS, PURL, SSK, TEMPLATE_FLOAT, TEMPLATE_INT, YARN_OVER, piece_ranges,
+                                          shear_shape_off)
 
 MIXED_CHART = """
 ppk\\k
@@ -229,7 +229,7 @@ def test_the_shear_shape_moves_only_sheared_faces():
               for spec in ("stretch-x=1.5", "stretch-y=1.5", "cylinder=0.5", "shear=0.3")}
     frames["rest"] = model.mesh.vertices
     shaped = {name: solve_frame(model, v).points for name, v in frames.items()}
-    with without_shear_shape():
+    with shear_shape_off():
         plain = {name: solve_frame(model, v).points for name, v in frames.items()}
     for name in frames:
         moved = np.abs(shaped[name] - plain[name]).max() / model.radius

@@ -16,7 +16,6 @@ from knitrun.sim.contact import contact_statistic
 from knitrun.sim.deformations import deformation_frames
 from knitrun.sim.knit_chart import chart_to_mesh, pattern_chart
 from knitrun.sim.simulate import simulate
-from tests.helpers import without_shear_shape
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +101,7 @@ def test_simulated_knits_touch_when_sheared(pattern):
         curves, report = simulate(mesh, frames)
         stats = contact_statistic(curves, report["yarn_radius"])
         assert stats["p5"] >= 0.8 and 0.95 <= stats["p50"] <= 1.10, (spec, stats)
-        with without_shear_shape():
+        with st.shear_shape_off():
             curves, report = simulate(mesh, frames)
         assert contact_statistic(curves, report["yarn_radius"])["p5"] < 0.8, spec
 

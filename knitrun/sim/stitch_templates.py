@@ -76,6 +76,7 @@ with s. Types without a relaxed shear shape (yarn-over and the decreases, relaxe
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
@@ -280,6 +281,18 @@ def shear_shape(code, pieces, relaxed=True):
 
 TEMPLATE_INT, TEMPLATE_FLOAT = pack_templates()
 MAX_POINTS = TEMPLATE_INT.shape[2]
+
+
+@contextlib.contextmanager
+def shear_shape_off():
+    """Every type's shear shape switched off (κ_ref = 0) in the packed templates while the block runs (the kernels
+    read ``TEMPLATE_FLOAT`` at every call): the runtime as before the shape existed, for comparisons."""
+    saved = TEMPLATE_FLOAT[:, F_SHEAR, 0].copy()
+    TEMPLATE_FLOAT[:, F_SHEAR, 0] = 0.0
+    try:
+        yield
+    finally:
+        TEMPLATE_FLOAT[:, F_SHEAR, 0] = saved
 
 
 def piece_ranges(code):
