@@ -69,7 +69,8 @@ def main():
     shadowed = pipeline._visibility
     probes = [("full", base, shadowed), ("  without inter-reflection", ABLATIONS["xi_shadowing"], shadowed),
               ("  without yarn-level shadows (probe)", base,
-         lambda lines, radius, direction, size, angular, receivers: [np.ones(len(p)) for p, _ in receivers])]
+         lambda lines, radius, direction, size, angular, receivers, depth_maps:
+         [np.ones(len(p)) for p, _ in receivers])]
     reference_lum = reference @ LUMINANCE
     for label, features, visibility in probes:
         pipeline._visibility = visibility
