@@ -11,10 +11,12 @@ Stages (each a function ``(spec, settings, seed, progress) -> StageResult``; ``p
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
 | interreflection | ``interreflection/albedo``, ``interreflection/transmittance`` (the yarn tube's ρ_Y, T_Y) | always |
+| closure | ``correction/xi_closed`` (ξ closed on the strip renderer) | its inputs are baked (``CLOSURE_INPUTS``) |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
 stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
-is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed), so an
+is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed; the
+closure's settings hold its input stages' settings and versions), so an
 interrupted or partial re-bake reuses finished stages. An entry stores a SHA-256 of its content; an entry that is
 unreadable, truncated or edited is a miss (the stage is baked again and the entry rewritten) and is reported in the
 stage's ``cache_warning``. Same seed and settings → identical pack contents whatever
@@ -38,6 +40,7 @@ from data_formats.cache_folders import cache_root
 from data_formats.errors import FormatError
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
 from knitbake.fibers.procedural_yarn import check_fiber_budget
+from knitbake.stages.closure import CLOSURE_INPUTS, bake_closure_stage
 from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
 from knitbake.stages.ds_precompute import bake_dual_scattering_stage
 from knitbake.stages.im_table import bake_environment_stage
@@ -46,7 +49,8 @@ from knitbake.stages.textures import bake_flyaway_stage, bake_regular_stage, fly
 from knitbake.stages.yarn_hull import bake_yarn_hull_stage
 from knitrun.render.camera import pixel_size, scene_camera
 
-STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment", "interreflection")
+STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment", "interreflection",
+               "closure")
 
 QUALITY = {
     "draft": {
@@ -58,6 +62,7 @@ QUALITY = {
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (12, 24, 12, 32)},
         "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2},
+        "closure": {"iterations": 4},
     },
     "standard": {
         "dual_scattering": {"n_theta": 64},
@@ -68,6 +73,7 @@ QUALITY = {
         "flyaway": {"width": 256, "height": 64, "samples": 4},
         "environment": {"shape": (24, 48, 24, 96)},
         "interreflection": {"n_views": 6, "rows": 16, "spp": 4, "batches": 3},
+        "closure": {"iterations": 4},
     },
     "final": {
         "dual_scattering": {"n_theta": 128},
@@ -78,6 +84,7 @@ QUALITY = {
         "flyaway": {"width": 512, "height": 128, "samples": 6},
         "environment": {"shape": (32, 64, 32, 128)},
         "interreflection": {"n_views": 8, "rows": 32, "spp": 8, "batches": 4},
+        "closure": {"iterations": 4},
     },
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.
@@ -86,8 +93,8 @@ QUALITY = {
 # environment 2: the table holds the TT and D lobes (schema 2.0), finer grids, measured lookup error; 3: scalar
 # quadrature error; correction 5, shadowing 3, interreflection 2, textures 2, flyaway 2: the fibers traced as Embree
 # curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn;
-# interreflection 4: the yarn's transmittance T_Y as well
-STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 6, "shadowing": 3, "environment": 3,
+# interreflection 4: the yarn's transmittance T_Y as well; correction 7: Ψ_* kept (correction/radiance)
+STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
                  "interreflection": 4, "textures": 2, "flyaway": 2}
 
 
@@ -149,7 +156,8 @@ def _load_stage(path: Path) -> tuple[StageResult | None, str | None]:
 
 STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
           "shadowing": bake_shadowing_stage, "textures": bake_regular_stage, "flyaway": bake_flyaway_stage,
-          "environment": bake_environment_stage, "interreflection": bake_yarn_hull_stage}
+          "environment": bake_environment_stage, "interreflection": bake_yarn_hull_stage,
+          "closure": bake_closure_stage}
 
 
 def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None = None) -> list[str]:
@@ -164,7 +172,9 @@ def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None
         unknown = [o for o in only if o not in STAGE_ORDER]
         if unknown:
             raise FormatError(f"--only {','.join(unknown)}: unknown table group (known: {', '.join(STAGE_ORDER)})")
-        stages = [s for s in stages if s in only]
+        stages = [s for s in stages if s in only or (s == "closure" and "correction" in only)]
+    if "closure" in stages and not set(CLOSURE_INPUTS) <= set(stages):
+        stages.remove("closure")  # a partial pack keeps the paper's ξ (ASSET_PACK.md §6)
     return stages
 
 
@@ -204,22 +214,30 @@ def bake_plan(spec: YarnSpec, quality: str = "draft", only=None, needs=None, see
         for stage in ("textures", "flyaway"):
             settings[stage]["height"] = needs["texture_height"]
             settings[stage]["width"] = needs["texture_width"]
+    correction = settings["correction"]
+    settings["closure"] = {**settings["closure"], "rows": max(correction["rows"], correction["n_v"]),
+                           "inputs": {s: {"settings": settings[s], "version": STAGE_VERSION[s]}
+                                      for s in CLOSURE_INPUTS}}
     stages = stages_for(spec, only, needs)
     _check_fiber_windows(spec, stages)
     return settings, stages
 
 
 def run_stage(spec: YarnSpec, stage: str, settings: dict, seed: int, use_cache: bool = True,
-              progress=None) -> tuple[StageResult, dict]:
+              progress=None, inputs: dict | None = None) -> tuple[StageResult, dict]:
     """(result, summary row) of one stage: from the stage cache when a valid entry exists, else baked and cached.
     The row holds seconds, cached, tables, error_estimate (the largest of its tables) and, when an entry was
-    damaged, cache_warning. Deterministic for a seed whatever the thread count, so any process may run it."""
+    damaged, cache_warning. Deterministic for a seed whatever the thread count, so any process may run it.
+    ``inputs`` (the closure only): stage → ``run_stage``'s (result, row) of each of ``CLOSURE_INPUTS``."""
     key = stage_key(stage, spec, settings, seed)
     path = cache_dir() / f"{stage}-{key}.npz"
     t0 = time.perf_counter()
     result, damaged = _load_stage(path) if use_cache else (None, None)
     cached = result is not None
-    if result is None:
+    if result is None and stage == "closure":
+        given = {s: inputs[s][0] for s in CLOSURE_INPUTS}
+        result = bake_closure_stage(spec, settings, seed, progress, given, _input_pack_writer(spec, seed, given))
+    elif result is None:
         result = STAGES[stage](spec, settings, seed, progress)
         if use_cache:
             _save_stage(path, result)
@@ -252,6 +270,17 @@ def write_baked_pack(spec: YarnSpec, output, quality: str, settings: dict, stage
     return summary
 
 
+def _input_pack_writer(spec: YarnSpec, seed: int, inputs: dict):
+    """``write(path, xi)``: the pack of the closure's input stages with ``correction/xi`` replaced by ``xi``."""
+    def write(path, xi):
+        results = {s: (r, {"seconds": 0.0}) for s, r in inputs.items()}
+        corr = inputs["correction"]
+        results["correction"] = (StageResult({**corr.tables, "correction/xi": xi}, corr.errors, corr.attrs,
+                                             corr.counts), {"seconds": 0.0})
+        write_baked_pack(spec, path, "closure input", {}, list(inputs), None, seed, results)
+    return write
+
+
 def _lazy_progress(progress_factory, stage):
     """A progress callback that asks ``progress_factory`` for the stage's bar only once the stage reports (a cached
     stage shows none)."""
@@ -278,5 +307,6 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
         if on_stage:
             on_stage(stage, i, len(stages))
         results[stage] = run_stage(spec, stage, settings[stage], seed, use_cache,
-                                   _lazy_progress(progress_factory, stage) if progress_factory else None)
+                                   _lazy_progress(progress_factory, stage) if progress_factory else None,
+                                   inputs=results if stage == "closure" else None)
     return write_baked_pack(spec, output, quality, settings, stages, needs, seed, results)

@@ -38,6 +38,7 @@ import os
 
 from data_formats.yarn_spec import YarnSpec
 from knitbake.bake import bake_plan, run_stage, write_baked_pack
+from knitbake.stages.closure import CLOSURE_INPUTS
 from knitbake.trace.reference import reference_batch, sample_batches
 
 SCHEDULER_ENV = "KNIT_DASK_SCHEDULER"
@@ -75,9 +76,11 @@ def submit_bake(client, spec: YarnSpec, output, quality: str = "draft", seed: in
     the futures of its stage tasks). Checks the plan (seed, quality, memory) before anything is submitted."""
     settings, stages = bake_plan(spec, quality, seed=seed, overrides=overrides)
     tag = os.urandom(4).hex()
-    stage_futures = {stage: client.submit(run_stage, spec, stage, settings[stage], seed, use_cache, pure=False,
-                                          key=f"{spec.name}-{stage}-{tag}")
-                     for stage in stages}
+    stage_futures = {}
+    for stage in stages:  # the closure (last) waits for its input stages' futures
+        inputs = {s: stage_futures[s] for s in CLOSURE_INPUTS} if stage == "closure" else None
+        stage_futures[stage] = client.submit(run_stage, spec, stage, settings[stage], seed, use_cache, None, inputs,
+                                             pure=False, key=f"{spec.name}-{stage}-{tag}")
     pack = client.submit(write_baked_pack, spec, str(output), quality, settings, stages, None, seed, stage_futures,
                          pure=False, key=f"{spec.name}-pack-{tag}")
     return pack, list(stage_futures.values())

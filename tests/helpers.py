@@ -25,6 +25,7 @@ TINY = {
     "flyaway": {"width": 32, "height": 8, "samples": 1},
     "environment": {"shape": (3, 3, 4, 3)},
     "interreflection": {"n_views": 2, "rows": 4, "spp": 1, "batches": 2},
+    "closure": {"iterations": 3},
 }
 
 # --- asset packs --------------------------------------------------------------------------------------------------

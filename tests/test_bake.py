@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from cli.knitbake_cli import main as knitbake
 from data_formats.asset_pack import describe, read_pack, validate
 from data_formats.yarn_spec import load_preset
-from knitbake.bake import STAGE_ORDER, bake, scene_needs, stages_for
+from knitbake.bake import STAGE_ORDER, bake, bake_plan, scene_needs, stage_key, stages_for
 from tests.helpers import TINY
 
 def small_yarn():
@@ -77,6 +77,21 @@ def test_only_what_the_yarn_and_scene_need():
     assert "environment" not in stages_for(spec, needs={"environment": False})
     with pytest.raises(ValueError, match="unknown table group"):
         stages_for(spec, only=["xi"])
+    # the closure runs after, and only with, its four input stages
+    assert stages_for(spec)[-1] == "closure"
+    assert "closure" not in stages_for(spec, only=["correction", "shadowing"])
+    assert "closure" in stages_for(spec, only=["dual_scattering", "correction", "shadowing", "textures"])
+
+
+def test_the_closures_cache_key_follows_its_input_stages():
+    spec = small_yarn()
+    key = lambda settings: stage_key("closure", spec, settings["closure"], 0)  # noqa: E731
+    base = bake_plan(spec, overrides=TINY)[0]
+    assert key(base) == key(bake_plan(spec, overrides=TINY)[0])
+    for stage, change in (("textures", {"samples": 2}), ("shadowing", {"spp": 2}), ("correction", {"spp": 2})):
+        moved = bake_plan(spec, overrides={**TINY, stage: {**TINY[stage], **change}})[0]
+        assert key(moved) != key(base), stage
+    assert key(bake_plan(spec, overrides={**TINY, "environment": {"shape": (3, 3, 4, 4)}})[0]) == key(base)
 
 
 def test_scene_sets_texture_size_and_environment():

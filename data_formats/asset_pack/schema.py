@@ -13,7 +13,7 @@ import numpy as np
 from ..conventions import HALF_PI, LENGTH_UNITS, PHI_RANGE, THETA_RANGE
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "2.2"
+SCHEMA_VERSION = "2.3"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
@@ -120,6 +120,13 @@ TABLES = (
               "ξ_N(v, φ): azimuthal factor of the DS correction", value_range=(0.0, None)),
     TableSpec("correction/xi", "correction", ("N_v", "N_theta", "N_phi", 3), ("v", "theta_d", "phi", "channel"), "1",
               "ξ(v, θ_d, φ) as baked, before factorization (since schema 1.1)", value_range=(0.0, None)),
+    TableSpec("correction/radiance", "correction", ("N_v", "N_theta", "N_phi", 3), ("v", "theta_d", "phi", "channel"),
+              "1", "Ψ_*(v, θ_d, φ): the path-traced radiance per unit irradiance that ξ closes on, mean over the bin's "
+              "pixels of the bake's straight yarn (since schema 2.3, §6)", value_range=(0.0, None)),
+    TableSpec("correction/xi_closed", "correction", ("N_v", "N_theta", "N_phi", 3),
+              ("v", "theta_d", "phi", "channel"), "1",
+              "ξ closed on the strip renderer of SHADING.md: the factor with which it reproduces correction/radiance "
+              "at the bin centres (since schema 2.3, §6)", value_range=(0.0, None)),
     TableSpec("correction/xi_residual", "correction", (), (), "1",
               "relative RMS residual of ξ ≈ ξ_M ξ_N over the whole baked grid", value_range=(0.0, None)),
     TableSpec("correction/xi_residual_by_v", "correction", ("N_v",), ("v",), "1",

@@ -19,7 +19,10 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
   ξ·Ψ_DS^renderer reproduces Ψ_* whatever the error of that count; ξ of a bin = Σ Ψ_* / Σ Ψ_DS. ξ's
   factorization is weighted by (Σ Ψ_DS)² of each bin, i.e. it fits the radiance
   ξ·Ψ_DS that shading produces: a bin where the DS estimate is tiny (an edge bin lit from the far side) has a
-  ratio far from the others that an unweighted fit lets distort every other direction of that v.
+  ratio far from the others that an unweighted fit lets distort every other direction of that v. The stage also
+  keeps Ψ_* itself, ``correction/radiance``: the mean path-traced radiance of each bin's pixels per unit irradiance
+  (the camera's pixels are 2h/rows square), which the ``closure`` stage (``knitbake/stages/closure.py``) makes the
+  strip renderer reproduce; this stage's ξ is the paper's, which that stage replaces.
 
 Each quantity is measured B times with independent seeds; tables hold the batch mean, ``*_stderr`` the standard
 error s/√B. The factorization X[k, m] ≈ a[k]·c[m] per (v, channel) is the leading singular pair of X (non-negative),
@@ -273,6 +276,7 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
     n_occluded = fiber_counts(spec.geometry, spec.radius)[1]
     samples = np.ones((batches, n_v, n_theta, n_phi, 3))
     weights = np.zeros((batches, n_v, n_theta, n_phi, 3))
+    radiance = np.zeros((batches, n_v, n_theta, n_phi, 3))
     rows = max(rows, n_v)
     total, done = batches * n_theta * n_phi, 0
     for b in range(batches):
@@ -285,15 +289,19 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
                 s = seed + 1000 * b + 37 * k + m
                 traced, _ = render(lit, cam, spp, seed=s, max_depth=max_depth)
                 ds = _ds_image(geometry, cam, light, spp, s, ds_tables, params, n_occluded)
-                num, _ = _bins(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
+                num, pixels = _bins(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
                 den, _ = _bins(ds, np.ones(ds.shape[:2]), row_v(rows), n_v)
+                radiance[b, :, k, m] = num / np.maximum(pixels, 1)[:, None]
                 ok = np.all(den > 1e-12 * max(den.max(), 1e-300), axis=1)
                 samples[b, ok, k, m] = num[ok] / den[ok]
                 weights[b, :, k, m] = den ** 2
                 done += 1
                 if progress:
                     progress(done, total)
-    return _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"), weights)
+    tables, errors = _factored_tables(samples, "correction", ("xi_M", "xi_N", "xi_residual"), weights)
+    tables["correction/radiance"] = radiance.mean(axis=0)
+    errors["correction/radiance"] = radiance.std(axis=0, ddof=1) / math.sqrt(batches)
+    return tables, errors
 
 
 def bake_shadowing_stage(spec, settings, seed, progress=None) -> StageResult:
