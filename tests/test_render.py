@@ -187,6 +187,7 @@ def test_ablations_change_the_image(tmp_path, pack):
         assert not np.array_equal(images[a], images[b]), (a, b)
     assert not np.array_equal(images["full"], images["no_tables"])
     assert not np.array_equal(images["full"], images["factored"])  # the tiny pack stores both forms
+    assert not np.array_equal(images["full"], images["closed"])  # and the ξ closed on the renderer
 
 
 def test_pack_errors_are_one_line(tmp_path, pack):

@@ -20,9 +20,15 @@ reference traced without flyaways and the hairs' light comes on top. ``flyaways`
 and fibers that Ψ^Fiber_G(v), a function of v alone, smooths away; it belongs with the fiber-level shadowing, so the
 rungs without Ψ^Fiber go without it too. Measured in BENCHMARKS.md, "Issue 13: fiber-level detail".
 
+``closed_xi`` shades with the pack's ``correction/xi_closed`` (ASSET_PACK.md §6, the bake's ``closure`` stage): ξ
+made to close on this renderer where it was measured, instead of the paper's Ψ_*/Ψ_DS. It is not the default:
+measured in BENCHMARKS.md ("Issue 13: ξ closed on the strip renderer"), it brings the lone yarns' regular fibers
+within 5 % of the flyaway-free references but does not lower the patches' error.
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ, + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection (= the full model, the
-default), + flyaways; then the full model without the tables, with the factored tables, and without the detail.
+default), + flyaways; then the full model without the tables, with the factored tables, without the detail, and
+with the closed ξ (without and with flyaways).
 ``ABLATION_LABELS`` gives each a label.
 """
 
@@ -41,6 +47,7 @@ class Features:
     interreflection: bool = True  # yarn-level inter-reflection (ρ_Y) and transmission (T_Y)
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
     fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
+    closed_xi: bool = False  # the pack's ξ closed on this renderer (correction/xi_closed) instead of the paper's
 
 
 ABLATIONS = {
@@ -52,9 +59,12 @@ ABLATIONS = {
     "no_tables": Features(xi=False, fiber_shadowing=False, fiber_detail=False),  # the full model without ξ and Ψ^Fiber
     "factored": Features(full_tables=False),
     "no_detail": Features(fiber_detail=False),
+    "closed": Features(closed_xi=True),
+    "closed_flyaways": Features(closed_xi=True, flyaways=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
                    "full": "+ inter-reflection (full)", "flyaways": "full + flyaways",
                    "no_tables": "full without ξ, Ψ^Fiber", "factored": "full, rank-1 factored ξ, Ψ",
-                   "no_detail": "full without the fiber-level detail"}
+                   "no_detail": "full without the fiber-level detail", "closed": "full, ξ closed on the renderer",
+                   "closed_flyaways": "full + flyaways, ξ closed"}

@@ -278,7 +278,7 @@ class Renderer:
         looks = [load_look(_pack_path(k, e, packs), e, scene.units,
                            corrections=features.xi or features.fiber_shadowing, full_tables=features.full_tables,
                            flyaways=features.flyaways, environment=environment, detail=features.fiber_detail,
-                           transmission=features.interreflection)
+                           transmission=features.interreflection, closed_xi=features.closed_xi)
                  for k, e in enumerate(scene.yarns)]
         for look in looks:
             if not features.xi:

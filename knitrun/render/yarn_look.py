@@ -40,6 +40,7 @@ from knitrun.shading.table_lookup import lookup_theta
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
+CLOSED_XI = "correction/xi_closed"  # optional (schema ≥ 2.3): read only when asked for
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
 
@@ -117,13 +118,14 @@ def fiber_detail_chain(ao_levels, coverage_levels) -> list:
 
 
 def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
-              environment=False, detail=True, transmission=True) -> YarnLook:
+              environment=False, detail=True, transmission=True, closed_xi=False) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
     ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors; ``detail``: the
     fiber-level detail from the pack's AO texture (``fiber_detail_chain``); ``transmission``: n_cross from the
-    pack's transmittance T_Y when it has one (module docstring)."""
+    pack's transmittance T_Y when it has one (module docstring); ``closed_xi``: ξ from the pack's
+    ``correction/xi_closed`` (schema ≥ 2.3; ASSET_PACK.md §6) instead of the paper's."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
@@ -132,6 +134,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
     if corrections:
         names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
+    if corrections and closed_xi:
+        names.append(CLOSED_XI)
     if flyaways:
         names.append("textures/flyaway")
     if detail:
@@ -165,7 +169,10 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
             transmittance, lookup_theta(pack.tables["dual_scattering/a_f"], 0.0), n_cross)
         n_cross_from = (f"transmittance T_Y = {float(transmittance @ LUMINANCE):.3f}: {n_cross:.2f} "
                         f"(geometric {geometric:.2f})")
-    tables = {n: np.asarray(pack.tables[n], np.float64) for n in names if n in CORRECTION_TABLES + FULL_TABLES}
+    tables = {n: np.asarray(pack.tables[n], np.float64) for n in names
+              if n in CORRECTION_TABLES + FULL_TABLES + (CLOSED_XI,)}
+    if CLOSED_XI in tables:
+        tables["correction/xi"] = tables[CLOSED_XI]
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:
