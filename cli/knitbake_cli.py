@@ -373,7 +373,8 @@ def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_
 @click.option("--quality", type=click.Choice(["draft", "standard", "final"]), default="draft", show_default=True,
               help="Resolution and sample counts of every table (the speed/accuracy trade: see BENCHMARKS.md).")
 @click.option("--only", default=None, help="Comma-separated table groups to bake (dual_scattering, correction, "
-                                           "shadowing, textures, flyaway, environment).")
+                                           "shadowing, textures, flyaway, environment, interreflection; closure "
+                                           "comes with correction when its four inputs are baked).")
 @click.option("--scene", "scene_path", type=click.Path(dir_okay=False), default=None,
               help="Bake only what this scene needs (no I_M without environment light; texture size from the "
                    "largest on-screen yarn width).")
