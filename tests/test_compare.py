@@ -3,8 +3,10 @@ folder is complete, floors included; and (slow) the full model keeps the straigh
 
 import json
 import math
+import shutil
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -101,12 +103,19 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
         assert (out / name).is_file(), name
     report = (out / "report.md").read_text()
     assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
+    assert summary["skipped"] == {}
+    old = tmp_path / "schema22.h5"  # a pack from before the closure: its rows are skipped, the rest reported
+    shutil.copy(pack, old)
+    with h5py.File(old, "r+") as f:
+        del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
     again = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"),
                                          "--instance-floor", str(out / "floor_instance.exr"),
-                                         "--pack", f"cotton1={pack}", "-o", str(tmp_path / "r2"), "--json"])
+                                         "--pack", f"cotton1={old}", "-o", str(tmp_path / "r2"), "--json"])
     assert again.exit_code == 0, again.output
     given = json.loads(again.stdout)
     assert set(given["floors"]) == {"instance"}
+    assert set(given["skipped"]) == {"closed", "closed_flyaways"} and "full" in given["ablations"]
+    assert "skipped: " in (tmp_path / "r2" / "report.md").read_text()
     for key in ("rel_l1", "rel_l1_2x", "flip", "mean_ratio"):  # the same floor, read instead of traced
         assert given["floors"]["instance"]["yarn"][key] == pytest.approx(floors["instance"]["yarn"][key])
     bad = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"), "--spp", "4",
