@@ -16,7 +16,7 @@ are written to a temporary pack; a scene holds the correction stage's straight y
 z ∈ [−P, 2P], the spec's radius) and, per bin (θ_d, φ), the correction stage's orthographic camera
 (``correction.strip_camera``, θ_o = θ_d, ``rows`` rows over v ∈ [−1, 1]) and its light (θ_i = −θ_d, φ_i = −φ,
 irradiance 1). The renderer (``knitrun.render.pipeline``, the full model without flyaways, MSAA 4) draws it; S(v,
-θ_d, φ) is the mean radiance of the pixels of each v bin (the bins of ``correction._bins``), to be compared with
+θ_d, φ) is the mean radiance of the pixels of each v bin (the bins of ``correction.v_bin_sums``), to be compared with
 the correction stage's ``correction/radiance`` Ψ_* of the same pixels. The image is linear in ξ (SHADING.md §3), but
 the renderer interpolates ξ between v bins, so ξ is updated by the fixed point
 
@@ -50,7 +50,7 @@ from data_formats.scene import Camera as SceneCamera
 from data_formats.scene import DirectionalLight, scene_from_dict
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import YarnSpec, dumps_spec
-from knitbake.stages.correction import _bins, row_v, strip_camera, yarn_direction
+from knitbake.stages.correction import row_v, strip_camera, v_bin_sums, yarn_direction
 from knitbake.stages.stage_result import StageResult
 
 CLOSURE_INPUTS = ("dual_scattering", "correction", "shadowing", "textures")
@@ -101,7 +101,7 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
             for m, phi in enumerate(cell_centres(*PHI_RANGE, n_phi)):
                 renderer.scene = _view(scene, spec, theta_d, phi, rows)
                 image = renderer.render().image.astype(np.float64)
-                sums, pixels = _bins(image, np.ones(image.shape[:2]), row_v(rows), n_v)
+                sums, pixels = v_bin_sums(image, np.ones(image.shape[:2]), row_v(rows), n_v)
                 out[:, k, m] = sums / np.maximum(pixels, 1)[:, None]
                 if progress:
                     progress(k * n_phi + m + 1, n_theta * n_phi)

@@ -135,7 +135,7 @@ def factor_rank1(x: np.ndarray, weight: np.ndarray | None = None, iterations: in
     return a, c, by_v, total
 
 
-def _bins(values, weights, rows_v, n_v):
+def v_bin_sums(values, weights, rows_v, n_v):
     """Per-v-bin sums of ``values`` (rows, cols, ...) and counts of ``weights`` (rows, cols) > 0."""
     idx = np.clip(((rows_v + 1) / 2 * n_v).astype(int), 0, n_v - 1)
     sums = np.zeros((n_v,) + values.shape[2:])
@@ -183,7 +183,7 @@ def bake_shadowing(spec: YarnSpec, n_v=8, n_theta=8, n_phi=8, rows=32, spp=4, ba
             for m, ph in enumerate(phis):
                 light = yarn_direction(th, -ph)
                 vis, hit = _visibility_image(tracer, cam, light, spp, seed + 1000 * b + 37 * k + m)
-                sums, counts = _bins(vis[..., None], hit, row_v(rows), n_v)
+                sums, counts = v_bin_sums(vis[..., None], hit, row_v(rows), n_v)
                 ok = counts > 0
                 samples[b, ok, k, m, :] = (sums[ok] / counts[ok][:, None])
                 done += 1
@@ -289,8 +289,8 @@ def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, 
                 s = seed + 1000 * b + 37 * k + m
                 traced, _ = render(lit, cam, spp, seed=s, max_depth=max_depth)
                 ds = _ds_image(geometry, cam, light, spp, s, ds_tables, params, n_occluded)
-                num, pixels = _bins(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
-                den, _ = _bins(ds, np.ones(ds.shape[:2]), row_v(rows), n_v)
+                num, pixels = v_bin_sums(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
+                den, _ = v_bin_sums(ds, np.ones(ds.shape[:2]), row_v(rows), n_v)
                 radiance[b, :, k, m] = num / np.maximum(pixels, 1)[:, None]
                 ok = np.all(den > 1e-12 * max(den.max(), 1e-300), axis=1)
                 samples[b, ok, k, m] = num[ok] / den[ok]
