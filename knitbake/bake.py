@@ -1,6 +1,7 @@
 """The bake: one yarn type → one asset pack, in cached stages.
 
-Stages (each a function ``(spec, settings, seed, progress) -> StageResult``; ``progress(done, total)``):
+Stages (each a function ``(spec, settings, seed, progress) -> StageResult``; ``progress(done, total)``; the closure
+also takes its input stages' results, ``run_stage``):
 
 | stage | tables | baked when |
 |---|---|---|
@@ -234,11 +235,12 @@ def run_stage(spec: YarnSpec, stage: str, settings: dict, seed: int, use_cache: 
     t0 = time.perf_counter()
     result, damaged = _load_stage(path) if use_cache else (None, None)
     cached = result is not None
-    if result is None and stage == "closure":
-        given = {s: inputs[s][0] for s in CLOSURE_INPUTS}
-        result = bake_closure_stage(spec, settings, seed, progress, given, _input_pack_writer(spec, seed, given))
-    elif result is None:
-        result = STAGES[stage](spec, settings, seed, progress)
+    if result is None:
+        extra = {}
+        if stage == "closure":
+            given = {s: inputs[s][0] for s in CLOSURE_INPUTS}
+            extra = {"inputs": given, "write_pack_to": _input_pack_writer(spec, seed, given)}
+        result = STAGES[stage](spec, settings, seed, progress, **extra)
         if use_cache:
             _save_stage(path, result)
     worst = max((float(np.max(e)) if np.ndim(e) else float(e)) for e in result.errors.values())

@@ -22,10 +22,22 @@ ROWS = TINY["correction"]["rows"]  # the closure's rows: max(rows, n_v) of the c
 
 @pytest.fixture(scope="module")
 def closed_pack(tmp_path_factory):
-    out = tmp_path_factory.mktemp("closure") / "cotton1.h5"
-    summary = bake(SPEC, out, overrides=TINY, only=list(closure.CLOSURE_INPUTS), use_cache=False)
-    assert list(summary)[-1] == "closure"
-    return out
+    """A tiny cotton1 pack of the closure and its inputs, baked into a stage cache of its own (``KNIT_CACHE_DIR``
+    set for the bake; the test of the cache bakes again into it)."""
+    folder = tmp_path_factory.mktemp("closure")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("KNIT_CACHE_DIR", str(folder / "cache"))
+        summary = bake(SPEC, folder / "cotton1.h5", overrides=TINY, only=list(closure.CLOSURE_INPUTS))
+    assert list(summary)[-1] == "closure" and not summary["closure"]["cached"]
+    return folder / "cotton1.h5"
+
+
+def test_the_closure_is_cached_like_every_stage(closed_pack, monkeypatch):
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(closed_pack.parent / "cache"))
+    again = bake(SPEC, closed_pack.parent / "again.h5", overrides=TINY, only=list(closure.CLOSURE_INPUTS))
+    assert all(row["cached"] for row in again.values())
+    with h5py.File(closed_pack) as a, h5py.File(closed_pack.parent / "again.h5") as b:
+        assert np.array_equal(a["correction/xi_closed"][()], b["correction/xi_closed"][()])
 
 
 def _miss(pack, xi, folder):
