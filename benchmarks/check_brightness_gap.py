@@ -16,13 +16,14 @@
    fibers' model owns).
 
     .venv/bin/python benchmarks/check_brightness_gap.py --pack out/bench/cotton1_standard.h5 \\
-        [--scene knit_patch_sky] [--reference-dir out/bench/refs] [--flyaway-spp 16]
+        [--scene knit_patch_sky] [--reference-dir out/bench/refs] [--flyaway-spp 16] [--closed-xi]
 
 The reference and its instance floor are ``DIR/<scene>.exr`` and ``DIR/<scene>_instance.exr``
 (``benchmarks/bench_floors.py``).
 """
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import h5py
@@ -59,15 +60,18 @@ def main():
     parser.add_argument("--scene", default="knit_patch_sky")
     parser.add_argument("--reference-dir", default="out/bench/refs")
     parser.add_argument("--flyaway-spp", type=int, default=16, help="spp of the flyaway-free reference; 0: skip")
+    parser.add_argument("--closed-xi", action="store_true", help="every model with the pack's closed ξ")
     args = parser.parse_args()
     tangent_spread_by_level(args.pack)
     scene = load_scene(Path(__file__).resolve().parent.parent / "examples" / "scenes" / f"{args.scene}.toml")
     reference = read_exr(Path(args.reference_dir) / f"{args.scene}.exr")
     floor = yarn_scale_metrics(read_exr(Path(args.reference_dir) / f"{args.scene}_instance.exr"), reference,
                                yarn_diameter_px(scene))["rel_l1"]
-    base = ABLATIONS["full"]
+    closed = {"closed_xi": args.closed_xi}
+    base = dataclasses.replace(ABLATIONS["full"], **closed)
     shadowed = pipeline._visibility
-    probes = [("full", base, shadowed), ("  without inter-reflection", ABLATIONS["xi_shadowing"], shadowed),
+    probes = [("full", base, shadowed),
+              ("  without inter-reflection", dataclasses.replace(ABLATIONS["xi_shadowing"], **closed), shadowed),
               ("  without yarn-level shadows (probe)", base,
          lambda lines, radius, direction, size, angular, receivers, depth_maps:
          [np.ones(len(p)) for p, _ in receivers])]
@@ -87,7 +91,8 @@ def main():
               f"{reference_lum[empty].sum() / reference_lum.sum():.3f}", flush=True)
         if label == "full":
             full_mean, full_lum = float(lum.mean()), lum
-    fly = pipeline.render(scene, {"cotton1": args.pack}, ABLATIONS["flyaways"]).image @ LUMINANCE
+    fly = pipeline.render(scene, {"cotton1": args.pack}, dataclasses.replace(ABLATIONS["flyaways"], **closed)).image \
+        @ LUMINANCE
     body = full_lum > LIT
     print(f"flyaway layer: radiance beside the body {fly[~body].sum() / reference_lum[~body].sum():.2f}× the "
           f"reference's; the body's radiance with the layer {fly[body].sum() / full_lum[body].sum():.3f}× without it "
