@@ -23,7 +23,7 @@ rungs without Ψ^Fiber go without it too. Measured in BENCHMARKS.md, "Issue 13: 
 ``closed_xi`` shades with the pack's ``correction/xi_closed`` (ASSET_PACK.md §6, the bake's ``closure`` stage): ξ
 made to close on this renderer where it was measured, instead of the paper's Ψ_*/Ψ_DS. It is not the default:
 measured in BENCHMARKS.md ("Issue 13: ξ closed on the strip renderer"), it brings the lone yarns' regular fibers
-within 5 % of the flyaway-free references but does not lower the patches' error.
+within −2.5 % … +5.4 % of the flyaway-free references but does not lower the patches' error.
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ, + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection (= the full model, the
