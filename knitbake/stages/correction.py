@@ -22,7 +22,7 @@ toward b) is ω = cos θ cos φ n + cos θ sin φ b + sin θ t. For a grid cell 
   ratio far from the others that an unweighted fit lets distort every other direction of that v. The stage also
   keeps Ψ_* itself, ``correction/radiance``: the mean path-traced radiance of each bin's pixels per unit irradiance
   (the camera's pixels are 2h/rows square), which the ``closure`` stage (``knitbake/stages/closure.py``) makes the
-  strip renderer reproduce; this stage's ξ is the paper's, which that stage replaces.
+  strip renderer reproduce; this stage's ξ stays the paper's, and that stage stores the closed one beside it.
 
 Each quantity is measured B times with independent seeds; tables hold the batch mean, ``*_stderr`` the standard
 error s/√B. The factorization X[k, m] ≈ a[k]·c[m] per (v, channel) is the leading singular pair of X (non-negative),
