@@ -335,26 +335,6 @@ def test_a_stitch_mesh_entry_is_simulated_at_rest_and_drawn(tmp_path, pack):
     assert np.all(np.isfinite(result.image))
 
 
-def test_multiple_scattering_lights_merge_close_lobes_and_keep_energy():
-    from knitrun.render.pipeline import ms_lights
-
-    dirs = np.array([[0.0, 1.0, 0.0], [0.1, 0.995, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    lam = np.array([100.0, 50.0, 2.0, 1.0])
-    w = np.array([[1.0, 1.0, 1.0], [0.5, 0.5, 0.5], [0.2, 0.1, 0.0], [0.0, 0.0, 0.0]])  # the last lobe is unused
-    vis = [np.array([[1.0, 0.0], [0.0, 1.0], [0.5, 0.5], [1.0, 1.0]])]
-    d, e, v = ms_lights(dirs, lam, w, vis)
-    energy = w * (2 * np.pi / lam * (1 - np.exp(-2 * lam)))[:, None]
-    assert d.shape == (2, 3) and np.allclose(np.linalg.norm(d, axis=1), 1)
-    np.testing.assert_allclose(e.sum(axis=0), energy.sum(axis=0))  # no energy lost or made
-    pair = int(np.argmin(np.abs(e - (energy[0] + energy[1])).sum(axis=1)))
-    np.testing.assert_allclose(e[pair], energy[0] + energy[1])  # the two lobes 5.7° apart share one light
-    share = energy[0, 1] / (energy[0, 1] + energy[1, 1])
-    np.testing.assert_allclose(v[0][pair], [share, 1 - share], rtol=1e-6)
-    np.testing.assert_allclose(v[0][1 - pair], [0.5, 0.5])
-    assert np.all((v[0] >= 0) & (v[0] <= 1))
-
-
 def test_a_yarn_without_flyaways_renders_without_a_flyaway_layer(tmp_path):
     spec = load_preset("cotton1")
     spec = dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=15),
@@ -406,20 +386,51 @@ def test_lobes_of_zero_weight_are_not_drawn_and_the_fit_is_cached(tmp_path, pack
     assert np.array_equal(first.image, again.image)
 
 
-def test_multiple_scattering_clusters_weigh_their_lobes():
-    """``pipeline.ms_clusters``: every lobe with light joins one cluster, a cluster's weights sum to 1, and
-    ``ms_lights`` is those weights applied to the lobes' visibilities."""
-    from knitrun.render import pipeline
+def test_multiple_scattering_cells_keep_energy_and_weigh_their_lobes():
+    """``ms_lights.ms_cells``: no light lost or made, a cell's lobe weights sum to 1, a sun goes whole to one cell in
+    its own direction, an unused lobe gets no weight, and ``ms_lights`` is the weights applied to the lobes'
+    visibilities."""
+    from knitrun.render.ms_lights import MS_CELLS, ms_cells, ms_lights
 
     rng = np.random.default_rng(3)
     d = rng.normal(size=(9, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     lam, w = rng.uniform(1, 50, 9), rng.uniform(0.1, 1, (9, 3))
-    dirs, irr, weights = pipeline.ms_clusters(d, lam, w)
-    assert np.allclose(weights.sum(axis=1), 1.0) and np.all((weights > 0).sum(axis=0) == 1)
-    assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0) and np.all(irr > 0)
+    lam[0], w[1] = 2500.0, 0.0  # a sun; an unused lobe
+    dirs, irr, weights = ms_cells(d, lam, w)
+    energy = w * (2 * np.pi / lam * (1 - np.exp(-2 * lam)))[:, None]
+    np.testing.assert_allclose(irr.sum(axis=0), energy.sum(axis=0), rtol=1e-12)
+    assert len(dirs) <= MS_CELLS and np.allclose(np.linalg.norm(dirs, axis=1), 1.0) and np.all(irr > 0)
+    assert np.allclose(weights.sum(axis=1), 1.0) and np.all(weights[:, 1] == 0)
+    assert (weights[:, 0] > 0).sum() == 1
+    sun_cell = int(np.argmax(weights[:, 0]))
+    if weights[sun_cell, 0] > 0.999:
+        assert dirs[sun_cell] @ d[0] > 0.9999
     vis = rng.uniform(0, 1, (9, 5))
-    assert np.allclose(pipeline.ms_lights(d, lam, w, [vis])[2][0], weights @ vis)
+    assert np.allclose(ms_lights(d, lam, w, [vis])[2][0], weights @ vis)
+
+
+def test_multiple_scattering_cells_carry_a_broad_lobes_light_from_where_it_shines():
+    """A broad lobe lights a plane facing away from its centre too: the cells' irradiance on the six axis planes,
+    Σ_c E_c max(0, ω_c·n), is within 6 % of the lobe's own (a quadrature of ∫ W G(ω) max(0, ω·n) dω) on each plane
+    that receives at least a tenth of the brightest's, where one light at the lobe's centre leaves the side planes
+    black. Splitting the lobe into two equal halves changes nothing (the lights depend on the sky, not on the fit)."""
+    from knitrun.render.ms_lights import fibonacci_sphere, ms_cells
+
+    centre = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
+    lam, w = np.array([0.7]), np.array([[1.0, 0.8, 0.6]])
+    samples = fibonacci_sphere(200_000)
+    radiance = np.exp(lam[0] * (samples @ centre - 1.0))
+    planes = np.vstack([np.eye(3), -np.eye(3)])
+    exact = (4 * np.pi / len(samples)) * (np.maximum(samples @ planes.T, 0.0) * radiance[:, None]).sum(axis=0)
+    dirs, irr, _ = ms_cells(centre[None], lam, w)
+    cells = (np.maximum(dirs @ planes.T, 0.0) * irr[:, 1:2]).sum(axis=0) / w[0, 1]
+    lit = exact > 0.1 * exact.max()
+    assert lit.sum() >= 5
+    np.testing.assert_allclose(cells[lit], exact[lit], rtol=0.06)
+    halves = ms_cells(np.vstack([centre, centre]), np.repeat(lam, 2), np.vstack([w, w]) / 2)
+    np.testing.assert_allclose(halves[0], dirs, atol=1e-12)
+    np.testing.assert_allclose(halves[1], irr, rtol=1e-12)
 
 
 def test_fiber_detail_keeps_each_rows_brightness():

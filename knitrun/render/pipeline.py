@@ -48,27 +48,26 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from data_formats.conventions import LUMINANCE
 from data_formats.curve_eval import yarn_frame
 from data_formats.errors import FormatError
 from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitrun.render.ablations import Features
 from knitrun.render.camera import scene_camera
 from knitrun.render.interreflection import interreflected_visibility
+from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
 from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
 from knitrun.render.yarn_look import load_look, no_full_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
-from knitrun.shading.im_lookup import no_im_table, sg_integral
+from knitrun.shading.im_lookup import no_im_table
 from knitrun.shading.srbf_cache import cached_fit
 from knitrun.sim.simulate import RADIUS_TOLERANCE
 
 SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
-MS_MERGE_DEG = 30.0  # lobes this close share one multiple-scattering evaluation
 
 
 @dataclass
@@ -171,43 +170,6 @@ def _view_phase(segment, s, yarn, tangent, view_dir, rest, normal, sign, period,
         b0, b1, b2 = t1 * n2 - t2 * n1, t2 * n0 - t0 * n2, t0 * n1 - t1 * n0
         gamma = math.atan2(w0 * b0 + w1 * b1 + w2 * b2, w0 * n0 + w1 * n1 + w2 * n2)
         out[k] = s[k] - sign[yarn[k]] * gamma / (2.0 * math.pi) * period[yarn[k]]
-
-
-def ms_clusters(lobe_dir, lobe_lambda, lobe_w, merge_deg: float = MS_MERGE_DEG):
-    """The environment's multiple-scattering lights (``strip_shading`` docstring): lobes in order of decreasing
-    irradiance luminance join the first cluster within ``merge_deg`` of them, else start one. Returns (directions
-    (C, 3), irradiance (C, 3), weights (C, J)): a cluster's direction is the luminance-weighted mean of its lobes',
-    its irradiance their sum, and its visibility at a point Σ_j weights[c, j] T̃_j (a lobe's luminance over its
-    cluster's)."""
-    energy = np.asarray(lobe_w) * sg_integral(lobe_lambda)[:, None]
-    luminance = energy @ LUMINANCE
-    cos_merge = math.cos(math.radians(merge_deg))
-    members, axes = [], []
-    for j in np.argsort(-luminance, kind="stable"):
-        if luminance[j] <= 0.0:
-            continue
-        k = next((k for k, a in enumerate(axes) if a @ lobe_dir[j] >= cos_merge), None)
-        if k is None:
-            members.append([j])
-            axes.append(np.asarray(lobe_dir[j], float))
-        else:
-            members[k].append(j)
-    dirs, irr = [], []
-    weights = np.zeros((len(members), len(luminance)))
-    for c, group in enumerate(members):
-        w = luminance[group] / luminance[group].sum()
-        d = (w[:, None] * lobe_dir[group]).sum(axis=0)
-        dirs.append(d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-12 else lobe_dir[group[0]])
-        irr.append(energy[group].sum(axis=0))
-        weights[c, group] = w
-    return np.array(dirs, np.float64).reshape(-1, 3), np.array(irr, np.float64).reshape(-1, 3), weights
-
-
-def ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis, merge_deg: float = MS_MERGE_DEG):
-    """``ms_clusters`` with each cluster's visibility at the points of every receiver set: (directions (C, 3),
-    irradiance (C, 3), [visibility (C, N) per receiver set of ``lobe_vis``, each (J, N)])."""
-    dirs, irr, weights = ms_clusters(lobe_dir, lobe_lambda, lobe_w, merge_deg)
-    return dirs, irr, [np.ascontiguousarray(weights @ v) for v in lobe_vis]
 
 
 def _check_pack_keys(scene: Scene, packs: dict) -> None:

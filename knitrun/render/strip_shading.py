@@ -41,10 +41,10 @@ sharpness λ_j, weight W_j, visibility T̃_j from the lobe's shadow map, raised 
 
 plus, beyond the paper, the environment's multiple scattering: eq. 17 has single scattering only (I_M integrates
 f), which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. Lobe j
-carries irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}); the lobes are merged into clusters (the
-renderer's ``ms_lights``: lobes within a fixed angle of a brighter cluster's direction join it; E summed, the
-direction and the visibility T̃ averaged with luminance weights), and each cluster c acts as a distant light for the
-smooth DS terms, with D = T̃_c Ψ^Fiber_G and n as for a directional light:
+carries irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}), which ``knitrun.render.ms_lights`` spreads over
+a dozen fixed cells of the sphere (each cell's light: E summed, direction and visibility T̃ averaged with luminance
+weights), and each cell c acts as a distant light for the smooth DS terms, with D = T̃_c Ψ^Fiber_G and n as for a
+directional light:
 
     L_o += E_c · ξ · (D d_b f_back^direct + F_scatter) cos θ_c^f        (``ds_kernel`` terms; f itself is in I_M)
 
@@ -377,7 +377,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     im_kernel(im, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
                     for ch in range(3):
                         rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
-                for c in range(ms.direction.shape[0]):  # multiple scattering: clusters of lobes as distant lights
+                for c in range(ms.direction.shape[0]):  # multiple scattering: cells of the sky as distant lights
                     _copy_row(ms.direction, c, w)
                     _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
                     vis = ms.visibility[c, q]

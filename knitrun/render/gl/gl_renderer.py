@@ -5,10 +5,11 @@ Mesa's llvmpipe on a machine without one).
 What runs where
 ---------------
 * Set-up (once, on the CPU, shared with the CPU renderer): ``pipeline.Renderer`` reads the packs (with the ablation's
-  tables), the yarn curves and the environment's SRBF fit; the multiple-scattering clusters are formed once
-  (``pipeline.ms_clusters``). Here every pack table becomes a GL texture: the DS tables (``ds_table``), ξ and Ψ^Fiber
-  (3-D textures for the full tables, 2-D for the factors), the I_M^{TT,D} table (a 3-D texture, its second and third
-  axes merged into one), the tangent, coverage and fiber-detail mip chains (each level uploaded as that GL mip level).
+  tables), the yarn curves and the environment's SRBF fit; the multiple-scattering lights (cells of the sky) are
+  formed once (``knitrun.render.ms_lights.ms_cells``). Here every pack table becomes a GL texture: the DS tables
+  (``ds_table``), ξ and Ψ^Fiber (3-D textures for the full tables, 2-D for the factors), the I_M^{TT,D} table (a 3-D
+  texture, its second and third axes merged into one), the tangent, coverage and fiber-detail mip chains (each level
+  uploaded as that GL mip level).
 * Per frame (``render``): the curves' polylines (``pipeline._polylines``) and their vertex tangents are uploaded as
   segments with their neighbours (GL_LINES_ADJACENCY); a geometry shader builds the camera-facing strips
   (``shaders/strip.geom``, the quads of ``strip_raster``). Pass 1, per directional light and per SRBF lobe: the
@@ -49,6 +50,7 @@ from data_formats.scene import EnvironmentLight
 from knitrun.render import pipeline
 from knitrun.render.ablations import Features
 from knitrun.render.camera import Camera, scene_camera
+from knitrun.render.ms_lights import ms_cells
 from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS
 from knitrun.render.strip_raster import SAMPLE_PATTERNS
 from knitrun.shading import fiber_bcsdf as fb
@@ -250,7 +252,7 @@ class GLRenderer:
         self.lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
         self.lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
         self.lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
-        self.ms_dir, self.ms_e, ms_weights = pipeline.ms_clusters(self.lobe_dir, self.lobe_lambda, self.lobe_w)
+        self.ms_dir, self.ms_e, ms_weights = ms_cells(self.lobe_dir, self.lobe_lambda, self.lobe_w)
         self.cluster_weights = _texture2d(self.ctx, ms_weights if ms_weights.size else np.zeros((1, 1)))
         self.light_dir = np.array([light.unit_direction for light in lights], np.float64).reshape(-1, 3)
         self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)

@@ -23,7 +23,7 @@ uniform vec3 light_irradiance[MAX_LIGHTS];
 uniform ShadowMapInfo light_map[MAX_LIGHTS];
 uniform sampler2D light_atlas;
 
-// SRBF lobes and the multiple-scattering clusters (pipeline.ms_clusters: weights (C, J) in a texture)
+// SRBF lobes and the multiple-scattering lights, cells of the sky (ms_lights.ms_cells: weights (C, J) in a texture)
 uniform int n_lobes;
 uniform vec3 lobe_dir[MAX_LOBES];
 uniform float lobe_lambda[MAX_LOBES];
