@@ -21,7 +21,7 @@ when no other configuration of the same scene is at least as fast with at most i
 one).
 
     .venv/bin/python benchmarks/bench_tradeoff.py --packs draft=d.h5,standard=s.h5,final=f.h5 --reference-dir DIR
-                                                  [--sweeps quality,srbf,gn] [--spp 64] [--plot docs/tradeoff.png]
+                                                  [--sweeps quality,srbf,gn] [--spp 64] [--plot PNG]
 """
 
 import argparse
@@ -220,10 +220,16 @@ def main():
     parser.add_argument("--sweeps", default="quality,srbf,gn")
     parser.add_argument("--spp", type=int, default=64, help="samples per pixel of references rendered here")
     parser.add_argument("--work-dir", default="out/bench/tradeoff", help="the GN sweep's curves and scenes")
-    parser.add_argument("--plot", default="docs/tradeoff.png")
+    parser.add_argument("--plot", help="scatter plot PNG (default docs/tradeoff.png when all three sweeps run; none "
+                                       "for a subset, so a partial run does not replace the documented plot)")
     args = parser.parse_args()
     packs = dict(item.split("=", 1) for item in args.packs.split(","))
     sweeps = args.sweeps.split(",")
+    unknown = sorted(set(sweeps) - {"quality", "srbf", "gn"})
+    if unknown:
+        parser.error(f"--sweeps: unknown sweep {unknown[0]!r} (quality, srbf, gn)")
+    if args.plot is None and set(sweeps) == {"quality", "srbf", "gn"}:
+        args.plot = "docs/tradeoff.png"
     reference_dir = Path(args.reference_dir)
     rows = []
     if "quality" in sweeps:
@@ -246,8 +252,9 @@ def main():
         for r in sorted(scene_rows, key=lambda r: r["ms"]):
             print(f"| {name} | {r['quality']} | {r['knob']} | {r['ms']:.0f} | {r['err']:.3f} | {r['to_floor']:.2f} | "
                   f"{r['mean_ratio']:.3f} | {r['flip']:.4f} | {'**yes**' if r['pareto'] else ''} |")
-    plot(args.plot, by_scene, floors)
-    print(f"\nplot: {args.plot}")
+    if args.plot:
+        plot(args.plot, by_scene, floors)
+        print(f"\nplot: {args.plot}")
 
 
 if __name__ == "__main__":
