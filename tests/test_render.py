@@ -415,11 +415,12 @@ def test_multiple_scattering_cells_carry_a_broad_lobes_light_from_where_it_shine
     Σ_c E_c max(0, ω_c·n), is within 6 % of the lobe's own (a quadrature of ∫ W G(ω) max(0, ω·n) dω) on each plane
     that receives at least a tenth of the brightest's, where one light at the lobe's centre leaves the side planes
     black. Splitting the lobe into two equal halves changes nothing (the lights depend on the sky, not on the fit)."""
-    from knitrun.render.ms_lights import fibonacci_sphere, ms_cells
+    from knitrun.render.ms_lights import ms_cells
+    from knitrun.shading.equirect import fibonacci_directions
 
     centre = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
     lam, w = np.array([0.7]), np.array([[1.0, 0.8, 0.6]])
-    samples = fibonacci_sphere(200_000)
+    samples = fibonacci_directions(200_000)
     radiance = np.exp(lam[0] * (samples @ centre - 1.0))
     planes = np.vstack([np.eye(3), -np.eye(3)])
     exact = (4 * np.pi / len(samples)) * (np.maximum(samples @ planes.T, 0.0) * radiance[:, None]).sum(axis=0)

@@ -5,20 +5,20 @@ environment's light (``strip_shading`` docstring, SHADING.md §4) by treating a 
 Those terms vary strongly with the light's angle to the yarn (θ_i: a fiber lit along its axis scatters little), so
 a broad lobe's light must arrive from the directions it covers, not from its centre alone.
 
-Cells: the sphere is split into ``MS_CELLS`` cells, the Voronoi regions of a Fibonacci point set with poles on ±y
-(the world's up axis, ``knitrun.shading.equirect``), fixed in the world. Lobe j (centre ω_j, sharpness λ_j, RGB weight
-W_j) carries irradiance E_j = W_j (2π/λ_j)(1 − e^{−2λ_j}) (``im_lookup.sg_integral``); it is spread over the cells
-by its SRBF value at ``MS_SAMPLES`` Fibonacci directions (equal solid angle), each sample given to its nearest cell
-centre, so Σ_c E_cj = E_j exactly. A lobe narrower than ``NARROW_SAMPLES`` sample spacings (a sun) goes whole to the
-cell of its centre. Cell c is one distant light: irradiance E_c = Σ_j E_cj, direction the normalised
-luminance-weighted mean of the sample directions its light comes from, and visibility Σ_j w_cj T̃_j at a point,
-w_cj = lum(E_cj)/lum(E_c) (the lobes' visibilities from their shadow maps). Cells without light are dropped.
+Cells: the sphere is split into ``MS_CELLS`` cells, the Voronoi regions of the Fibonacci point set of
+``equirect.fibonacci_directions`` (poles on ±y, the world's up axis), fixed in the world. Lobe j (centre ω_j,
+sharpness λ_j, RGB weight W_j) carries irradiance E_j = W_j (2π/λ_j)(1 − e^{−2λ_j}) (``im_lookup.sg_integral``); it
+is spread over the cells by its SRBF value at ``MS_SAMPLES`` Fibonacci directions (equal solid angle), each sample
+given to its nearest cell centre, so Σ_c E_cj = E_j exactly. A lobe narrower than ``NARROW_SAMPLES`` sample spacings
+(a sun) goes whole to the cell of its centre. Cell c is one distant light: irradiance E_c = Σ_j E_cj, direction the
+normalised luminance-weighted mean of the sample directions its light comes from, and visibility Σ_j w_cj T̃_j at a
+point, w_cj = lum(E_cj)/lum(E_c) (the lobes' visibilities from their shadow maps). Cells without light are dropped.
 
 Why cells and not the lobes: the first version merged lobes within 30° of each other and put each group's light at
 its centre, so the image depended on how the fit happened to split the sky: on the straight yarn under the built-in
 sky the mean brightness went 0.954 / 0.971 / 1.048 / 1.022 / 0.985 of the reference for J = 8 / 12 / 16 / 24 / 32 lobes
-with irradiance errors of the fit all below 1 %. With 12 cells it is 0.994 / 1.030 / 1.027 / 1.030 / 1.025, and 12,
-24, 48 or 64 cells agree to 1 % (BENCHMARKS.md, "The environment's multiple scattering over cells"). Twelve cells cost
+with irradiance errors of the fit all below 1 %. With 12 cells it is 0.993 / 1.031 / 1.026 / 1.028 / 1.023, and 12,
+24 or 48 cells agree to 1 % (BENCHMARKS.md, "The environment's multiple scattering over cells"). Twelve cells cost
 what the 13 groups of the built-in sky's 16 lobes did.
 """
 
@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from data_formats.conventions import LUMINANCE
+from knitrun.shading.equirect import fibonacci_directions
 from knitrun.shading.im_lookup import sg_integral
 
 MS_CELLS = 12
@@ -37,19 +38,10 @@ MS_SAMPLES = 16384
 NARROW_SAMPLES = 2.0  # a lobe of angular standard deviation 1/√λ below this many sample spacings is one direction
 
 
-def fibonacci_sphere(n: int) -> np.ndarray:
-    """(n, 3) unit vectors of the Fibonacci lattice with poles on ±y: equal-area cells, deterministic."""
-    k = np.arange(n) + 0.5
-    y = 1.0 - 2.0 * k / n
-    r = np.sqrt(np.maximum(0.0, 1.0 - y * y))
-    a = math.pi * (1.0 + math.sqrt(5.0)) * k
-    return np.stack([r * np.cos(a), y, r * np.sin(a)], axis=1)
-
-
 @functools.cache
 def _cells(n_cells: int, n_samples: int):
     """(cell centres, samples, owning cell of each sample), built once."""
-    centres, samples = fibonacci_sphere(n_cells), fibonacci_sphere(n_samples)
+    centres, samples = fibonacci_directions(n_cells), fibonacci_directions(n_samples)
     return centres, samples, np.argmax(samples @ centres.T, axis=1)
 
 

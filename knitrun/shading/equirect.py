@@ -42,3 +42,14 @@ def texel_directions(height: int, width: int) -> np.ndarray:
     phi = -np.pi + (np.arange(width) + 0.5) * 2 * np.pi / width
     t, p = np.meshgrid(theta, phi, indexing="ij")
     return np.stack([np.sin(t) * np.sin(p), np.cos(t), np.sin(t) * np.cos(p)], axis=-1)
+
+
+def fibonacci_directions(n: int) -> np.ndarray:
+    """(n, 3) near-uniform unit directions, the Fibonacci lattice with poles on ±y: point k has d_y = 1 − 2(k + ½)/n
+    and azimuth φ_k = π(3 − √5)(k + ½) (the golden angle times k + ½, from +z toward +x as above). Deterministic;
+    the cells of nearest points have nearly equal solid angle."""
+    k = np.arange(n) + 0.5
+    y = 1.0 - 2.0 * k / max(n, 1)
+    r = np.sqrt(np.maximum(0.0, 1.0 - y * y))
+    phi = math.pi * (3.0 - math.sqrt(5.0)) * k
+    return np.stack([r * np.sin(phi), y, r * np.cos(phi)], axis=1)

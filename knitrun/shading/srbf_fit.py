@@ -50,7 +50,7 @@ import numpy as np
 from scipy.optimize import least_squares, nnls
 
 from data_formats.conventions import LUMINANCE
-from knitrun.shading.equirect import texel_directions
+from knitrun.shading.equirect import fibonacci_directions, texel_directions
 from knitrun.shading.im_lookup import sg, sg_integral
 
 LAMBDA_MIN = 0.5
@@ -118,7 +118,7 @@ def fit_srbf(image, n_lobes: int = 16, max_iterations: int = 30, seed: int = 0,
     weights = (_nnls_weights(sg(dirs[:, None, :], centres[None], lam[None]), omega, rest) if active
                else np.zeros((0, 3)))  # scipy's NNLS aborts on an empty matrix
     filler = n_fit - active
-    fit = SRBFFit(np.vstack([src_centres, centres, _fibonacci(filler) @ _rotation(seed).T]),
+    fit = SRBFFit(np.vstack([src_centres, centres, fibonacci_directions(filler) @ _rotation(seed).T]),
                   np.concatenate([src_lam, lam, np.full(filler, LAMBDA_MIN)]),
                   np.vstack([src_weights, weights, np.zeros((filler, 3))]), 0.0, 0.0, 0.0)
     return _with_errors(fit, dirs, omega, radiance)
@@ -232,7 +232,7 @@ def _greedy(dirs, weight, radiance, n_lobes, lam_max):
     centres = np.zeros((0, 3))
     lam = np.zeros(0)
     residual = radiance
-    fixed = _fibonacci(64)
+    fixed = fibonacci_directions(64)
     scale = radiance.max(initial=0.0)
     for _ in range(n_lobes):
         score = np.clip(residual @ LUMINANCE, 0, None) * np.sqrt(weight)
@@ -300,15 +300,6 @@ def _refine(dirs, weight, radiance, centres, lam, max_iterations, lam_max):
                            max_nfev=max_iterations)
     c, _, lm, _ = unpack(result.x)
     return c, np.clip(lm, LAMBDA_MIN, lam_max)
-
-
-def _fibonacci(n):
-    """(n, 3) near-uniform unit directions (Fibonacci sphere)."""
-    i = np.arange(n) + 0.5
-    y = 1 - 2 * i / max(n, 1)
-    r = np.sqrt(1 - y * y)
-    phi = np.pi * (3 - np.sqrt(5)) * i
-    return np.stack([r * np.sin(phi), y, r * np.cos(phi)], axis=1)
 
 
 def _rotation(seed):
