@@ -16,10 +16,10 @@ point, w_cj = lum(E_cj)/lum(E_c) (the lobes' visibilities from their shadow maps
 
 Why cells and not the lobes: the first version merged lobes within 30° of each other and put each group's light at
 its centre, so the image depended on how the fit happened to split the sky: on the straight yarn under the built-in
-sky the mean brightness went 0.954 / 0.971 / 1.048 / 1.022 / 0.985 of the reference for J = 8 / 12 / 16 / 24 / 32 lobes
-with irradiance errors of the fit all below 1 %. With 12 cells it is 0.993 / 1.031 / 1.026 / 1.028 / 1.023, and 12,
-24 or 48 cells agree to 1 % (BENCHMARKS.md, "The environment's multiple scattering over cells"). Twelve cells cost
-what the 13 groups of the built-in sky's 16 lobes did.
+sky the mean brightness went 0.954 / 0.971 / 1.048 / 1.022 / 0.985 of the reference for J = 8 / 12 / 16 / 24 / 32
+lobes with irradiance errors of the fit all below 1 %. With 12 cells it is 0.993 / 1.031 / 1.026 / 1.028 / 1.023,
+and 12, 24 or 48 cells agree to 1 % (BENCHMARKS.md, "The environment's multiple scattering over cells of the sky").
+Twelve cells cost what the 13 groups of the built-in sky's 16 lobes did.
 """
 
 from __future__ import annotations
