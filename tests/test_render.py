@@ -403,9 +403,9 @@ def test_multiple_scattering_cells_keep_energy_and_weigh_their_lobes():
     assert len(dirs) <= MS_CELLS and np.allclose(np.linalg.norm(dirs, axis=1), 1.0) and np.all(irr > 0)
     assert np.allclose(weights.sum(axis=1), 1.0) and np.all(weights[:, 1] == 0)
     assert (weights[:, 0] > 0).sum() == 1
-    sun_cell = int(np.argmax(weights[:, 0]))
-    if weights[sun_cell, 0] > 0.999:
-        assert dirs[sun_cell] @ d[0] > 0.9999
+    sun_dirs, sun_irr, sun_weights = ms_cells(d[:1], lam[:1], w[:1])  # a sun alone: one light, where the sun is
+    assert sun_dirs.shape == (1, 3) and sun_dirs[0] @ d[0] > 1.0 - 1e-12 and np.allclose(sun_weights, 1.0)
+    np.testing.assert_allclose(sun_irr[0], energy[0], rtol=1e-12)
     vis = rng.uniform(0, 1, (9, 5))
     assert np.allclose(ms_lights(d, lam, w, [vis])[2][0], weights @ vis)
 
