@@ -167,7 +167,7 @@ def test_near_zero_roughness_is_finite_and_meets_its_limit():
 
 @pytest.mark.parametrize("beta_r_deg", [1e-3, 1.0, 5.238, 25.0])
 def test_r_lobe_rule_matches_direct_quadrature(beta_r_deg):
-    """The lookup's 12-node R-lobe rule (``r_lobe_integral``, reached through ``im_lookup`` with an all-zero TT+D
+    """The lookup's R-lobe rules (``r_lobe_integral``, reached through ``im_lookup`` with an all-zero TT+D
     table) against ``im_direct`` of the R lobe alone: within 0.25% wherever I_M^R exceeds 0.1% of its largest value in
     the λ decade, for β_R from near zero to very rough, λ from 0.5 to 10⁴, points on the lobe's ridge and at the
     poles; exactly finite at θ = ±π/2."""

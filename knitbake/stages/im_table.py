@@ -4,7 +4,7 @@ quadrature, and integrate I_M directly (``im_direct``, the ground truth of the t
 I_M(θ_o, θ_j, Δφ, λ) = ∫ G(ω_i; ω_j, λ) f(ω_i, ω_o) cos θ_i dω_i with G = exp(λ(ω_i·ω_j − 1)), Δφ = φ_j − φ_o;
 parameterisation and lookup in ``knitrun.shading.im_lookup``, BCSDF in ``knitrun.shading.fiber_bcsdf`` (dω = cos θ dθ
 dφ). The pack's table holds the TT and D lobes only: the renderer integrates the narrow R lobe itself
-(``im_lookup.r_lobe_integral``, the R formula below with a fixed 12-node rule), because no grid of practical size
+(``im_lookup.r_lobe_integral``, the R formula below with a fixed 4-node Hermite or 12-node Legendre rule), because no grid of practical size
 resolves a 1° R lobe under a sharp SRBF (see ``knitrun.shading.im_lookup``).
 
 Quadrature

@@ -213,24 +213,33 @@ float i0e(float x) {
     return total / sqrt(2.0 * PI * x);
 }
 
+// im_lookup._r_integrand: the R rule's integrand at θ_i = t without 1/Z_R
+float r_integrand(float t, float mu, float sigma, float theta_j, float cos_j, float lam) {
+    float ct = cos(t);
+    float sh = sin(0.5 * (t - theta_j));  // cos(t − θ_j) − 1 = −2 sin²(·/2), exact for small angles
+    float d = (t - mu) / sigma;
+    return exp(-0.5 * d * d - 2.0 * lam * sh * sh) * ct * ct * i0e(lam * max(ct, 0.0) * cos_j);
+}
+
 // im_lookup.r_lobe_integral: I_M^R / A_R for the R lobe (μ, σ, Z) of the view
 float r_lobe_integral(float mu, float sigma, float z, float theta_j, float lam) {
     if ((mu - theta_j) * (mu - theta_j) > -log(R_NEGLIGIBLE * z / PI) * (2.0 * sigma * sigma + PI * PI / (2.0 * lam)))
         return 0.0;
     float precision_ = 1.0 / (sigma * sigma) + lam;
     float centre = (mu / (sigma * sigma) + lam * theta_j) / precision_;
-    float reach = R_WINDOW / sqrt(precision_);
-    float lo = max(-HALF_PI, centre - reach), hi = min(HALF_PI, centre + reach);
+    float sd = 1.0 / sqrt(precision_);
+    float cos_j = max(cos(theta_j), 0.0), total = 0.0;
+    if (-HALF_PI <= centre - R_HERMITE_REACH * sd && centre + R_HERMITE_REACH * sd <= HALF_PI) {
+        float scale = sqrt(2.0) * sd;  // Gauss–Hermite for the product Gaussian inside the domain
+        for (int q = 0; q < R_HERMITE_NODES; ++q)
+            total += RH_W[q] * r_integrand(centre + scale * RH_X[q], mu, sigma, theta_j, cos_j, lam);
+        return scale * total / z;
+    }
+    float lo = max(-HALF_PI, centre - R_WINDOW * sd), hi = min(HALF_PI, centre + R_WINDOW * sd);
     if (hi <= lo) return 0.0;
     float half_len = 0.5 * (hi - lo), mid = 0.5 * (hi + lo);
-    float cos_j = max(cos(theta_j), 0.0), total = 0.0;
-    for (int q = 0; q < R_NODES; ++q) {
-        float t = mid + half_len * R_X[q];
-        float ct = cos(t);
-        float sh = sin(0.5 * (t - theta_j));  // cos(t − θ_j) − 1 = −2 sin²(·/2), exact for small angles
-        float d = (t - mu) / sigma;
-        total += R_W[q] * exp(-0.5 * d * d - 2.0 * lam * sh * sh) * ct * ct * i0e(lam * max(ct, 0.0) * cos_j);
-    }
+    for (int q = 0; q < R_NODES; ++q)
+        total += R_W[q] * r_integrand(mid + half_len * R_X[q], mu, sigma, theta_j, cos_j, lam);
     return half_len * total / z;
 }
 
