@@ -110,46 +110,58 @@ def shadow_visibility(sm: ShadowMap, positions, bias, light_angular_radius: floa
     return visibility
 
 
+RECEIVER_BLOCK = 256  # receivers per prange iteration: they share one set of tap scratch arrays
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def _pcss(depth, view, origin, texel, d_min, positions, bias, tan_angle, pcf_radius, visibility):
-    """visibility[k] for every receiver k (module docstring); each iteration writes only its own entry."""
+    """visibility[k] for every receiver k (module docstring); each iteration writes only its own entry. The taps lie
+    on a grid, so a filter's column and row texels (and bilinear fractions) are found once per axis, not per tap."""
     size = depth.shape[0]
-    for k in prange(positions.shape[0]):
-        px, py, pz = positions[k, 0] - origin[0], positions[k, 1] - origin[1], positions[k, 2] - origin[2]
-        x = view[0, 0] * px + view[0, 1] * py + view[0, 2] * pz
-        y = view[1, 0] * px + view[1, 1] * py + view[1, 2] * pz
-        z = view[2, 0] * px + view[2, 1] * py + view[2, 2] * pz
-        u, w = x / texel + 0.5 * size, 0.5 * size - y / texel
-        reach = MAX_FILTER_TEXELS + 2.0
-        if not (math.isfinite(z) and -reach < u < size + reach and -reach < w < size + reach):
-            continue  # non-finite or off the map: lit
-        threshold = z - bias[k]
-        r = min(max(pcf_radius, (z - d_min) * tan_angle / texel), MAX_FILTER_TEXELS)
-        n = min(MAX_TAPS, int(math.ceil(2.0 * r)) + 1)
-        found, total = 0, 0.0
-        for a in range(n):
-            for b in range(n):
+    for block in prange((positions.shape[0] + RECEIVER_BLOCK - 1) // RECEIVER_BLOCK):
+        cols, rows = np.empty(MAX_TAPS, np.int64), np.empty(MAX_TAPS, np.int64)
+        col_f, row_f = np.empty(MAX_TAPS), np.empty(MAX_TAPS)
+        for k in range(block * RECEIVER_BLOCK, min(positions.shape[0], (block + 1) * RECEIVER_BLOCK)):
+            px, py, pz = positions[k, 0] - origin[0], positions[k, 1] - origin[1], positions[k, 2] - origin[2]
+            x = view[0, 0] * px + view[0, 1] * py + view[0, 2] * pz
+            y = view[1, 0] * px + view[1, 1] * py + view[1, 2] * pz
+            z = view[2, 0] * px + view[2, 1] * py + view[2, 2] * pz
+            u, w = x / texel + 0.5 * size, 0.5 * size - y / texel
+            reach = MAX_FILTER_TEXELS + 2.0
+            if not (math.isfinite(z) and -reach < u < size + reach and -reach < w < size + reach):
+                continue  # non-finite or off the map: lit
+            threshold = z - bias[k]
+            r = min(max(pcf_radius, (z - d_min) * tan_angle / texel), MAX_FILTER_TEXELS)
+            n = min(MAX_TAPS, int(math.ceil(2.0 * r)) + 1)
+            for a in range(n):
                 tu = u - r + (2.0 * r * a / (n - 1) if n > 1 else r)
-                tw = w - r + (2.0 * r * b / (n - 1) if n > 1 else r)
-                d = _fetch(depth, int(math.floor(tw)), int(math.floor(tu)))
-                if d < threshold:
-                    found += 1
-                    total += d
-        if found == 0:
-            continue
-        r = min(max(pcf_radius, (z - total / found) * tan_angle / texel), MAX_FILTER_TEXELS)
-        n = min(MAX_TAPS, max(1, int(math.ceil(2.0 * r))))
-        lit = 0.0
-        for a in range(n):
-            for b in range(n):
+                tw = w - r + (2.0 * r * a / (n - 1) if n > 1 else r)
+                cols[a], rows[a] = int(math.floor(tu)), int(math.floor(tw))
+            found, total = 0, 0.0
+            for b in range(n):  # along rows: the map is row-major
+                for a in range(n):
+                    d = _fetch(depth, rows[b], cols[a])
+                    if d < threshold:
+                        found += 1
+                        total += d
+            if found == 0:
+                continue
+            r = min(max(pcf_radius, (z - total / found) * tan_angle / texel), MAX_FILTER_TEXELS)
+            n = min(MAX_TAPS, max(1, int(math.ceil(2.0 * r))))
+            for a in range(n):
                 fu = u - r + 2.0 * r * (a + 0.5) / n - 0.5  # relative to texel centres
-                fw = w - r + 2.0 * r * (b + 0.5) / n - 0.5
-                j, i = int(math.floor(fu)), int(math.floor(fw))
-                su, sw = fu - j, fw - i
-                top = (1.0 - su) * _lit(depth, i, j, threshold) + su * _lit(depth, i, j + 1, threshold)
-                bottom = (1.0 - su) * _lit(depth, i + 1, j, threshold) + su * _lit(depth, i + 1, j + 1, threshold)
-                lit += (1.0 - sw) * top + sw * bottom
-        visibility[k] = min(max(lit / (n * n), 0.0), 1.0)
+                fw = w - r + 2.0 * r * (a + 0.5) / n - 0.5
+                cols[a], rows[a] = int(math.floor(fu)), int(math.floor(fw))
+                col_f[a], row_f[a] = fu - cols[a], fw - rows[a]
+            lit = 0.0
+            for b in range(n):
+                i, sw = rows[b], row_f[b]
+                for a in range(n):
+                    j, su = cols[a], col_f[a]
+                    top = (1.0 - su) * _lit(depth, i, j, threshold) + su * _lit(depth, i, j + 1, threshold)
+                    bottom = (1.0 - su) * _lit(depth, i + 1, j, threshold) + su * _lit(depth, i + 1, j + 1, threshold)
+                    lit += (1.0 - sw) * top + sw * bottom
+            visibility[k] = min(max(lit / (n * n), 0.0), 1.0)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
