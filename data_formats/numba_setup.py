@@ -6,6 +6,9 @@
   source of the toolchain: Numba checks only the timestamp of a kernel's own file, so a kernel whose callee in
   another module changed would load its stale machine code (seen: an edited normaliser in ``fiber_bcsdf`` left
   ``strip_shading`` on the old one). Other sources give another folder; old folders can be deleted at any time.
+  Numba's settings that change the machine code it generates (``CODEGEN_SETTINGS``) are not in its cache key
+  either: a run under ``NUMBA_ENABLE_PROFILING=1`` (for a profiler) cached kernels that then shaded 1.8× slower in
+  every later run. When any of them is set, the folder's name carries a hash of their values too.
   This module must be imported before any kernel is defined; ``data_formats/__init__`` (the bottom layer, which
   every package imports first) does, and it also sets Numba's setting when a script imported numba first (Numba
   reads its environment once, at import).
@@ -34,8 +37,21 @@ def sources_hash(root=None) -> str:
     return digest.hexdigest()
 
 
+# environment settings that change Numba's generated code (and that its cache key ignores)
+CODEGEN_SETTINGS = ("NUMBA_ENABLE_PROFILING", "NUMBA_OPT", "NUMBA_DEBUGINFO", "NUMBA_BOUNDSCHECK", "NUMBA_CPU_NAME",
+                    "NUMBA_CPU_FEATURES", "NUMBA_LOOP_VECTORIZE", "NUMBA_SLP_VECTORIZE", "NUMBA_FASTMATH")
+
+
+def cache_folder_name(environ=os.environ) -> str:
+    """``sources_hash()``, followed by a hash of the ``CODEGEN_SETTINGS`` set in ``environ`` if any is."""
+    settings = [f"{name}={environ[name]}" for name in CODEGEN_SETTINGS if name in environ]
+    if not settings:
+        return sources_hash()
+    return sources_hash() + "-" + hashlib.blake2b("\n".join(settings).encode(), digest_size=4).hexdigest()
+
+
 if "NUMBA_CACHE_DIR" not in os.environ:
-    _cache = cache_root() / "numba" / sources_hash()
+    _cache = cache_root() / "numba" / cache_folder_name()
     try:
         _cache.mkdir(parents=True, exist_ok=True)
         os.environ["NUMBA_CACHE_DIR"] = str(_cache)

@@ -127,6 +127,21 @@ def test_the_kernel_cache_folder_follows_every_source(tmp_path):
     assert sources_hash() != first and len(sources_hash()) == 16
 
 
+def test_settings_that_change_the_machine_code_get_their_own_cache_folder():
+    """Numba's cache key ignores settings such as ``NUMBA_ENABLE_PROFILING``: kernels compiled under them must not
+    land in the folder that normal runs load from."""
+    from data_formats.numba_setup import cache_folder_name, sources_hash
+
+    assert cache_folder_name({}) == sources_hash()
+    profiled = cache_folder_name({"NUMBA_ENABLE_PROFILING": "1"})
+    assert profiled.startswith(sources_hash() + "-") and profiled != cache_folder_name({"NUMBA_OPT": "0"})
+    assert cache_folder_name({"NUMBA_ENABLE_PROFILING": "1", "UNRELATED": "x"}) == profiled
+    code = ("import os; import data_formats; from data_formats.numba_setup import sources_hash; "
+            f"assert os.path.basename(os.environ['NUMBA_CACHE_DIR']) == {profiled!r} != sources_hash()")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    subprocess.run([sys.executable, "-c", code], check=True, env={**env, "NUMBA_ENABLE_PROFILING": "1"})
+
+
 def test_kernels_use_the_keyed_cache_folder_even_after_a_plain_numba_import():
     """A script that imports numba before the toolchain (``benchmarks/bench_render.py`` does) still caches kernels
     in the keyed folder, not in ``__pycache__`` beside the sources, where a stale callee would be loaded."""
