@@ -53,8 +53,8 @@ from numba import njit, prange
 
 from data_formats.conventions import HALF_PI, LUMINANCE, THETA_RANGE
 from knitrun.shading.fiber_bcsdf import (INV_PI2, N_CONTEXT, P_A_D, P_A_R, P_A_TT, P_ALPHA_R, P_ALPHA_TT, P_BETA_R,
-                                         P_BETA_TT, P_GAMMA_TT, context_into, cos2_normaliser, evaluate, gauss,
-                                         lobe_centre_at, tt_logistic_scale)
+                                         P_BETA_TT, P_GAMMA_TT, context_into, evaluate, lobe_centre_at,
+                                         log_cos2_normaliser, tt_logistic_scale)
 from knitrun.shading.fiber_frame import wrap_angle
 from knitrun.shading.table_lookup import axis_cell
 
@@ -151,8 +151,7 @@ def _lobe(theta_i, theta_o, alpha, width):
     centred by ``fiber_bcsdf.lobe_centre_at``."""
     sigma = 2.0 * max(width, WIDTH_FLOOR)
     mu = lobe_centre_at(alpha, sigma, theta_o)
-    g = gauss(theta_i, mu, sigma)
-    return g / cos2_normaliser(mu, sigma) if g > 0.0 else 0.0
+    return math.exp(-0.5 * ((theta_i - mu) / sigma) ** 2 - log_cos2_normaliser(mu, sigma))
 
 
 @njit(cache=True)
@@ -184,13 +183,13 @@ def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, wor
     out too (F_direct and L_o/E then lack it), for callers that take single scattering from elsewhere (the
     renderer's multiple-scattering lights: f is in I_M)."""
     i0, i1, fr = axis_cell(theta_i, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
-    sin_o, cos_o = math.sin(theta_o), math.cos(theta_o)
+    sin_o = math.sin(theta_o)
     cos_i = math.cos(theta_i)
     wo, wi, f_single, ctx = work[0:3], work[3:6], work[6:9], work[9:]
-    wo[0], wo[1], wo[2] = sin_o, cos_o, 0.0  # φ_o = 0, so φ_i = −φ
-    wi[0], wi[1], wi[2] = math.sin(theta_i), cos_i * math.cos(phi), -cos_i * math.sin(phi)
     f_single[:] = 0.0
     if direct > 0.0 and single:  # f; a point wholly in shadow skips it (weight D = 0)
+        wo[0], wo[1], wo[2] = sin_o, math.cos(theta_o), 0.0  # φ_o = 0, so φ_i = −φ
+        wi[0], wi[1], wi[2] = math.sin(theta_i), cos_i * math.cos(phi), -cos_i * math.sin(phi)
         context_into(p, wo, ctx, False)
         evaluate(p, ctx, wi, f_single)
     n_r_g = 0.5 * INV_PI
