@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from numba import njit
 from scipy import integrate, special
 
 from data_formats import asset_pack as ap
@@ -13,7 +14,8 @@ from data_formats.yarn_spec import load_preset
 from knitbake.bake import QUALITY
 from knitbake.stages import im_table as im
 from knitrun.shading import fiber_bcsdf as fb
-from knitrun.shading.im_lookup import R_NEGLIGIBLE, i0e, im_lookup, sg
+from knitrun.shading.im_lookup import (R_NEGLIGIBLE, i0e, im_kernel, im_lookup, im_slice_kernel, im_slices,
+                                       im_table_from, sg)
 from tests.helpers import BCSDF, DEG, ROUGH, TEST_SHAPE, YARN, provenance
 
 MEDIUM = fb.params_from_values([0.3, 0.25, 0.2], [0.5, 0.45, 0.4], [0.1, 0.15, 0.2], 8 * DEG, 12 * DEG, 25 * DEG,
@@ -221,6 +223,36 @@ def test_lookup_matches_direct_quadrature(rough_table):
     for d in range(5):
         m = decade == d
         assert np.max(np.abs(got[m] - ref[m]) / ref[m].max(axis=0)) < 0.01, d
+
+
+@njit(cache=True)
+def _both_kernels(table, slices, params, theta_o, theta_j, dphi, lam, lobe):
+    """im_kernel on the table and im_slice_kernel on its slices, per point (lobe[k]: the point's lobe)."""
+    full, sliced = np.empty((theta_o.shape[0], 3)), np.empty((theta_o.shape[0], 3))
+    for k in range(theta_o.shape[0]):
+        c = fb.view_context(params, theta_o[k])
+        im_kernel(table, params, c, theta_o[k], theta_j[k], dphi[k], lam[k], full[k])
+        im_slice_kernel(slices, lobe[k], params, c, theta_o[k], theta_j[k], dphi[k], lam[k], sliced[k])
+    return full, sliced
+
+
+@pytest.mark.parametrize("order", [(0, 1, 2, 3), (3, 1, 0, 2)])
+def test_slices_at_the_lobes_lambda_give_the_tables_lookup(rough_table, order):
+    """The renderer interpolates the table along log λ once per lobe (``im_slices``) and then over the other three
+    axes: the same value as the 16-corner lookup to rounding, for λ inside, at and beyond the axis' ends, whatever
+    the axes' order in the table."""
+    table, _, axes = rough_table
+    im = im_table_from(np.transpose(table, order + (4,)), [axes[a] for a in order])
+    lambdas = np.array([0.3, 0.5, 2.7, 64.0, 6600.0, 1e4, 3e4])
+    rng = np.random.default_rng(3)
+    n = 3000
+    lobe = rng.integers(0, len(lambdas), n)
+    theta_o, theta_j = rng.uniform(-np.pi / 2, np.pi / 2, n), rng.uniform(-np.pi / 2, np.pi / 2, n)
+    full, sliced = _both_kernels(im, im_slices(im, lambdas), ROUGH, theta_o, theta_j, rng.uniform(-7, 7, n),
+                                 lambdas[lobe], lobe)
+    assert np.all(full > 0) and np.allclose(sliced, full, rtol=1e-12, atol=0)
+    with pytest.raises(ValueError, match="λ"):
+        im_slices(im, [1.0, 0.0])
 
 
 def test_cotton1_standard_quality_meets_the_lookup_target():

@@ -27,7 +27,7 @@ from knitrun.render.yarn_look import no_detail, no_full_table, ones_factor
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
 from knitrun.shading.equirect import texel_directions
-from knitrun.shading.im_lookup import im_table_from
+from knitrun.shading.im_lookup import im_slices, im_table_from
 from knitrun.shading.srbf_fit import fit_srbf
 from tests.helpers import FRONT, ROUGH, SKY, SUN, TEST_SHAPE, TINY, straight, write_scene
 
@@ -144,7 +144,8 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
         look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0)
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
-                      Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n), i_m, rgb, alpha)
+                      Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n),
+                      im_slices(i_m, fit.sharpness), rgb, alpha)
         theta_o = np.arcsin(np.sum(view * tangent, axis=1))
         direct = np.zeros((n, 3))
         for wj, lam, w in zip(fit.directions, fit.sharpness, fit.weights):

@@ -61,7 +61,7 @@ from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
 from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
 from knitrun.render.yarn_look import load_look, no_full_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
-from knitrun.shading.im_lookup import no_im_table
+from knitrun.shading.im_lookup import im_slices, no_im_table
 from knitrun.shading.srbf_cache import cached_fit
 from knitrun.sim.simulate import RADIUS_TOLERANCE
 
@@ -277,6 +277,10 @@ class Renderer:
             if progress is not None:
                 progress("srbf_fit", self.setup_timings["srbf_fit"])
         self.fit = fit
+        # the I_M tables at the lobes' λ, once (``im_lookup.im_slices``; no slice without an environment): the shading
+        # kernels read these
+        lambdas = np.zeros(0) if fit is None else fit.sharpness
+        self.im_slices = [im_slices(table, lambdas) for table in self.im_tables]
         self.shadow_depth = {}  # shadow maps by size, drawn over by the next map of that size
 
     def frame_index(self, frame: int | None) -> int:
@@ -368,7 +372,7 @@ class Renderer:
             idx = np.flatnonzero(points["yarn"] == k)
             kernel_look, corrections, _ = self.kernel_looks[k]
             environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]), Lights(ms_dir, ms_e, ms_vis[0]),
-                           self.im_tables[k]) if len(lobe_dir) else (None, None, None)
+                           self.im_slices[k]) if len(lobe_dir) else (None, None, None)
             shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
                           Lights(light_dir, light_e, light_vis[0]) if len(light_dir) else None, *environment, rgb,
                           alpha)
@@ -379,7 +383,7 @@ class Renderer:
             for k in drawn_fly:
                 idx = np.flatnonzero(fly_points["yarn"] == k)
                 shade_flyaway(idx, hairs, *self.kernel_looks[k], Lights(light_dir, light_e, light_vis[1]),
-                              Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]), self.im_tables[k], fly_rgb,
+                              Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]), self.im_slices[k], fly_rgb,
                               fly_alpha, fly_transmit)
         lap("shade")
 

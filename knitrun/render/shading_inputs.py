@@ -21,7 +21,7 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
                    SRBF lobes, ``pipeline.ms_lights``)
 ``Lobes``          SRBF lobes: ``direction`` (J, 3), ``sharpness`` λ (J,), ``weight`` W (J, 3),
                    ``visibility`` (J, N)
-``IMTable``        the I_M^{TT,D} table and its axes (``knitrun.shading.im_lookup``)
+``IMSlices``       the I_M^{TT,D} table at each lobe's λ and its other axes (``knitrun.shading.im_lookup``)
 =================  =======================================================================================
 """
 

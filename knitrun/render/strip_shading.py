@@ -37,7 +37,8 @@ sharpness λ_j, weight W_j, visibility T̃_j from the lobe's shadow map, raised 
 
     L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 
-(I_M = the pack's I_M^{TT,D} table + the R lobe integrated per lookup, ``im_lookup.im_kernel``)
+(I_M = the pack's I_M^{TT,D} table + the R lobe integrated per lookup, ``im_lookup.im_kernel``; the kernels read
+the table as ``im_lookup.IMSlices``, interpolated at each lobe's λ once, ``im_slice_kernel``)
 
 plus, beyond the paper, the environment's multiple scattering: eq. 17 has single scattering only (I_M integrates
 f), which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. Lobe j
@@ -85,7 +86,7 @@ from knitrun.shading.dual_scattering import (D_B, D_F, K_F_BACK_DIRECT, K_F_SCAT
                                              forward_fraction)
 from knitrun.shading.fiber_bcsdf import N_CONTEXT, context_into, evaluate, r_lobe_context_into, spread_params
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
-from knitrun.shading.im_lookup import im_kernel
+from knitrun.shading.im_lookup import im_slice_kernel
 from knitrun.shading.table_lookup import axis_cell
 
 DEGENERATE = 1e-6  # |ω_o × t| below this: the strip is edge-on (ASSET_PACK.md §3); the point is not drawn
@@ -374,7 +375,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     spread_params(params, spread2, phi_f, wide)
                     # the R lobe of the fiber-frame view, for I_M's R rule
                     r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
-                    im_kernel(im, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
+                    im_slice_kernel(im, j, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
                     for ch in range(3):
                         rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
                 for c in range(ms.direction.shape[0]):  # multiple scattering: cells of the sky as distant lights
@@ -471,7 +472,8 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                 phi_f = azimuth_difference(tf, wo, w)
                 spread_params(params, spread2, phi_f, wide)
                 r_lobe_context_into(wide, wo_l[0], ctx)
-                im_kernel(im, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f, lobes.sharpness[j], f)
+                im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f, lobes.sharpness[j],
+                                f)
                 lit = lobes.visibility[j, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, w, psi, scratch)
                 for ch in range(3):
                     rgb[q, ch] += lobes.weight[j, ch] * lit * f[ch]
