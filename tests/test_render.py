@@ -20,7 +20,7 @@ from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import radius_mismatch, render
-from knitrun.render.strip_shading import resolve, shade_regular, variant_of
+from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, ones_factor
@@ -260,6 +260,53 @@ def test_flyaway_variant_hash_is_the_fixed_hash_and_uses_all_three():
     np.testing.assert_array_equal(picks, [_splitmix_variant(c, p) for c, p in pairs])
     counts = np.bincount(picks, minlength=3)
     assert counts.min() > 0.25 * picks.size  # each variant about a third
+
+
+def _through_yarn(v, w_b, w_n, reach, a_f, n_cross):
+    """The fraction of light reaching a hair beside a yarn (unit radius) from direction (w_b, w_n) in the yarn's
+    cross-section, by ray–circle intersection at each of the kernel's depths: a_f to the power n_cross times the
+    chord inside the circle over its diameter."""
+    d = np.array([w_b, w_n]) / math.hypot(w_b, w_n)
+    depth = math.sqrt(max(reach * reach - v * v, 0.0))
+    out = np.zeros(3)
+    for k in range(HAIR_DEPTHS):
+        p = np.array([v, depth * ((2 * k + 1) / HAIR_DEPTHS - 1)])
+        disc = (p @ d) ** 2 - (p @ p - 1.0)  # |p + s d| = 1: s = −p·d ± √disc
+        crossed = disc > 0 and -(p @ d) - math.sqrt(disc) > 0
+        out += a_f ** (n_cross * math.sqrt(disc)) if crossed else 1.0
+    return out / HAIR_DEPTHS
+
+
+def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_crosses_it():
+    """``_hair_light`` beyond the body: 1 with the light on the hair's side or along the yarn, its own yarn's
+    transmittance where the ray toward the light crosses the tube (ray–circle intersection at the same depths), and
+    over the body Ψ^Fiber_G, whatever the geometry."""
+    a_f = np.array([0.2, 0.5, 0.8])
+    ds = np.zeros((5, 9, 3))
+    ds[0] = a_f  # row R_A_F: ā_f(θ) the same at every θ
+    t, n, b = np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), np.array([0, 1.0, 0])  # b = n × t
+    psi = np.full((4, 1, 3), 0.25)
+    tables = Corrections(np.zeros((0, 1, 1, 3)), np.ones((4, 1, 3)), np.ones((4, 1, 3)), np.zeros((0, 1, 1, 3)),
+                         psi, np.ones((4, 1, 3)))
+    out, scratch = np.empty(3), np.empty(3)
+    reach, n_cross = 2.5, 6.0
+
+    def light(v, w, on_body=False, count=n_cross):
+        _hair_light(on_body, tables, ds, count, reach, v, t, n, b, np.asarray(w, float) / np.linalg.norm(w), out,
+                    scratch)
+        return out.copy()
+
+    up = [0.0, 1.0, 0.3]  # from above (+b), a little in front
+    np.testing.assert_allclose(light(1.5, up), 1.0)  # the hair above: nothing between it and the light
+    below = light(-1.5, up)
+    np.testing.assert_allclose(below, _through_yarn(-1.5, 1.0, 0.3, reach, a_f, n_cross), rtol=1e-12)
+    assert np.all(below < 1.0) and below[0] < below[1] < below[2]  # redder through a red-passing yarn
+    assert np.all(light(-1.2, up) <= below)  # nearer the axis: longer chords
+    np.testing.assert_allclose(light(-1.5, [1.0, 0, 0]), 1.0)  # along the yarn
+    np.testing.assert_allclose(light(-1.5, up, count=0.0), 1.0)  # a yarn that lets everything through
+    back = [0.4, 0.5, -1.0]  # from behind and above: the hair below and in front is shadowed at some depths
+    np.testing.assert_allclose(light(-1.3, back), _through_yarn(-1.3, 0.5, -1.0, reach, a_f, n_cross), rtol=1e-12)
+    np.testing.assert_allclose(light(0.5, up, on_body=True), 0.25)  # over the body: Ψ^Fiber_G
 
 
 def test_resolve_weights_coverage_over_the_background():

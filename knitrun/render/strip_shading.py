@@ -53,7 +53,11 @@ Flyaways (``shade_flyaway``): the variant of period ⌊s/period⌋ of curve c is
 integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the wider flyaway strip; the hair
 tangent from its RGB; single scattering, L_o = Σ E V S f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j S_j I_M (thin hairs: no
 multiple-scattering terms), S = Ψ^Fiber_G(v_strip, ω_i) (mean RGB) where the hair lies over the yarn body
-(|v_strip| ≤ 1, v_strip = v·h_fly/r) — a hair on the surface is shadowed like the surface fibers — and 1 beyond.
+(|v_strip| ≤ 1, v_strip = v·h_fly/r) — a hair on the surface is shadowed like the surface fibers — and beyond it
+the transmittance of the hair's own yarn toward ω_i, ā_f(θ_i)^{n_cross·ℓ} where the ray crosses the tube on a chord ℓ
+diameters long, averaged over the depths the hair may have (``_hair_light``): without it a hair below a yarn lit
+from above shone as if in the open (the straight yarn under the sky: the hairs below the body at 2.0× the
+reference's, BENCHMARKS.md "Issue 13: hairs in their own yarn's shadow").
 A hair is not an opaque film: of the radiance behind it (the yarn body, or the background) it passes on its forward
 fraction τ = ā_f(θ_o^f) (``dual_scattering.forward_fraction``; cotton ≈ 0.7), which a broad bright backdrop such as
 the body sends on toward the camera as it receives it. Without τ a hair over the body replaces the body's multiply
@@ -90,6 +94,7 @@ from knitrun.shading.im_lookup import im_slice_kernel
 from knitrun.shading.table_lookup import axis_cell
 
 DEGENERATE = 1e-6  # |ω_o × t| below this: the strip is edge-on (ASSET_PACK.md §3); the point is not drawn
+HAIR_DEPTHS = 4  # depths averaged over by a hair's own-yarn shadow (``_hair_light``)
 POINT_BLOCK = 256  # shading points per prange iteration: they share one set of scratch arrays
 # rows of a block's (_N_VEC, 3) scratch in ``shade_regular``
 _T, _WO, _N, _B, _TF, _TEX, _XI, _PSI, _SCRATCH, _IM, _W, _WO_L = range(12)
@@ -422,7 +427,8 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
     ``flyaway``: its three texture variants); writes rgb[idx], alpha[idx] and transmit[idx] (RGB, the hair's
     forward fraction ā_f(θ_o): what it passes on of the radiance behind it)."""
     params, ds, period = look.params, look.ds, look.period
-    half_width, radius = look.flyaway_half_width, look.radius
+    half_width, radius, n_cross = look.flyaway_half_width, look.radius, look.n_cross
+    reach = half_width / radius  # the hair layer's half-width in yarn radii
     texel_u = period / flyaway.cols[0, 0]
     texel_v = 2.0 * half_width / flyaway.rows[0, 0]
     for block in prange((idx.shape[0] + POINT_BLOCK - 1) // POINT_BLOCK):
@@ -447,11 +453,11 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
             # local fiber frame: x along tf, y toward the camera in the normal plane, z = x × y
             if not _strip_frame(tf, wo, ny, b):
                 continue
-            psi[:] = 1.0
             wo_l[0], wo_l[1], wo_l[2] = dot(wo, tf), dot(wo, ny), 0.0
             spread2 = tangent_spread(texel[:3], texel[3])
             # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
-            # shadowing of that strip point applies to it; beyond it the hair sticks out and only yarn-level shadows
+            # shadowing of that strip point applies to it; beyond it the hair sticks out, and its own yarn shadows it
+            # where the ray toward the light crosses the yarn (``_hair_light``)
             v_strip = v * half_width / radius
             on_body = abs(v_strip) <= 1.0
             for light in range(lights.direction.shape[0]):
@@ -461,10 +467,10 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                 context_into(wide, wo_l, ctx, False)
                 evaluate(wide, ctx, wl, f)
                 cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
-                lit = lights.visibility[light, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, w, psi,
-                                                                 scratch)
+                _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
+                lit = lights.visibility[light, q] * cos_i
                 for ch in range(3):
-                    rgb[q, ch] += lights.irradiance[light, ch] * lit * f[ch] * cos_i
+                    rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
             for j in range(lobes.direction.shape[0]):
                 if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
                     continue
@@ -474,19 +480,47 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                 r_lobe_context_into(wide, wo_l[0], ctx)
                 im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f, lobes.sharpness[j],
                                 f)
-                lit = lobes.visibility[j, q] * _body_shadow(on_body, corrections, v_strip, t, n, b, w, psi, scratch)
+                _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
                 for ch in range(3):
-                    rgb[q, ch] += lobes.weight[j, ch] * lit * f[ch]
+                    rgb[q, ch] += lobes.weight[j, ch] * lobes.visibility[j, q] * psi[ch] * f[ch]
 
 
 @njit(cache=True, inline='always')
-def _body_shadow(on_body, tables, v, t, n, b, wi, psi, scratch):
-    """Ψ^Fiber_G (mean RGB, clamped to [0, 1]) at strip coordinate v toward ω_i, or 1 off the yarn body."""
-    if not on_body:
-        return 1.0
-    theta_i, phi = _strip_angles(wi, t, n, b)
-    _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, psi, scratch)
-    return _fiber_lit(psi)
+def _hair_light(on_body, tables, ds, n_cross, reach, v, t, n, b, wi, out, scratch):
+    """out[:3] = the fraction of the light from ω_i that reaches a hair at strip coordinate v (yarn radii from the
+    axis, along b) of a yarn with axis tangent t (strip frame n, b). Over the body (``on_body``, |v| ≤ 1): Ψ^Fiber_G
+    (mean RGB, clamped to [0, 1]) of the regular strip there. Beyond it the hair sticks out of its own yarn, which
+    shadows it where the ray toward the light crosses the tube. The strip does not say how far in front of or behind
+    the axis the hair lies, so the fraction is the mean over ``HAIR_DEPTHS`` depths z spread evenly over the hair
+    layer's reach (|(v, z)| ≤ ``reach`` radii). In the cross-section (b, n), with ŵ the unit part of ω_i normal to
+    t, a ray from p = (v, z) heading toward the axis (p·ŵ < 0) passes it at distance √(|p|² − (p·ŵ)²); where that is
+    below 1 it meets n_cross·ℓ fibers, ℓ = √(1 − distance²) its chord over the diameter, and keeps ā_f(θ_i)^{n_cross·ℓ}
+    per channel (the count and ā_f of light crossing another yarn, module docstring)."""
+    out[0] = out[1] = out[2] = 1.0
+    if on_body:
+        theta_i, phi = _strip_angles(wi, t, n, b)
+        _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, out, scratch)
+        out[0] = out[1] = out[2] = _fiber_lit(out)
+        return
+    wb, wn = dot(wi, b), dot(wi, n)
+    across = math.sqrt(wb * wb + wn * wn)
+    if across < DEGENERATE:  # light along the yarn: the ray never nears the axis
+        return
+    wb, wn = wb / across, wn / across
+    depth = math.sqrt(max(reach * reach - v * v, 0.0))
+    forward_fraction(ds, longitudinal_angle(t, wi), scratch)
+    out[0] = out[1] = out[2] = 0.0
+    for k in range(HAIR_DEPTHS):
+        z = depth * ((2.0 * k + 1.0) / HAIR_DEPTHS - 1.0)
+        toward = v * wb + z * wn
+        miss = v * v + z * z - toward * toward
+        if toward >= 0.0 or miss >= 1.0:
+            for ch in range(3):
+                out[ch] += 1.0 / HAIR_DEPTHS
+            continue
+        count = n_cross * math.sqrt(1.0 - miss)
+        for ch in range(3):
+            out[ch] += scratch[ch] ** count / HAIR_DEPTHS
 
 
 # --- resolve ---------------------------------------------------------------------------------------------------------

@@ -117,6 +117,7 @@ def gl_constants() -> str:
         _glsl_array("GL_X", fiber_bcsdf._GL_X), _glsl_array("GL_W", fiber_bcsdf._GL_W),
         f"const float MAX_TANGENT_SPREAD = {strip_shading.MAX_TANGENT_SPREAD!r};",
         f"const float DEGENERATE = {strip_shading.DEGENERATE!r};",
+        f"const int HAIR_DEPTHS = {strip_shading.HAIR_DEPTHS};",
         f"const float MAX_FILTER_TEXELS = {MAX_FILTER_TEXELS!r};",
         f"const int MAX_TAPS = {MAX_TAPS};",
         f"const float NO_YARN = {NO_YARN!r};",

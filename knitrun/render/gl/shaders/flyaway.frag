@@ -49,12 +49,34 @@ vec4 fly_sample(int layer, float level, float u, float v) {
     return out_;
 }
 
-// strip_shading._body_shadow: Ψ^Fiber_G (mean RGB) of the regular strip at v_strip toward w, 1 off the body
-float body_shadow(bool on_body, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
-    if (!on_body) return 1.0;
-    vec3 xi, psi;
-    corrections(v_strip, t, n, b, 0.0, w, xi, psi);
-    return fiber_lit(psi);
+// strip_shading._hair_light: the fraction of the light from w reaching a hair at v_strip: over the body Ψ^Fiber_G
+// (mean RGB) of the regular strip there; beyond it the hair's own yarn's transmittance where the ray toward the light
+// crosses the tube, a_f(θ_i)^(n_cross·chord), averaged over HAIR_DEPTHS depths within the hair layer's reach
+vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
+    if (on_body) {
+        vec3 xi, psi;
+        corrections(v_strip, t, n, b, 0.0, w, xi, psi);
+        return vec3(fiber_lit(psi));
+    }
+    float wb = dot(w, b), wn = dot(w, n);
+    float across = sqrt(wb * wb + wn * wn);
+    if (across < DEGENERATE) return vec3(1.0);
+    wb /= across;
+    wn /= across;
+    float depth = sqrt(max(reach * reach - v_strip * v_strip, 0.0));
+    int i0, i1;
+    float fr;
+    axis_cell(clamped_asin(dot(t, w)), -HALF_PI, HALF_PI, textureSize(ds_table, 0).x, false, i0, i1, fr);
+    vec3 a_f = clamp(ds_row(R_A_F, i0, i1, fr), 0.0, 1.0);
+    vec3 through = vec3(0.0);
+    for (int k = 0; k < HAIR_DEPTHS; ++k) {
+        float z = depth * ((2.0 * float(k) + 1.0) / float(HAIR_DEPTHS) - 1.0);
+        float toward = v_strip * wb + z * wn;
+        float miss = v_strip * v_strip + z * z - toward * toward;
+        through += (toward >= 0.0 || miss >= 1.0) ? vec3(1.0)
+                 : pow(max(a_f, vec3(1e-30)), vec3(n_cross * sqrt(1.0 - miss)));
+    }
+    return through / float(HAIR_DEPTHS);
 }
 
 void main() {
@@ -88,6 +110,7 @@ void main() {
     float spread2 = tangent_spread(texel.rgb, texel.a);
     float v_strip = sp.v * flyaway_half_width / radius;
     bool on_body = abs(v_strip) <= 1.0;
+    float reach = flyaway_half_width / radius;
     Params p = yarn_params();
     vec3 rgb = vec3(0.0);
     for (int l = 0; l < n_lights; ++l) {
@@ -95,9 +118,9 @@ void main() {
         float phi_f = azimuth_difference(tf, sp.wo, w);
         float theta_i_f = clamped_asin(dot(tf, w));
         vec3 f = bcsdf_single(spread_params(p, spread2, phi_f), theta_i_f, theta_o_f, phi_f);
-        float lit = pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS)
-                  * body_shadow(on_body, v_strip, sp.t, sp.n, sp.b, w);
-        rgb += light_irradiance[l] * lit * f * cos(theta_i_f);
+        float lit = pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS);
+        rgb += light_irradiance[l] * lit * hair_light(on_body, reach, v_strip, sp.t, sp.n, sp.b, w) * f
+             * cos(theta_i_f);
     }
     for (int j = 0; j < n_lobes; ++j) {
         float vis = lobe_visibility(j, sp.position);
@@ -109,7 +132,7 @@ void main() {
         float mu_r = lobe_centre_at(wide.alpha_r, sigma_r, theta_o_f);
         vec3 i_m = im_kernel(wide, mu_r, sigma_r, cos2_normaliser(mu_r, sigma_r), theta_o_f, clamped_asin(dot(tf, w)),
                              -phi_f, lobe_lambda[j]);
-        rgb += lobe_weight[j] * vis * body_shadow(on_body, v_strip, sp.t, sp.n, sp.b, w) * i_m;
+        rgb += lobe_weight[j] * vis * hair_light(on_body, reach, v_strip, sp.t, sp.n, sp.b, w) * i_m;
     }
     out_radiance = vec4(alpha * rgb, 1.0);
 }
