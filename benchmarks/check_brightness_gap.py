@@ -3,20 +3,22 @@
 1. The tangent spread a pack's texture holds, per mip level: the Toksvig variance (1 − r)/r from r = |T|/coverage
    (``knitrun.render.strip_shading.tangent_spread``, without its cap), as an angle in degrees: median and
    coverage-weighted RMS over texels with coverage > 0.05.
-2. The mean radiance ratio and yarn-scale rel L1 (ratio to the fiber-instance floor) of the full model (ξ, Ψ^Fiber,
-   inter-reflection; no flyaways), as rendered, with inter-reflection switched off, and with every yarn-level
-   visibility forced to 1 (no shadow maps: the probe that bounds what yarn-level shadowing takes away).
+2. The mean radiance ratio and yarn-scale rel L1 (ratio to the fiber-instance floor) of the regular fibers' model
+   (the full model without its flyaway layer: ξ, Ψ^Fiber, inter-reflection), as rendered, with inter-reflection
+   switched off, and with every yarn-level visibility forced to 1 (no shadow maps: the probe that bounds what
+   yarn-level shadowing takes away).
 3. Coverage: the fraction of pixels brighter than 0.02 (luminance) in the reference and in the strip image, and the
    share of the reference's energy in pixels the strips leave at the background.
 4. The flyaway layer against the reference's hairs: pixels the full model's regular strips cover (luminance > 0.02)
-   are the body, the rest is beside it; the summed radiance beside the body with the layer over the reference's,
+   are the body, the rest is beside it; the summed radiance beside the body with the layer (the full model) over the
+   reference's,
    and the body's radiance with the layer over without it.
 5. The flyaways' share of the reference (``--flyaway-spp`` > 0): the scene path traced without flyaways at that spp,
    its mean over the reference's, and the full model's mean ratio against it (the part of the gap that the regular
    fibers' model owns).
 
     .venv/bin/python benchmarks/check_brightness_gap.py --pack out/bench/cotton1_standard.h5 \\
-        [--scene knit_patch_sky] [--reference-dir out/bench/refs] [--flyaway-spp 16] [--closed-xi]
+        [--scene knit_patch_sky] [--reference-dir out/bench/refs] [--flyaway-spp 16] [--papers-xi]
 
 The reference and its instance floor are ``DIR/<scene>.exr`` and ``DIR/<scene>_instance.exr``
 (``benchmarks/bench_floors.py``).
@@ -60,15 +62,16 @@ def main():
     parser.add_argument("--scene", default="knit_patch_sky")
     parser.add_argument("--reference-dir", default="out/bench/refs")
     parser.add_argument("--flyaway-spp", type=int, default=16, help="spp of the flyaway-free reference; 0: skip")
-    parser.add_argument("--closed-xi", action="store_true", help="every model with the pack's closed ξ")
+    parser.add_argument("--papers-xi", action="store_true",
+                        help="every model with the paper's ξ instead of the pack's closed one")
     args = parser.parse_args()
     tangent_spread_by_level(args.pack)
     scene = load_scene(Path(__file__).resolve().parent.parent / "examples" / "scenes" / f"{args.scene}.toml")
     reference = read_exr(Path(args.reference_dir) / f"{args.scene}.exr")
     floor = yarn_scale_metrics(read_exr(Path(args.reference_dir) / f"{args.scene}_instance.exr"), reference,
                                yarn_diameter_px(scene))["rel_l1"]
-    closed = {"closed_xi": args.closed_xi}
-    base = dataclasses.replace(ABLATIONS["full"], **closed)
+    closed = {"closed_xi": not args.papers_xi}
+    base = dataclasses.replace(ABLATIONS["full"], flyaways=False, **closed)
     shadowed = pipeline._visibility
     probes = [("full", base, shadowed),
               ("  without inter-reflection", dataclasses.replace(ABLATIONS["xi_shadowing"], **closed), shadowed),
@@ -91,7 +94,7 @@ def main():
               f"{reference_lum[empty].sum() / reference_lum.sum():.3f}", flush=True)
         if label == "full":
             full_mean, full_lum = float(lum.mean()), lum
-    fly = pipeline.render(scene, {"cotton1": args.pack}, dataclasses.replace(ABLATIONS["flyaways"], **closed)).image \
+    fly = pipeline.render(scene, {"cotton1": args.pack}, dataclasses.replace(ABLATIONS["full"], **closed)).image \
         @ LUMINANCE
     body = full_lum > LIT
     print(f"flyaway layer: radiance beside the body {fly[~body].sum() / reference_lum[~body].sum():.2f}× the "

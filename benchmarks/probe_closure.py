@@ -4,8 +4,8 @@ The correction stage (``knitbake/stages/correction.py``) measures ξ(v, θ_d, φ
 orthographic camera from θ_o = θ_d (azimuth 0), lit from θ_i = −θ_d, φ_i = −φ. This probe builds that yarn as a scene
 (the same spec, drawn along a straight curve), frames two ply periods with an orthographic camera from the same
 direction, lights it with the same directional light, and compares the strip renderer's image with the path-traced
-one (flyaways off: the fibers the bake sees) at the table's bin centres. Printed per configuration: the luminance of
-each model over the reference's over the whole frame.
+one (flyaways off in both: the fibers the bake sees; ``ablations.regular_fibers``) at the table's bin centres.
+Printed per configuration: the luminance of each model over the reference's over the whole frame.
 
 Where ξ is a ratio of bin sums Σ Ψ_* / Σ Ψ_DS, the renderer's image at a bin centre should come back to the
 reference within the bake's noise, if the renderer evaluates the DS term that the bake divided by. A ratio far from
@@ -33,7 +33,7 @@ from data_formats.scene import load_scene  # noqa: E402
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves  # noqa: E402
 from data_formats.yarn_spec import load_preset  # noqa: E402
 from knitbake.stages.correction import yarn_direction  # noqa: E402
-from knitrun.render.ablations import ABLATIONS  # noqa: E402
+from knitrun.render.ablations import regular_fibers  # noqa: E402
 from knitrun.render.pipeline import render  # noqa: E402
 
 THETA_D = (0.19635, 0.58905, -0.58905)  # bin centres of the standard pack's 8 θ_d cells (rad)
@@ -86,7 +86,7 @@ def main():
             for phi in PHI:
                 scene = _scene(folder, period, theta_d, phi, args.spp)
                 reference = (_trace_without_flyaways(scene, args.spp) @ LUMINANCE).sum()
-                ratios = [(render(scene, {"cotton1": args.pack}, ABLATIONS[a]).image @ LUMINANCE).sum() / reference
+                ratios = [(render(scene, {"cotton1": args.pack}, regular_fibers(a)).image @ LUMINANCE).sum() / reference
                           for a in ablations]
                 print(f"| {math.degrees(theta_d):+.1f}° | {math.degrees(phi):+.1f}° | "
                       + " | ".join(f"{r:.3f}" for r in ratios) + " |", flush=True)

@@ -1,6 +1,7 @@
 """The bake's closure stage (``knitbake/stages/closure.py``): the strip renderer with the closed ξ reproduces the
 correction stage's path-traced radiance Ψ_* on the bake's own configurations, where the paper's ξ does not; the
-renderer reads the closed ξ only when asked (``Features.closed_xi``)."""
+renderer reads the closed ξ by default where the pack has it, and the paper's ξ when asked or where it does not
+(``Features.closed_xi``)."""
 
 import shutil
 
@@ -8,7 +9,6 @@ import h5py
 import numpy as np
 import pytest
 
-from data_formats.errors import FormatError
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
 from knitbake.stages import closure
@@ -65,17 +65,22 @@ def test_the_closed_xi_reproduces_the_traced_radiance_where_the_papers_does_not(
     assert np.all(closed >= paper / closure.CLAMP - 1e-6) and np.all(closed <= paper * closure.CLAMP + 1e-6)
 
 
-def test_the_renderer_reads_the_closed_xi_only_when_asked(closed_pack, tmp_path):
+def test_the_renderer_reads_the_closed_xi_where_the_pack_has_it(closed_pack, tmp_path):
     scene = closure._scene(tmp_path, SPEC, closed_pack)
     with h5py.File(closed_pack) as f:
         paper, closed = f["correction/xi"][()], f["correction/xi_closed"][()]
-    assert np.array_equal(Renderer(scene).looks[0].xi_full, paper)
-    assert np.array_equal(Renderer(scene, features=Features(closed_xi=True)).looks[0].xi_full, closed)
+    assert np.array_equal(Renderer(scene).looks[0].xi_full, closed)
+    assert Renderer(scene).setup_facts["xi"] == {SPEC.name: "closed on the renderer"}
+    # the pack was baked with --only (no flyaway stage): drawn without the flyaway layer, and said
+    assert any("drawn without its flyaway layer" in w for w in Renderer(scene).warnings)
+    assert np.array_equal(Renderer(scene, features=Features(closed_xi=False)).looks[0].xi_full, paper)
+    factored = Renderer(scene, features=Features(full_tables=False)).looks[0]  # the closed ξ has no factors
+    assert factored.xi_full.shape[0] == 0 and "factors" in factored.xi_from
     old = tmp_path / "schema22.h5"  # a pack from before the closure
     shutil.copy(closed_pack, old)
     with h5py.File(old, "r+") as f:
         del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
     scene = closure._scene(tmp_path, SPEC, old)
-    assert np.array_equal(Renderer(scene).looks[0].xi_full, paper)
-    with pytest.raises(FormatError, match="lacks correction/xi_closed"):
-        Renderer(scene, features=Features(closed_xi=True))
+    renderer = Renderer(scene)
+    assert np.array_equal(renderer.looks[0].xi_full, paper)
+    assert renderer.setup_facts["xi"] == {SPEC.name: "the paper's (the pack has no correction/xi_closed)"}

@@ -103,8 +103,9 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
         assert (out / name).is_file(), name
     report = (out / "report.md").read_text()
     assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
-    assert summary["skipped"] == {}
-    old = tmp_path / "schema22.h5"  # a pack from before the closure: its rows are skipped, the rest reported
+    assert summary["ablations"]["full"]["xi"] == {"cotton1": "closed on the renderer"}
+    assert summary["ablations"]["papers_xi"]["xi"] == {"cotton1": "the paper's"}
+    old = tmp_path / "schema22.h5"  # a pack from before the closure: every row shaded with the paper's ξ, and said
     shutil.copy(pack, old)
     with h5py.File(old, "r+") as f:
         del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
@@ -114,8 +115,8 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     assert again.exit_code == 0, again.output
     given = json.loads(again.stdout)
     assert set(given["floors"]) == {"instance"}
-    assert set(given["skipped"]) == {"closed", "closed_flyaways"} and "full" in given["ablations"]
-    assert "skipped: " in (tmp_path / "r2" / "report.md").read_text()
+    assert given["ablations"]["full"]["xi"] == {"cotton1": "the paper's (the pack has no correction/xi_closed)"}
+    assert "ξ of the full model: cotton1: the paper's (the pack has no" in (tmp_path / "r2" / "report.md").read_text()
     for key in ("rel_l1", "rel_l1_2x", "flip", "mean_ratio"):  # the same floor, read instead of traced
         assert given["floors"]["instance"]["yarn"][key] == pytest.approx(floors["instance"]["yarn"][key])
     bad = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"), "--spp", "4",

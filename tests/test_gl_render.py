@@ -85,9 +85,14 @@ def test_a_bent_yarn_is_split_into_triangles_as_the_cpu_splits_it(tmp_path, pack
 
 def test_shadows_agree_at_the_yarn_scale(tmp_path, pack):
     """A yarn in front of another under a slanted sun and the sky, a third across them: the shadow maps are
-    rasterised by the driver from the light's view (edges at its samples), so again the yarn scale."""
+    rasterised by the driver from the light's view (edges at its samples), so again the yarn scale. The regular
+    layer with the paper's ξ, whose difference lies along one row of shadow edge; with the closed ξ the same row's
+    differences share one sign and the mean moves −0.72 % (yarn scale 0.0075), with the flyaway layer too −1.3 %
+    (0.0136): measured, not yet explained (BENCHMARKS.md "Issue 13: hairs in their own yarn's shadow, and the
+    closed ξ with flyaways as the default")."""
     yarns = [straight(z=0.0), straight(z=-0.1) + [0, -0.04, 0], straight(z=0.05) @ ALONG_Y.T]
-    gl, cpu = _both(write_scene(tmp_path, yarns, camera=ORTHO, lights=SUN + "\n" + SKY), pack)
+    gl, cpu = _both(write_scene(tmp_path, yarns, camera=ORTHO, lights=SUN + "\n" + SKY), pack,
+                    ABLATIONS["interreflection"])
     assert abs(gl.mean() / cpu.mean() - 1) < 5e-3
     assert _yarn_l1(gl, cpu) < 6e-3
 
@@ -112,7 +117,7 @@ def test_the_flyaway_layer_follows_the_cpu_renderer(tmp_path, pack):
     axis-aligned orthographic view: the same samples)."""
     path = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.03, 0]], camera=ORTHO, lights=SUN + "\n" + SKY)
     gl, cpu = _both(path, pack, Features(flyaways=True))
-    bare, _ = _both(path, pack)
+    bare, _ = _both(path, pack, Features(flyaways=False))
     assert np.abs(gl - bare).mean() > 0.02 * bare.mean()  # the layer is drawn
     assert abs(gl.mean() / cpu.mean() - 1) < 2e-3
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
@@ -152,7 +157,7 @@ def test_the_command_line_renders_with_the_gl_backend(tmp_path, pack):
     assert summary["backend"] == "gl" and out.is_file() and summary["mean_rgb"][0] > 0
     assert "GL_RENDERER" not in summary and summary["gl_renderer"]
     frames = CliRunner().invoke(main, ["render", str(path), "--pack", f"cotton1={pack}", "-o",
-                                       str(tmp_path / "f_#.png"), "--backend", "gl", "--ablation", "flyaways",
+                                       str(tmp_path / "f_#.png"), "--backend", "gl", "--ablation", "papers_xi",
                                        "--frames", "0:1", "--json"])
     assert frames.exit_code == 0, frames.output
     assert (tmp_path / "f_0.png").is_file() and json.loads(frames.stdout)["frames"] == [0, 1]

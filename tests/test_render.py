@@ -48,8 +48,8 @@ def test_straight_yarn_is_drawn_lit_and_deterministic(tmp_path, pack):
     middle = img[22:26, 10:54]
     assert np.abs(middle - [0.1, 0.2, 0.3]).sum(axis=2).mean() > 0.05
     assert set(a.timings) >= {"load", "raster", "shadow", "shade", "resolve"}
-    assert a.facts["shading_points"] > 0 and a.facts["flyaway_points"] == 0  # flyaways are off by default
-    assert _render(path, pack, features=Features(flyaways=True)).facts["flyaway_points"] > 0
+    assert a.facts["shading_points"] > 0 and a.facts["flyaway_points"] > 0  # flyaways are on by default
+    assert _render(path, pack, features=Features(flyaways=False)).facts["flyaway_points"] == 0
 
 
 def test_identical_for_one_and_two_threads(tmp_path, pack):
@@ -183,12 +183,11 @@ def test_ablations_change_the_image(tmp_path, pack):
     lobes) with a second yarn in front of the first, whose shadow the inter-reflection softens."""
     path = write_scene(tmp_path, [straight(), straight(z=0.1) + [0, 0.05, 0]], camera=FRONT, lights=SKY + "\n" + SUN)
     images = {name: _render(path, pack, features=f).image for name, f in ABLATIONS.items()}
-    ladder = ["plain_ds", "xi", "xi_shadowing", "full", "flyaways"]
+    ladder = ["plain_ds", "xi", "xi_shadowing", "interreflection", "closed", "full"]
     for a, b in zip(ladder, ladder[1:]):
         assert not np.array_equal(images[a], images[b]), (a, b)
-    assert not np.array_equal(images["full"], images["no_tables"])
-    assert not np.array_equal(images["full"], images["factored"])  # the tiny pack stores both forms
-    assert not np.array_equal(images["full"], images["closed"])  # and the ξ closed on the renderer
+    for other in ("no_tables", "factored", "no_detail", "papers_xi"):  # the tiny pack stores both forms and both ξ
+        assert not np.array_equal(images["full"], images[other]), other
 
 
 def test_pack_errors_are_one_line(tmp_path, pack):

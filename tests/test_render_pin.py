@@ -1,6 +1,7 @@
 """The strip renderer's image is pinned: small renders of two crossing yarns (the session's tiny cotton1 pack) under
-the sun with the flyaway layer, under the built-in sky with 16 SRBF lobes, and with the factored tables, compared
-with the images stored in ``tests/data/render_pins.npz``.
+the sun with the flyaway layer and the paper's ξ, under the built-in sky with 16 SRBF lobes (the full model: the
+closed ξ and the flyaway layer), and under the sun with the paper's factored tables, compared with the images
+stored in ``tests/data/render_pins.npz``.
 
 Speed work (issue 15) must not move the image. The tolerance admits what a faster but equivalent evaluation changes
 (a tabulated normaliser, reordered sums): per pixel, |Δ| ≤ ``PIXEL_TOLERANCE`` × the pinned image's largest value,
@@ -31,7 +32,7 @@ look_at = [0.0, 0.0, 0.0]
 fov_deg = 30.0
 width = 80
 height = 60"""
-CASES = {"sun_flyaways": (SUN, 4, "flyaways"),
+CASES = {"sun_flyaways": (SUN, 4, "papers_xi"),
          "sky16": (SKY, 16, "full"),
          "sun_factored": (SUN, 4, "factored")}
 

@@ -139,17 +139,10 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     instance = floor_rows.get("instance")
 
     render(scene, packs, ABLATIONS["full"])  # pays the kernels' compile or cache load once
-    rows, full, skipped = {}, None, {}
+    rows, full = {}, None
     for name in ablations:
         say(f"strip renderer: {name}")
-        try:
-            result = render(scene, packs, ABLATIONS[name])
-        except FormatError as e:  # the closed ξ is optional (schema ≥ 2.3): a pack without it skips those rows
-            if not ABLATIONS[name].closed_xi:
-                raise
-            say(f"strip renderer: {name} skipped ({e})")
-            skipped[name] = str(e)
-            continue
+        result = render(scene, packs, ABLATIONS[name])
         seconds = sum(result.timings.values())
         metrics, error_map = _metrics(result.image, ref, diameter, exposure, magma=True)
         if name == "full":
@@ -160,7 +153,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         write_png(out / f"diff_{name}.png", 4.0 * np.abs(result.image - ref), exposure)
         rows[name] = {**metrics, "to_instance_floor": _to_floor(metrics, instance), "ms": seconds * 1e3,
                       "ms_per_pass": {k: v * 1e3 for k, v in result.timings.items()},
-                      "speedup": None if ref_seconds is None else ref_seconds / seconds}
+                      "speedup": None if ref_seconds is None else ref_seconds / seconds, "xi": result.facts["xi"]}
     if full is not None:
         _, yarn_map = flip_error(yarn_filter(full, diameter).astype(np.float32),
                                  yarn_filter(ref, diameter).astype(np.float32), exposure, magma=True)
@@ -173,7 +166,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
                "exposure_stops": exposure, "flip_mode": next(iter(rows.values()))["flip_mode"] if rows else None,
                "floors": {k: {**_without_mode(row), "what": FLOORS[k][1], "image": floor_facts[k]}
                           for k, row in floor_rows.items()},
-               "ablations": {k: _without_mode(row) for k, row in rows.items()}, "skipped": skipped}
+               "ablations": {k: _without_mode(row) for k, row in rows.items()}}
     with atomic_path(out / "report.json") as tmp:
         Path(tmp).write_text(json.dumps(summary, indent=2))
     with atomic_path(out / "report.md") as tmp:
@@ -214,8 +207,9 @@ def _markdown(summary) -> str:
         ratio = row["to_instance_floor"]["rel_l1"] if row["to_instance_floor"] else None
         lines.append(f"| {ABLATION_LABELS.get(name, name)} | {row['yarn']['mean_ratio']:.3f} | "
                      f"{row['yarn']['rel_l1']:.3f} | {_fmt(ratio, '.2f')} | {row['flip']:.4f} | {row['ms']:.0f} |")
-    lines += [f"| {ABLATION_LABELS.get(name, name)} | skipped: {why} | | | | |"
-              for name, why in summary.get("skipped", {}).items()]
+    xi = summary["ablations"].get("full", {}).get("xi")
+    if xi:
+        lines += ["", "ξ of the full model: " + "; ".join(f"{yarn}: {how}" for yarn, how in xi.items()) + "."]
     lines += ["", "## Every metric", "",
               "Yarn scale (d = the projected yarn diameter): rel L1, relMSE and FLIP of the box-filtered images; mean "
               "and worst-tile radiance ratios over tiles of 2d px where the reference has signal.", "",

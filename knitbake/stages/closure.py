@@ -8,8 +8,9 @@ paper's ξ does not make the renderer reproduce the path tracer even where ξ wa
 seen and lit as the correction stage sees and lights it, the renderer was off by −15 % to +39 % (worst with the
 light behind; ``benchmarks/probe_closure.py``, BENCHMARKS.md "where the regular fibers' error lies"). This stage
 bakes ``correction/xi_closed``, the factor that closes that gap; the pack keeps the paper's ξ as well, and the
-renderer uses the closed one when asked (``Features.closed_xi``, ablations ``closed`` and ``closed_flyaways``:
-measured in BENCHMARKS.md, "Issue 13: ξ closed on the strip renderer", it is not the default).
+renderer uses the closed one by default where the pack has it (``Features.closed_xi``; measured in BENCHMARKS.md,
+"Issue 13: ξ closed on the strip renderer" and "Issue 13: hairs in their own yarn's shadow, and the closed ξ with
+flyaways as the default").
 
 Method. Inputs: the baked ``dual_scattering``, ``correction``, ``shadowing`` and ``textures`` stages. Their tables
 are written to a temporary pack; a scene holds the correction stage's straight yarn (a straight curve along +z over
@@ -96,7 +97,7 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
     out = np.zeros((n_v, n_theta, n_phi, 3))
     with tempfile.TemporaryDirectory(prefix="knit-closure-") as tmp:
         scene = _scene(Path(tmp), spec, pack)
-        renderer = Renderer(scene, features=Features(flyaways=False))
+        renderer = Renderer(scene, features=Features(flyaways=False, closed_xi=False))  # ξ: the iterate's pack
         for k, theta_d in enumerate(cell_centres(*THETA_RANGE, n_theta)):
             for m, phi in enumerate(cell_centres(*PHI_RANGE, n_phi)):
                 renderer.scene = _view(scene, spec, theta_d, phi, rows)

@@ -10,10 +10,12 @@ and the geometric fiber count for light crossing a yarn instead of the one from 
 False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N} (the paper's) instead of the pack's unfactorized
 tables.
 
-The flyaway layer is off by default: measured against the reference (BENCHMARKS.md, "Issue 13: hairs that pass
-the body's light on"), it lowers the yarn-scale error on five of the seven example scenes but raises it on the
-straight yarn under the sky and back-lit, where the regular fibers alone are already 13–16 % brighter than the
-reference traced without flyaways and the hairs' light comes on top. ``flyaways`` draws it anyway.
+The full model (the defaults) draws the flyaway layer and shades the regular fibers with ξ closed on this renderer:
+measured against the reference on the seven example scenes (BENCHMARKS.md, "Issue 13: hairs in their own yarn's
+shadow, and the closed ξ with flyaways as the default"), the flyaway layer lowers the yarn-scale error on every scene
+once its hairs lie in their own yarn's shadow and the regular fibers are not already too bright: with the paper's ξ
+the lone yarn's regular fibers alone are 15–16 % brighter than the reference traced without hairs under the sky and
+back-lit ("Issue 13: ξ closed on the strip renderer"), and hairs drawn on top raise the error there.
 
 ``fiber_detail`` multiplies the regular fibers' radiance by the fiber-level detail of the pack's AO texture
 (``yarn_look.fiber_detail_chain``: each texel's ambient visibility over its row's mean), the crevices between plies
@@ -21,20 +23,20 @@ and fibers that Ψ^Fiber_G(v), a function of v alone, smooths away; it belongs w
 rungs without Ψ^Fiber go without it too. Measured in BENCHMARKS.md, "Issue 13: fiber-level detail".
 
 ``closed_xi`` shades with the pack's ``correction/xi_closed`` (ASSET_PACK.md §6, the bake's ``closure`` stage): ξ
-made to close on this renderer where it was measured, instead of the paper's Ψ_*/Ψ_DS. It is not the default:
-measured in BENCHMARKS.md ("Issue 13: ξ closed on the strip renderer"), it brings the lone yarns' regular fibers
-within −2.5 % … +5.4 % of the flyaway-free references but does not lower the patches' error.
+made to close on this renderer where it was measured, instead of the paper's Ψ_*/Ψ_DS. A pack without it (schema
+< 2.3, or baked with ``--only``) is shaded with the paper's ξ, and the render's facts say so (``facts["xi"]``). The
+closed ξ exists only as a full table: the factored rung (``full_tables`` False) uses the paper's factors.
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
-plain DS, + ξ, + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection (= the full model, the
-default), + flyaways; then the full model without the tables, with the factored tables, without the detail, and
-with the closed ξ (without and with flyaways).
-``ABLATION_LABELS`` gives each a label.
+plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
+the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
+factored tables, without the detail, and with the paper's ξ.
+``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 
 @dataclass(frozen=True)
@@ -43,28 +45,35 @@ class Features:
 
     xi: bool = True
     fiber_shadowing: bool = True
-    flyaways: bool = False  # off by default: see the module docstring
+    flyaways: bool = True
     interreflection: bool = True  # yarn-level inter-reflection (ρ_Y) and transmission (T_Y)
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
     fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
-    closed_xi: bool = False  # the pack's ξ closed on this renderer (correction/xi_closed) instead of the paper's
+    closed_xi: bool = True  # ξ closed on this renderer (correction/xi_closed) where the pack has it, else the paper's
 
 
+_PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
 ABLATIONS = {
-    "plain_ds": Features(xi=False, fiber_shadowing=False, interreflection=False, fiber_detail=False),
-    "xi": Features(fiber_shadowing=False, interreflection=False, fiber_detail=False),
-    "xi_shadowing": Features(interreflection=False),
+    "plain_ds": Features(xi=False, fiber_shadowing=False, interreflection=False, fiber_detail=False, **_PAPERS),
+    "xi": Features(fiber_shadowing=False, interreflection=False, fiber_detail=False, **_PAPERS),
+    "xi_shadowing": Features(interreflection=False, **_PAPERS),
+    "interreflection": Features(**_PAPERS),
+    "closed": Features(flyaways=False),
     "full": Features(),
-    "flyaways": Features(flyaways=True),
     "no_tables": Features(xi=False, fiber_shadowing=False, fiber_detail=False),  # the full model without ξ and Ψ^Fiber
-    "factored": Features(full_tables=False),
+    "factored": Features(full_tables=False, closed_xi=False),
     "no_detail": Features(fiber_detail=False),
-    "closed": Features(closed_xi=True),
-    "closed_flyaways": Features(closed_xi=True, flyaways=True),
+    "papers_xi": Features(closed_xi=False),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
-                   "full": "+ inter-reflection (full)", "flyaways": "full + flyaways",
-                   "no_tables": "full without ξ, Ψ^Fiber", "factored": "full, rank-1 factored ξ, Ψ",
-                   "no_detail": "full without the fiber-level detail", "closed": "full, ξ closed on the renderer",
-                   "closed_flyaways": "full + flyaways, ξ closed"}
+                   "interreflection": "+ inter-reflection", "closed": "+ ξ closed on the renderer",
+                   "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
+                   "factored": "full, the paper's rank-1 factored ξ, Ψ",
+                   "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ"}
+
+
+def regular_fibers(name: str) -> Features:
+    """Ablation ``name`` without its flyaway layer: what a probe that traces its reference without flyaways compares
+    (``benchmarks/probe_closure.py``, ``probe_orientation.py``)."""
+    return replace(ABLATIONS[name], flyaways=False)

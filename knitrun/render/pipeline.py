@@ -250,10 +250,11 @@ class Renderer:
                 look.n_occluded = 0.0
         self.looks = looks
         self.setup_facts["n_cross"] = {look.name: look.n_cross_from for look in looks}
+        self.setup_facts["xi"] = {look.name: look.xi_from if features.xi else "none (switched off)" for look in looks}
         self.kernel_looks = [shading_look(look) for look in looks]
         self.im_tables = [look.im if look.im is not None else no_im_table() for look in looks]
         self.environment = environment
-        self.warnings = []
+        self.warnings = [w for look in looks for w in look.warnings]
         self.curves = [_scene_curves(entry, scene.units, self.warnings) for entry in scene.yarns]
         for k, (entry, curves) in enumerate(zip(scene.yarns, self.curves)):
             message = radius_mismatch(curves, entry.radius, f"yarns[{k}]")

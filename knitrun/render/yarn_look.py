@@ -40,7 +40,7 @@ from knitrun.shading.table_lookup import lookup_theta
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
-CLOSED_XI = "correction/xi_closed"  # optional (schema ≥ 2.3): read only when asked for
+CLOSED_XI = "correction/xi_closed"  # optional (schema ≥ 2.3): the paper's ξ where a pack lacks it
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
 
@@ -69,6 +69,8 @@ class YarnLook:
     flyaway_half_width: float
     n_cross: float  # fibers a beam crossing another yarn meets (``transmittance_count`` or geometric)
     n_cross_from: str  # where n_cross came from, for RenderResult.facts
+    xi_from: str  # which ξ the regular fibers are shaded with (closed, the paper's), for RenderResult.facts
+    warnings: list  # what the pack could not give that the features asked for (one line each)
     n_occluded: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
     yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
@@ -118,23 +120,31 @@ def fiber_detail_chain(ao_levels, coverage_levels) -> list:
 
 
 def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
-              environment=False, detail=True, transmission=True, closed_xi=False) -> YarnLook:
+              environment=False, detail=True, transmission=True, closed_xi=True) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
     ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors; ``detail``: the
     fiber-level detail from the pack's AO texture (``fiber_detail_chain``); ``transmission``: n_cross from the
     pack's transmittance T_Y when it has one (module docstring); ``closed_xi``: ξ from the pack's
-    ``correction/xi_closed`` (schema ≥ 2.3; ASSET_PACK.md §6) instead of the paper's."""
+    ``correction/xi_closed`` (schema ≥ 2.3; ASSET_PACK.md §6) instead of the paper's, where the pack has it and
+    ``full_tables`` (the closed ξ is a full table); ``YarnLook.xi_from`` says which ξ was read."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
         raise FormatError(f"{pack_path}: pack baked for yarn {spec.name!r}, the scene draws {entry.spec.name!r}")
+    stored = header.info
     flyaways = flyaways and spec.has_flyaways  # a yarn without flyaways has no flyaway textures to draw
+    warnings = []
+    if flyaways and "textures/flyaway/mip0" not in stored:
+        flyaways = False
+        warnings.append(f"{pack_path}: no flyaway textures (baked with --only): {spec.name} is drawn without its "
+                        f"flyaway layer")
     names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
     if corrections:
         names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
-    if corrections and closed_xi:
+    closed_xi = corrections and closed_xi and full_tables and CLOSED_XI in stored
+    if closed_xi:
         names.append(CLOSED_XI)
     if flyaways:
         names.append("textures/flyaway")
@@ -142,7 +152,6 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         names.append("textures/ao")
     if environment:
         names.append("environment/I_M_TT_D")
-    stored = header.info
     if environment and ALBEDO_TABLE in stored:
         names.append(ALBEDO_TABLE)
     if transmission and TRANSMITTANCE_TABLE in stored:
@@ -173,6 +182,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
               if n in CORRECTION_TABLES + FULL_TABLES + (CLOSED_XI,)}
     if CLOSED_XI in tables:
         tables["correction/xi"] = tables[CLOSED_XI]
+    xi_from = ("none (switched off)" if not corrections else "closed on the renderer" if closed_xi
+               else "the paper's" + ("" if full_tables else " factors") +
+               ("" if CLOSED_XI in stored or not full_tables else f" (the pack has no {CLOSED_XI})"))
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:
@@ -193,7 +205,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
-        n_cross=n_cross, n_cross_from=n_cross_from, n_occluded=n_occluded,
+        n_cross=n_cross, n_cross_from=n_cross_from, n_occluded=n_occluded, xi_from=xi_from, warnings=warnings,
         twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
         yarn_albedo=yarn_albedo, im=im, residuals=residuals)
 
