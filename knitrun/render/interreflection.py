@@ -26,12 +26,23 @@ receiver, the luminance of ρ_Y·c, scales every channel.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit, prange
 
 
 def interreflected_visibility(visibility, albedo):
     """V' = V / (1 − ρ (1 − V)) (module docstring) for visibility V ∈ [0, 1] and hull albedo ρ ∈ [0, 1]
-    (broadcasting); V' ∈ [V, 1]."""
-    v = np.clip(np.asarray(visibility, np.float64), 0.0, 1.0)
-    rho = np.clip(np.asarray(albedo, np.float64), 0.0, 1.0)
-    denominator = 1.0 - rho * (1.0 - v)
-    return np.where(denominator > 0.0, v / np.maximum(denominator, 1e-300), 1.0)
+    (broadcasting; both clipped to [0, 1]); V' ∈ [V, 1]. One pass over the elements on the machine's threads: the
+    renderer applies it to every lobe's visibility of every shading point (16 × ~850K values a frame, 0.2 s as
+    numpy's chain of temporaries)."""
+    v, rho = np.broadcast_arrays(np.asarray(visibility, np.float64), np.asarray(albedo, np.float64))
+    out = np.empty(v.shape)
+    _interreflect(np.ascontiguousarray(v).reshape(-1), np.ascontiguousarray(rho).reshape(-1), out.reshape(-1))
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _interreflect(v, rho, out):
+    for k in prange(v.shape[0]):
+        vk, r = min(max(v[k], 0.0), 1.0), min(max(rho[k], 0.0), 1.0)
+        denominator = 1.0 - r * (1.0 - vk)
+        out[k] = vk / denominator if denominator > 0.0 else 1.0
