@@ -17,11 +17,19 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    shading): they add nothing.
 3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample G-buffer (``strip_raster``);
    with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second one. A flyaway
-   sample is kept where no regular strip is nearer than the yarn radius.
+   sample is kept where no regular strip is nearer than the yarn radius, and a flyaway shading point where its
+   hair texture covers anything (``strip_shading.flyaway_coverage``): one of zero coverage adds nothing to the
+   image, so the passes below skip it.
 4. ``shadow``: per directional light a yarn-level shadow map of ``render.shadow_map_size``² texels, filtered by PCF
    (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
    angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by 1.5 yarn
    radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job).
+   A flyaway point with a regular point of its curve in its pixel within ``SHARE_REACH`` = 0.1 pixel (``strip_shading.
+   same_surface``: the same MSAA sample of the same strip plane) takes that point's visibilities instead of its own
+   lookups (``facts["flyaway_points_shared"]``): 47 % of the covered flyaway points of ``bench_render``'s patch. The
+   image moves by at most 0.4 % of its peak on the example scenes (BENCHMARKS.md, "Issue 15: the flyaway layer's
+   shadow lookups"); with a reach of a yarn radius 64 % would share, but a hair on a hard shadow's edge then took
+   the light of a sample up to a pixel away (15 % of the peak at one pixel of the grazing-light patch).
    With ``Features.interreflection`` each T̃_j becomes T̃_j / (1 − ρ (1 − T̃_j)), ρ the receiver's yarn hull albedo
    (``knitrun.render.interreflection``): the light the neighbours block and send on.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
@@ -58,7 +66,8 @@ from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
-from knitrun.render.strip_shading import resolve, shade_flyaway, shade_regular, shading_points
+from knitrun.render.strip_shading import (flyaway_coverage, resolve, same_surface, shade_flyaway, shade_regular,
+                                          shading_points)
 from knitrun.render.yarn_look import load_look, no_full_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table
@@ -67,6 +76,7 @@ from knitrun.sim.simulate import RADIUS_TOLERANCE
 
 SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
+SHARE_REACH = 0.1  # pixels: a flyaway point this close to a regular point of its curve shares its shadow lookups
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
 
 
@@ -329,30 +339,50 @@ class Renderer:
             mask = ~gbuffer.coverage | (fly_buffer.depth <= gbuffer.depth + tolerance)
             mask &= np.isin(fly_buffer.yarn, drawn_fly)
             fly_points = shading_points(fly_buffer, camera, pattern, mask=mask)
+            hairs = _kernel_points(fly_points, lines, looks)
+            covered = self._hair_coverage(hairs, fly_points["yarn"], drawn_fly) > 0.0
         facts.update(shading_points=int(len(points["weight"])),
-                     flyaway_points=0 if fly_points is None else int(len(fly_points["weight"])))
+                     flyaway_points=0 if fly_points is None else int(len(fly_points["weight"])),
+                     flyaway_points_covered=0 if fly_points is None else int(covered.sum()))
         lap("raster")
 
+        # the receivers of each set of points: all regular points; the flyaway points the hairs cover (a point of zero
+        # coverage adds nothing to the image, so it gets no shadow lookups and no shading; its visibility reads 1)
+        # but have no regular point of their curve in their pixel within a yarn radius (one that has shares its
+        # lookups: a shadow map texel spans pixels, and both lie on the curve's strip plane)
         sets = [points] + ([fly_points] if fly_points is not None else [])
+        where = [slice(None)]
+        if fly_points is not None:
+            partner = np.empty(len(fly_points["weight"]), np.int64)
+            same_surface(points["start"], points["curve"], points["position"], fly_points["start"],
+                         fly_points["curve"], fly_points["position"], SHARE_REACH * fly_points["footprint"], partner)
+            shared = np.flatnonzero(covered & (partner >= 0))
+            where.append(np.flatnonzero(covered & (partner < 0)))
+            facts["flyaway_points_shared"] = int(len(shared))
         bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
-        receivers = [(s["position"], bias_radius[s["yarn"]] if len(s["yarn"]) else np.zeros(0)) for s in sets]
+        receivers = [(s["position"][at], bias_radius[s["yarn"][at]] if len(s["yarn"]) else np.zeros(0))
+                     for s, at in zip(sets, where)]
         directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)
         light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
         size = scene.render.shadow_map_size
-        light_vis = [np.empty((len(light_dir), len(s["weight"]))) for s in sets]
+        light_vis = [np.ones((len(light_dir), len(s["weight"]))) for s in sets]
         for i, d in enumerate(light_dir):
-            for out, vis in zip(light_vis, _visibility(lines, radius, d, size, 0.0, receivers, self.shadow_depth)):
-                out[i] = vis
+            for out, at, vis in zip(light_vis, where, _visibility(lines, radius, d, size, 0.0, receivers,
+                                                                   self.shadow_depth)):
+                out[i, at] = vis
         lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
         lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
         lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
-        lobe_vis = [np.empty((len(lobe_dir), len(s["weight"]))) for s in sets]
+        lobe_vis = [np.ones((len(lobe_dir), len(s["weight"]))) for s in sets]
         for j, d in enumerate(lobe_dir):
             angular = min(1.0 / math.sqrt(lobe_lambda[j]), MAX_LOBE_ANGULAR_RADIUS)
-            for out, vis in zip(lobe_vis, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR), angular,
-                                                      receivers, self.shadow_depth)):
-                out[j] = vis
+            for out, at, vis in zip(lobe_vis, where, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR),
+                                                                 angular, receivers, self.shadow_depth)):
+                out[j, at] = vis
+        if fly_points is not None:
+            for vis in (light_vis, lobe_vis):
+                vis[1][:, shared] = vis[0][:, partner[shared]]
         albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
             np.zeros(len(looks))
         if len(lobe_dir) and albedo.any():
@@ -380,9 +410,8 @@ class Renderer:
         if fly_points is not None:
             n_fly = len(fly_points["weight"])
             fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
-            hairs = _kernel_points(fly_points, lines, looks)
             for k in drawn_fly:
-                idx = np.flatnonzero(fly_points["yarn"] == k)
+                idx = np.flatnonzero((fly_points["yarn"] == k) & covered)
                 shade_flyaway(idx, hairs, *self.kernel_looks[k], Lights(light_dir, light_e, light_vis[1]),
                               Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]), self.im_slices[k], fly_rgb,
                               fly_alpha, fly_transmit)
@@ -398,6 +427,14 @@ class Renderer:
         lap("resolve")
         facts["residuals"] = {look.name: look.residuals for look in looks}
         return RenderResult(image.reshape(h, w, 3).astype(np.float32), timings, facts)
+
+    def _hair_coverage(self, hairs, yarn, drawn_fly):
+        """The coverage the flyaway layer's points get from their yarn's hair texture (``flyaway_coverage``)."""
+        coverage = np.zeros(len(yarn))
+        for k in drawn_fly:
+            flyaway_coverage(np.flatnonzero(yarn == k), hairs, self.kernel_looks[k][0], self.kernel_looks[k][2],
+                             coverage)
+        return coverage
 
 
 def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,

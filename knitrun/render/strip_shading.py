@@ -7,7 +7,8 @@ MSAA shades once per primitive per pixel (as a GPU does): the covered samples of
 that covers them, and each group is one shading point with the attributes of its first sample and the weight
 (samples in the group)/k. ``shading_points`` builds them from a ``StripGBuffer``, in pixel order (pixel p owns the
 points start[p]:start[p+1], so the resolve runs in parallel over pixels without races); an optional per-sample mask
-drops samples (the flyaway layer's depth test against the regular layer).
+drops samples (the flyaway layer's depth test against the regular layer). ``same_surface`` pairs a flyaway point
+with the regular point of its pixel and curve, whose yarn-level shadow lookups it can share.
 
 Regular fibers (``shade_regular``), per point, angles by ``ASSET_PACK.md`` §3
 ----------------------------------------------------------------------------
@@ -196,6 +197,24 @@ def shading_points(gbuffer, camera, pattern, mask=None):
         points[name] = getattr(gbuffer, name)[i, j, a]
     points["tangent"] = gbuffer.tangent[i, j, a].astype(np.float64)
     return points
+
+
+@njit(parallel=True, cache=True)
+def same_surface(start, curve, position, other_start, other_curve, other_position, reach, out):
+    """out[q] for each point q of another set of shading points (``other_*``, e.g. the flyaway layer's): the point
+    of this set in the same pixel with the same curve and a position within reach[q] (scene units) of q's, or −1
+    where there is none. Both sets are in pixel order (``shading_points``); a pixel has a handful of points."""
+    for p in prange(start.shape[0] - 1):
+        for q in range(other_start[p], other_start[p + 1]):
+            out[q] = -1
+            for r in range(start[p], start[p + 1]):
+                if curve[r] != other_curve[q]:
+                    continue
+                d2 = ((position[r, 0] - other_position[q, 0]) ** 2 + (position[r, 1] - other_position[q, 1]) ** 2
+                      + (position[r, 2] - other_position[q, 2]) ** 2)
+                if d2 <= reach[q] * reach[q]:
+                    out[q] = r
+                    break
 
 
 # --- the strip frame (ASSET_PACK.md §3) ---------------------------------------------------------------------------
@@ -421,6 +440,38 @@ def variant_of(curve, period_index):
     return int(x % np.uint64(3))
 
 
+@njit(cache=True, inline='always')
+def _hair_texel(q, points, period, flyaway, texel_u, texel_v, t, wo, n, b, tf, texel):
+    """Point q of the flyaway layer: its tangent and view direction into t, wo, its strip frame (n, b), the texel of
+    its period's variant (``variant_of``) into ``texel`` (RGBA) and the hair tangent from it into tf. Returns (drawn,
+    v): drawn False where the strip is edge-on or the texel has no tangent (nothing to draw there)."""
+    _copy_row(points.tangent, q, t)
+    _copy_row(points.view_dir, q, wo)
+    if not _strip_frame(t, wo, n, b):
+        return False, 0.0
+    u, v = points.arclength[q] / period, min(max(points.v[q], -1.0), 1.0)
+    sample_mip(flyaway, variant_of(points.curve[q], int(math.floor(u))),
+               mip_level(points.footprint[q], texel_u, texel_v), u, v, texel)
+    return _texture_tangent(texel, t, n, b, tf), v
+
+
+@njit(parallel=True, cache=True)
+def flyaway_coverage(idx, points, look, flyaway, alpha):
+    """alpha[idx]: the coverage ``shade_flyaway`` gives the flyaway-layer points ``idx`` of one yarn, without shading
+    them. The renderer drops the points of zero coverage before their shadow lookups and shading: they add nothing
+    to the image (``resolve``), and where the hair texture is magnified most of the layer's points are such."""
+    texel_u = look.period / flyaway.cols[0, 0]
+    texel_v = 2.0 * look.flyaway_half_width / flyaway.rows[0, 0]
+    for block in prange((idx.shape[0] + POINT_BLOCK - 1) // POINT_BLOCK):
+        vec = np.empty((_N_VEC, 3))  # scratch owned by this block of points
+        texel = np.empty(4)
+        for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
+            q = idx[m]
+            drawn, _ = _hair_texel(q, points, look.period, flyaway, texel_u, texel_v, vec[_T], vec[_WO], vec[_N],
+                                   vec[_B], vec[_TF], texel)
+            alpha[q] = min(max(texel[3], 0.0), 1.0) if drawn else 0.0
+
+
 @njit(parallel=True, cache=True)
 def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit):
     """Shade the flyaway-layer points ``idx`` of one yarn (the named tuples of ``knitrun.render.shading_inputs``;
@@ -439,12 +490,10 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
         wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
         for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
             q = idx[m]
-            drawn, u, v = _begin_point(q, points, period, t, wo, n, b, rgb, alpha)
+            rgb[q, :] = 0.0
+            alpha[q] = 0.0
+            drawn, v = _hair_texel(q, points, period, flyaway, texel_u, texel_v, t, wo, n, b, tf, texel)
             if not drawn:
-                continue
-            sample_mip(flyaway, variant_of(points.curve[q], int(math.floor(u))),
-                       mip_level(points.footprint[q], texel_u, texel_v), u, v, texel)
-            if not _texture_tangent(texel, t, n, b, tf):
                 continue
             alpha[q] = min(max(texel[3], 0.0), 1.0)
             theta_o_f = longitudinal_angle(tf, wo)
