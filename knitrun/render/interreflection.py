@@ -34,8 +34,10 @@ def interreflected_visibility(visibility, albedo):
     (broadcasting; both clipped to [0, 1]); V' ∈ [V, 1]. One pass over the elements on the machine's threads: the
     renderer applies it to every lobe's visibility of every shading point (16 × ~850K values a frame, 0.2 s as
     numpy's chain of temporaries)."""
-    v, rho = np.broadcast_arrays(np.asarray(visibility, np.float64), np.asarray(albedo, np.float64))
-    out = np.empty(v.shape)
+    v, rho = np.asarray(visibility, np.float64), np.asarray(albedo, np.float64)
+    shape = np.broadcast_shapes(v.shape, rho.shape)
+    v, rho = np.broadcast_to(v, shape), np.broadcast_to(rho, shape)  # read-only views; copied below only if strided
+    out = np.empty(shape)
     _interreflect(np.ascontiguousarray(v).reshape(-1), np.ascontiguousarray(rho).reshape(-1), out.reshape(-1))
     return out
 
