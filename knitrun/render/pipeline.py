@@ -348,10 +348,11 @@ class Renderer:
 
         # the receivers of each set of points: all regular points; the flyaway points the hairs cover (a point of zero
         # coverage adds nothing to the image, so it gets no shadow lookups and no shading; its visibility reads 1)
-        # but have no regular point of their curve in their pixel within a yarn radius (one that has shares its
-        # lookups: a shadow map texel spans pixels, and both lie on the curve's strip plane)
+        # that are not at the sample of a regular point of their curve (``SHARE_REACH``: such a point shares its
+        # lookups, module docstring)
         sets = [points] + ([fly_points] if fly_points is not None else [])
         where = [slice(None)]
+        facts["flyaway_points_shared"] = 0
         if fly_points is not None:
             partner = np.empty(len(fly_points["weight"]), np.int64)
             same_surface(points["start"], points["curve"], points["position"], fly_points["start"],
