@@ -12,7 +12,7 @@ also takes its input stages' results, ``run_stage``):
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
 | interreflection | ``interreflection/albedo``, ``interreflection/transmittance`` (the yarn tube's ρ_Y, T_Y) | always |
-| closure | ``correction/xi_closed`` (ξ closed on the strip renderer) | its inputs are baked (``CLOSURE_INPUTS``) |
+| closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer) | its inputs are baked |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
 stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
@@ -41,7 +41,7 @@ from data_formats.cache_folders import cache_root
 from data_formats.errors import FormatError
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
 from knitbake.fibers.procedural_yarn import check_fiber_budget
-from knitbake.stages.closure import CLOSURE_INPUTS, bake_closure_stage
+from knitbake.stages.closure import CLOSURE_INPUTS, bake_closure_stage, papers_xi_at_views
 from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
 from knitbake.stages.ds_precompute import bake_dual_scattering_stage
 from knitbake.stages.im_table import bake_environment_stage
@@ -94,9 +94,10 @@ QUALITY = {
 # environment 2: the table holds the TT and D lobes (schema 2.0), finer grids, measured lookup error; 3: scalar
 # quadrature error; correction 5, shadowing 3, interreflection 2, textures 2, flyaway 2: the fibers traced as Embree
 # curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn;
-# interreflection 4: the yarn's transmittance T_Y as well; correction 7: Ψ_* kept (correction/radiance)
+# interreflection 4: the yarn's transmittance T_Y as well; correction 7: Ψ_* kept (correction/radiance);
+# closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
-                 "interreflection": 4, "textures": 2, "flyaway": 2}
+                 "interreflection": 4, "textures": 2, "flyaway": 2, "closure": 2}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64
@@ -216,7 +217,8 @@ def bake_plan(spec: YarnSpec, quality: str = "draft", only=None, needs=None, see
             settings[stage]["height"] = needs["texture_height"]
             settings[stage]["width"] = needs["texture_width"]
     correction = settings["correction"]
-    settings["closure"] = {**settings["closure"], "rows": max(correction["rows"], correction["n_v"]),
+    settings["closure"] = {"spp": correction["spp"], "batches": correction["batches"], **settings["closure"],
+                           "rows": max(correction["rows"], correction["n_v"]),
                            "inputs": {s: {"settings": settings[s], "version": STAGE_VERSION[s]}
                                       for s in CLOSURE_INPUTS}}
     stages = stages_for(spec, only, needs)
@@ -273,12 +275,16 @@ def write_baked_pack(spec: YarnSpec, output, quality: str, settings: dict, stage
 
 
 def _input_pack_writer(spec: YarnSpec, seed: int, inputs: dict):
-    """``write(path, xi)``: the pack of the closure's input stages with ``correction/xi`` replaced by ``xi``."""
-    def write(path, xi):
+    """``write(path, xi_view)``: the pack of the closure's input stages with ``correction/xi_view`` = ``xi_view`` (a
+    closure iterate; its error estimate in this temporary pack: the paper's ξ's at the views)."""
+    corr = inputs["correction"]
+    error = papers_xi_at_views(corr.errors["correction/xi"])
+
+    def write(path, xi_view):
         results = {s: (r, {"seconds": 0.0}) for s, r in inputs.items()}
-        corr = inputs["correction"]
-        results["correction"] = (StageResult({**corr.tables, "correction/xi": xi}, corr.errors, corr.attrs,
-                                             corr.counts), {"seconds": 0.0})
+        results["correction"] = (StageResult({**corr.tables, "correction/xi_view": xi_view},
+                                             {**corr.errors, "correction/xi_view": error}, corr.attrs, corr.counts),
+                                 {"seconds": 0.0})
         write_baked_pack(spec, path, "closure input", {}, list(inputs), None, seed, results)
     return write
 

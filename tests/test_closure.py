@@ -1,7 +1,7 @@
-"""The bake's closure stage (``knitbake/stages/closure.py``): the strip renderer with the closed ξ reproduces the
-correction stage's path-traced radiance Ψ_* on the bake's own configurations, where the paper's ξ does not; the
-renderer reads the closed ξ by default where the pack has it, and the paper's ξ when asked or where it does not
-(``Features.closed_xi``)."""
+"""The bake's closure stage (``knitbake/stages/closure.py``): the strip renderer with the view-closed ξ reproduces the
+path-traced radiance Ψ_* of the bake's yarn at every (θ_i, θ_o, φ) bin centre, where the paper's ξ does not; the
+renderer reads the closed ξ by default where the pack has it, the diagonal-closed ξ of a schema-2.3 pack, and the
+paper's ξ when asked or where neither is there (``Features.closed_xi``)."""
 
 import shutil
 
@@ -37,50 +37,82 @@ def test_the_closure_is_cached_like_every_stage(closed_pack, monkeypatch):
     again = bake(SPEC, closed_pack.parent / "again.h5", overrides=TINY, only=list(closure.CLOSURE_INPUTS))
     assert all(row["cached"] for row in again.values())
     with h5py.File(closed_pack) as a, h5py.File(closed_pack.parent / "again.h5") as b:
-        assert np.array_equal(a["correction/xi_closed"][()], b["correction/xi_closed"][()])
+        assert np.array_equal(a["correction/xi_view"][()], b["correction/xi_view"][()])
 
 
-def _miss(pack, xi, folder):
-    """RMS of S/Ψ_* − 1 over the closure's measured bins, the renderer drawing with ``xi`` as the pack's ξ."""
-    copy = folder / f"xi_{abs(hash(xi.tobytes()))}.h5"
+def _miss(pack, xi_view, folder):
+    """RMS of S/Ψ_* − 1 over the closure's measured bins, the renderer drawing with ``xi_view`` as the pack's ξ."""
+    copy = folder / f"xi_{abs(hash(xi_view.tobytes()))}.h5"
     shutil.copy(pack, copy)
     with h5py.File(copy, "r+") as f:
-        f["correction/xi"][...] = xi.astype(np.float32)
-        target, err = f["correction/radiance"][()], f["correction/radiance_stderr"][()]
+        f["correction/xi_view"][...] = xi_view.astype(np.float32)
+        target, err = f["correction/radiance_view"][()], f["correction/radiance_view_stderr"][()]
     measured = np.all((target > closure.SIGNAL * target.max()) & (err <= closure.MAX_RELATIVE_ERROR * target),
                       axis=-1)
-    rendered = closure.render_bins(copy, SPEC, target.shape[:3], ROWS)
+    rendered = closure.render_bins(copy, SPEC, target.shape[:4], ROWS)
     assert measured.sum() >= 4, "too few measured bins for the test to mean anything"
     return float(np.sqrt(np.mean((rendered[measured] / target[measured] - 1.0) ** 2)))
 
 
 def test_the_closed_xi_reproduces_the_traced_radiance_where_the_papers_does_not(closed_pack, tmp_path):
     with h5py.File(closed_pack) as f:
-        paper, closed = f["correction/xi"][()], f["correction/xi_closed"][()]
-        attrs = dict(f["correction/xi_closed"].attrs)
-        assert np.all(np.isfinite(f["correction/xi_closed_stderr"][()]))
+        paper, closed = closure.papers_xi_at_views(f["correction/xi"][()]), f["correction/xi_view"][()]
+        attrs = dict(f["correction/xi_view"].attrs)
+        assert np.all(np.isfinite(f["correction/xi_view_stderr"][()]))
+        assert np.all(np.isfinite(f["correction/radiance_view_stderr"][()]))
+        assert np.array_equal(f["correction/xi_closed"][()], closure.diagonal_of(closed))
+        assert np.array_equal(closure.diagonal_of(f["correction/radiance_view"][()]), f["correction/radiance"][()])
     before, after = _miss(closed_pack, paper, tmp_path), _miss(closed_pack, closed, tmp_path)
     assert after < 0.5 * before, (before, after)
     assert 0.0 <= attrs["closure_residual_rms"] <= attrs["closure_residual_max"]
     assert np.all(closed >= paper / closure.CLAMP - 1e-6) and np.all(closed <= paper * closure.CLAMP + 1e-6)
 
 
+def test_the_papers_xi_at_the_views_is_the_papers_on_the_diagonal_and_linear_in_theta_d():
+    rng = np.random.default_rng(3)
+    xi = rng.uniform(0.5, 2.0, (3, 4, 2, 3))
+    at_views = closure.papers_xi_at_views(xi)
+    for k in range(4):  # θ_o = −θ_i: θ_d = θ_o, a grid centre
+        assert np.allclose(at_views[:, 3 - k, k], xi[:, k])
+    # θ_i = θ_o: θ_d = 0, halfway between the two middle centres
+    assert np.allclose(at_views[:, 1, 1], 0.5 * (xi[:, 1] + xi[:, 2]))
+    # θ_i at the first centre, θ_o at the last: θ_d = 3π/8, the last centre
+    assert np.allclose(at_views[:, 0, 3], xi[:, 3])
+
+
 def test_the_renderer_reads_the_closed_xi_where_the_pack_has_it(closed_pack, tmp_path):
     scene = closure._scene(tmp_path, SPEC, closed_pack)
     with h5py.File(closed_pack) as f:
-        paper, closed = f["correction/xi"][()], f["correction/xi_closed"][()]
-    assert np.array_equal(Renderer(scene).looks[0].xi_full, closed)
+        paper, closed = f["correction/xi"][()], f["correction/xi_view"][()]
+    view = Renderer(scene, features=Features(view_xi=True))
+    assert np.array_equal(view.looks[0].xi_view, closed)
+    assert view.setup_facts["xi"] == {SPEC.name: "closed on the renderer at every view"}
+    default = Renderer(scene).looks[0]  # the diagonal of the view-closed ξ
+    assert default.xi_view.shape[0] == 0 and np.array_equal(default.xi_full, closure.diagonal_of(closed))
     assert Renderer(scene).setup_facts["xi"] == {SPEC.name: "closed on the renderer"}
     # the pack was baked with --only (no flyaway stage): drawn without the flyaway layer, and said
     assert any("drawn without its flyaway layer" in w for w in Renderer(scene).warnings)
-    assert np.array_equal(Renderer(scene, features=Features(closed_xi=False)).looks[0].xi_full, paper)
-    factored = Renderer(scene, features=Features(full_tables=False)).looks[0]  # the closed ξ has no factors
-    assert factored.xi_full.shape[0] == 0 and "factors" in factored.xi_from
-    old = tmp_path / "schema22.h5"  # a pack from before the closure
+    papers = Renderer(scene, features=Features(closed_xi=False)).looks[0]
+    assert np.array_equal(papers.xi_full, paper) and papers.xi_view.shape[0] == 0
+    factored = Renderer(scene, features=Features(full_tables=False, view_xi=True)).looks[0]  # no closed factors
+    assert factored.xi_full.shape[0] == 0 and factored.xi_view.shape[0] == 0 and "factors" in factored.xi_from
+    assert Renderer(scene, features=Features(xi=False, view_xi=True)).looks[0].xi_view.shape[0] == 0
+    old = tmp_path / "schema23.h5"  # a pack of schema 2.3: ξ closed on the diagonal
     shutil.copy(closed_pack, old)
+    diagonal = paper * 1.25
     with h5py.File(old, "r+") as f:
+        del f["correction/xi_view"], f["correction/xi_view_stderr"]
+        del f["correction/radiance_view"], f["correction/radiance_view_stderr"]
         del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
-    scene = closure._scene(tmp_path, SPEC, old)
-    renderer = Renderer(scene)
+        for name in ("xi_closed", "xi_closed_stderr"):  # the paper's ξ's attributes: the same axes
+            value = diagonal if name == "xi_closed" else f["correction/xi_stderr"][()]
+            f[f"correction/{name}"] = value.astype(np.float32)
+            f[f"correction/{name}"].attrs.update(f["correction/" + name.replace("_closed", "")].attrs)
+    renderer = Renderer(closure._scene(tmp_path, SPEC, old), features=Features(view_xi=True))  # asked, not there
+    assert np.allclose(renderer.looks[0].xi_full, diagonal) and renderer.looks[0].xi_view.shape[0] == 0
+    assert renderer.setup_facts["xi"] == {SPEC.name: "closed on the renderer"}
+    with h5py.File(old, "r+") as f:  # a pack from before the closure
+        del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
+    renderer = Renderer(closure._scene(tmp_path, SPEC, old))
     assert np.array_equal(renderer.looks[0].xi_full, paper)
     assert renderer.setup_facts["xi"] == {SPEC.name: "the paper's (the pack has no correction/xi_closed)"}

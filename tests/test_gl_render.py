@@ -56,12 +56,23 @@ def test_a_lit_straight_yarn_is_the_cpu_image(tmp_path, pack, lights):
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()  # per pixel: the same geometry, shaded at the same sample
 
 
-@pytest.mark.parametrize("ablation", ["plain_ds", "xi", "factored", "no_tables", "no_detail"])
+@pytest.mark.parametrize("ablation", ["plain_ds", "xi", "factored", "no_tables", "no_detail", "view_xi"])
 def test_ablations_follow_the_cpu_renderer(tmp_path, pack, ablation):
     gl, cpu = _both(write_scene(tmp_path, [straight()], camera=ORTHO, lights=SUN + "\n" + SKY), pack,
                     ABLATIONS[ablation])
     assert abs(gl.mean() / cpu.mean() - 1) < 2e-3
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
+
+
+def test_the_view_closed_xi_is_read_and_moves_the_image(tmp_path, pack):
+    """The ``view_xi`` case above compares something: the pack's ``correction/xi_view`` is uploaded, and the image
+    it gives is not the default's (the diagonal's ξ)."""
+    path = write_scene(tmp_path, [straight()], camera=ORTHO, lights=SUN + "\n" + SKY)
+    scene = dataclasses.replace(load_scene(path), background=(0.0, 0.0, 0.0))
+    renderer = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}, ABLATIONS["view_xi"])
+    assert renderer.cpu.looks[0].xi_view.shape[0] > 0
+    view, default = renderer.render().image, _both(path, pack)[0]
+    assert np.abs(view - default).mean() > 1e-2 * default.mean()
 
 
 def test_a_pinhole_view_agrees_at_the_yarn_scale(tmp_path, pack):

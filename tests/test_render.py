@@ -23,7 +23,7 @@ from knitrun.render.pipeline import radius_mismatch, render
 from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
-from knitrun.render.yarn_look import no_detail, no_full_table, ones_factor
+from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
 from knitrun.shading.equirect import texel_directions
@@ -133,7 +133,8 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     view /= np.linalg.norm(view, axis=1, keepdims=True)
     flat = mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]])
     full = mip_stack([[np.ones((2, 4))]])
-    off = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor())
+    off = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor(),
+                      no_view_table())
     sky = sky_image(64, 128)
     dirs = texel_directions(64, 128).reshape(-1, 3)
     texel_sr = (np.pi / 64) * (2 * np.pi / 128) * np.cos(np.arcsin(np.clip(dirs[:, 1], -1, 1)))
@@ -286,7 +287,7 @@ def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_cros
     t, n, b = np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), np.array([0, 1.0, 0])  # b = n × t
     psi = np.full((4, 1, 3), 0.25)
     tables = Corrections(np.zeros((0, 1, 1, 3)), np.ones((4, 1, 3)), np.ones((4, 1, 3)), np.zeros((0, 1, 1, 3)),
-                         psi, np.ones((4, 1, 3)))
+                         psi, np.ones((4, 1, 3)), np.zeros((0, 1, 1, 1, 3)))
     out, scratch = np.empty(3), np.empty(3)
     reach, n_cross = 2.5, 6.0
 
@@ -584,3 +585,33 @@ def test_a_uniform_ao_texture_leaves_the_image_as_without_detail(tmp_path, pack)
     assert np.array_equal(with_detail, without)
     textured = _render(path, pack).image  # the tiny pack's own AO does move the image
     assert np.abs(textured - _render(path, pack, features=Features(fiber_detail=False)).image).max() > 1e-3
+
+
+def test_the_view_closed_xi_lookup_is_quadrilinear_on_the_table_grid():
+    """``strip_shading._table_v4`` (the lookup of ``correction/xi_view``) against a direct evaluation: the table
+    value at a bin centre, the mean of the two neighbours halfway along each axis, clamped in v and θ, wrapped in φ,
+    and exact for a function linear in every axis."""
+    from data_formats.conventions import THETA_RANGE, cell_centres
+    from knitrun.render.strip_shading import _table_v4
+
+    n_v, n_t, n_p = 4, 6, 8
+    rng = np.random.default_rng(11)
+    tab = rng.uniform(0.5, 2.0, (n_v, n_t, n_t, n_p, 3))
+    vs, ts, ps = cell_centres(-1.0, 1.0, n_v), cell_centres(*THETA_RANGE, n_t), cell_centres(-np.pi, np.pi, n_p)
+    out = np.empty(3)
+    _table_v4(tab, vs[1], ts[2], ts[4], ps[5], out)
+    assert np.allclose(out, tab[1, 2, 4, 5])
+    _table_v4(tab, vs[1], 0.5 * (ts[2] + ts[3]), ts[4], ps[5], out)  # halfway along θ_i
+    assert np.allclose(out, 0.5 * (tab[1, 2, 4, 5] + tab[1, 3, 4, 5]))
+    _table_v4(tab, vs[1], ts[2], 0.5 * (ts[0] + ts[1]), ps[5], out)  # halfway along θ_o
+    assert np.allclose(out, 0.5 * (tab[1, 2, 0, 5] + tab[1, 2, 1, 5]))
+    _table_v4(tab, vs[1], ts[2], ts[4], np.pi - 1e-9, out)  # φ wraps: halfway between the last and the first
+    assert np.allclose(out, 0.5 * (tab[1, 2, 4, n_p - 1] + tab[1, 2, 4, 0]))
+    _table_v4(tab, 5.0, -4.0, 4.0, ps[2], out)  # v and θ clamp
+    assert np.allclose(out, tab[n_v - 1, 0, n_t - 1, 2])
+    a, b, c = rng.normal(size=3)  # linear in v, θ_i, θ_o: exact between centres
+    linear = (a * vs[:, None, None, None] + b * ts[None, :, None, None] + c * ts[None, None, :, None]
+              + np.zeros((1, 1, 1, n_p)))[..., None] * np.ones(3)
+    v, ti, to = 0.3 * vs[1] + 0.7 * vs[2], 0.2 * ts[1] + 0.8 * ts[2], 0.6 * ts[3] + 0.4 * ts[4]
+    _table_v4(linear, v, ti, to, 0.1, out)
+    assert np.allclose(out, a * v + b * ti + c * to)

@@ -13,7 +13,7 @@ import numpy as np
 from ..conventions import HALF_PI, LENGTH_UNITS, PHI_RANGE, THETA_RANGE
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "2.3"
+SCHEMA_VERSION = "2.4"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
@@ -53,7 +53,8 @@ AXES = {a.name: a for a in (
          "u = s/period on texture columns, s the rest arc length (texel centres, positions not stored)",
          store_samples=False),
     Axis("theta_o", True, THETA_RANGE, "clamp", "rad",
-         "θ_o = asin(ω_o·t), longitudinal angle of the view against the fiber tangent"),
+         "θ_o = asin(ω_o·t), longitudinal angle of the view (t: the fiber tangent for I_M, the yarn tangent for "
+         "the correction tables, §3)"),
     Axis("theta_j", True, THETA_RANGE, "clamp", "rad",
          "θ_j = asin(ω_j·t), longitudinal angle of the SRBF centre against the fiber tangent"),
     Axis("abs_phi_j_minus_phi_o", True, (0.0, math.pi), "clamp", "rad",
@@ -127,6 +128,15 @@ TABLES = (
               ("v", "theta_d", "phi", "channel"), "1",
               "ξ closed on the strip renderer of SHADING.md: the factor with which it reproduces correction/radiance "
               "at the bin centres (since schema 2.3, §6)", value_range=(0.0, None)),
+    TableSpec("correction/radiance_view", "correction", ("N_v", "N_theta", "N_theta", "N_phi", 3),
+              ("v", "theta_i", "theta_o", "phi", "channel"), "1",
+              "Ψ_*(v, θ_i, θ_o, φ): the path-traced radiance per unit irradiance of the bake's straight yarn seen "
+              "from θ_o and lit from (θ_i, φ), mean over the bin's pixels, that correction/xi_view closes on (since "
+              "schema 2.4, §6)", value_range=(0.0, None)),
+    TableSpec("correction/xi_view", "correction", ("N_v", "N_theta", "N_theta", "N_phi", 3),
+              ("v", "theta_i", "theta_o", "phi", "channel"), "1",
+              "ξ closed on the strip renderer of SHADING.md at every view: the factor with which it reproduces "
+              "correction/radiance_view at the bin centres (since schema 2.4, §6)", value_range=(0.0, None)),
     TableSpec("correction/xi_residual", "correction", (), (), "1",
               "relative RMS residual of ξ ≈ ξ_M ξ_N over the whole baked grid", value_range=(0.0, None)),
     TableSpec("correction/xi_residual_by_v", "correction", ("N_v",), ("v",), "1",

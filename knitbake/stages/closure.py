@@ -7,35 +7,42 @@ point, lit by the fraction Ψ^Fiber_G of its table, times the AO detail (``data_
 paper's ξ does not make the renderer reproduce the path tracer even where ξ was measured: on the bake's own yarn,
 seen and lit as the correction stage sees and lights it, the renderer was off by −15 % to +39 % (worst with the
 light behind; ``benchmarks/probe_closure.py``, BENCHMARKS.md "where the regular fibers' error lies"). This stage
-bakes ``correction/xi_closed``, the factor that closes that gap; the pack keeps the paper's ξ as well, and the
-renderer uses the closed one by default where the pack has it (``Features.closed_xi``; measured in BENCHMARKS.md,
-"Issue 13: ξ closed on the strip renderer" and "Issue 13: hairs in their own yarn's shadow, and the closed ξ with
-flyaways as the default").
+bakes ``correction/xi_view``, the factor that closes that gap at every view (until schema 2.3 it baked
+``correction/xi_closed``, closed on the correction stage's diagonal only); the pack keeps the paper's ξ as well, and
+the renderer uses the closed one by default where the pack has it (``Features.closed_xi``; measured in BENCHMARKS.md,
+"Issue 13: ξ closed on the strip renderer" and "Issue 13: ξ closed at every view").
 
 Method. Inputs: the baked ``dual_scattering``, ``correction``, ``shadowing`` and ``textures`` stages. Their tables
 are written to a temporary pack; a scene holds the correction stage's straight yarn (a straight curve along +z over
-z ∈ [−P, 2P], the spec's radius) and, per bin (θ_d, φ), the correction stage's orthographic camera
-(``correction.strip_camera``, θ_o = θ_d, ``rows`` rows over v ∈ [−1, 1]) and its light (θ_i = −θ_d, φ_i = −φ,
-irradiance 1). The renderer (``knitrun.render.pipeline``, the full model without flyaways, MSAA 4) draws it; S(v,
-θ_d, φ) is the mean radiance of the pixels of each v bin (the bins of ``correction.v_bin_sums``), to be compared with
-the correction stage's ``correction/radiance`` Ψ_* of the same pixels. The image is linear in ξ (SHADING.md §3), but
-the renderer interpolates ξ between v bins, so ξ is updated by the fixed point
+z ∈ [−P, 2P], the spec's radius), seen by the correction stage's orthographic camera from θ_o
+(``correction.strip_camera``, ``rows`` rows over v ∈ [−1, 1]) and lit from (θ_i, φ_i = −φ), irradiance 1, for every
+bin centre (θ_i, θ_o, φ) of the correction stage's grid: off the diagonal too. The paper's ξ(v, θ_d, φ) is applied
+at every θ_h = (θ_i + θ_o)/2 although it was measured only on θ_o = −θ_i, and the strip renderer with it (or with
+a ξ closed on that diagonal alone) was off by up to +86 % on a straight yarn lit at θ_i = 65° and seen at θ_o = 0
+(BENCHMARKS.md, "Issue 13: ξ closed at every view"). So this stage first path-traces Ψ_*(v, θ_i, θ_o, φ), the
+mean radiance of each v bin's pixels (as the correction stage does on its diagonal: the same yarn tracer, camera,
+spp and batches, ``correction/radiance_view``), then has the renderer (``knitrun.render.pipeline``, the full model
+without flyaways, MSAA 4) draw every bin, S(v, θ_i, θ_o, φ) its mean radiance per v bin. The image is linear in ξ
+(SHADING.md §3), but the renderer interpolates ξ between bins, so ξ is updated by the fixed point
 
-    ξ ← ξ · Ψ_* / S(ξ)        (per v, θ_d, φ, channel)
+    ξ ← ξ · Ψ_* / S(ξ)        (per v, θ_i, θ_o, φ, channel)
 
-``iterations`` times from the paper's ξ, kept within a factor ``CLAMP`` of it, in the bins where Ψ_* is measured
-(above ``SIGNAL`` × its largest value, standard error ≤ ``MAX_RELATIVE_ERROR`` of it, in every channel) and S
-exceeds ``SIGNAL`` × its largest value; other bins (the grazing θ_d and the strip's edges, where few fibers are
-hit: 5 % of Ψ_*'s energy at standard quality) keep the paper's ξ. A last render measures what is left: the closure
-residual |S/Ψ_* − 1| over those bins (attributes ``closure_residual_max`` and ``closure_residual_rms`` of
-``correction/xi_closed``).
+``iterations`` times from the paper's ξ at θ_d = (θ_o − θ_i)/2 (``papers_xi_at_views``), kept within a factor
+``CLAMP`` of it, in the bins where Ψ_* is measured (above ``SIGNAL`` × its largest value, standard error ≤
+``MAX_RELATIVE_ERROR`` of it, in every channel) and S exceeds ``SIGNAL`` × its largest value; other bins (grazing
+views and lights and the strip's edges, where few fibers are hit) keep the starting value. A last render measures
+what is left: the closure residual |S/Ψ_* − 1| over those bins (attributes ``closure_residual_max`` and
+``closure_residual_rms`` of ``correction/xi_view``).
 
-Only the bake's diagonal θ_o = −θ_i = θ_d is closed, as only it is measured: ξ(v, θ_d, φ) is still applied at
-every θ_h, where the closure says nothing.
+The diagonal θ_o = −θ_i of the result is stored as well, ``correction/xi_closed`` (v, θ_d, φ), the ξ of a renderer
+that looks ξ up at θ_d alone (until closure version 2 this stage closed only that diagonal, and a pack's default):
+at a diagonal bin centre the two lookups read the same grid value and no other, so the diagonal's fixed point is
+the one that stage ran, on the same Ψ_* (the diagonal bins of ``correction/radiance_view`` are the correction
+stage's ``correction/radiance``, not traced again).
 
-Errors. The closed ξ is Ψ_* over the renderer's estimate per unit ξ, so its relative standard error is Ψ_*'s
-(``correction/radiance_stderr``, over the correction stage's batches; where a bin kept the paper's ξ, the paper's
-error). It does not include the closure residual, which is reported beside it.
+Errors. The closed ξ is Ψ_* over the renderer's estimate per unit ξ, so its relative standard error is Ψ_*'s (over
+the batches); where a bin kept the starting ξ, the paper's error at the nearest θ_d. It does not include the closure
+residual, which is reported beside it.
 """
 
 from __future__ import annotations
@@ -51,8 +58,10 @@ from data_formats.scene import Camera as SceneCamera
 from data_formats.scene import DirectionalLight, scene_from_dict
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import YarnSpec, dumps_spec
-from knitbake.stages.correction import row_v, strip_camera, v_bin_sums, yarn_direction
+from knitbake.stages.correction import row_v, strip_camera, v_bin_sums, yarn_direction, yarn_tracer
 from knitbake.stages.stage_result import StageResult
+from knitbake.trace.path_tracer import render
+from knitrun.shading.table_lookup import axis_cell
 
 CLOSURE_INPUTS = ("dual_scattering", "correction", "shadowing", "textures")
 SIGNAL = 1e-3  # a bin takes part when Ψ_* and S both exceed this fraction of their largest value
@@ -78,80 +87,157 @@ def _scene(folder: Path, spec: YarnSpec, pack: Path):
     return scene_from_dict(data, "closure scene", folder)
 
 
-def _view(scene, spec: YarnSpec, theta_d: float, phi: float, rows: int):
-    """``scene`` seen by the correction stage's camera for θ_d and lit by its light for (θ_d, φ)."""
-    cam = strip_camera(spec, theta_d, rows)
+def _view(scene, spec: YarnSpec, theta_i: float, theta_o: float, phi: float, rows: int):
+    """``scene`` seen by the correction stage's camera from θ_o and lit from (θ_i, φ_i = −φ)."""
+    cam = strip_camera(spec, theta_o, rows)
     camera = SceneCamera(tuple(cam.position.tolist()), tuple(cam.look_at.tolist()), tuple(cam.up.tolist()), None,
                          float(cam.ortho_height), int(cam.width), int(cam.height))
-    light = DirectionalLight(tuple(yarn_direction(-theta_d, -phi).tolist()), (1.0, 1.0, 1.0))
+    light = DirectionalLight(tuple(yarn_direction(theta_i, -phi).tolist()), (1.0, 1.0, 1.0))
     return dataclasses.replace(scene, camera=camera, lights=(light,))
 
 
+def _views(n_theta: int, n_phi: int):
+    """Every bin centre (k, l, m, θ_i, θ_o, φ) of the view grid, in table order."""
+    thetas, phis = cell_centres(*THETA_RANGE, n_theta), cell_centres(*PHI_RANGE, n_phi)
+    for k, theta_i in enumerate(thetas):
+        for ell, theta_o in enumerate(thetas):
+            for m, phi in enumerate(phis):
+                yield k, ell, m, theta_i, theta_o, phi
+
+
+def trace_view_radiance(spec: YarnSpec, diagonal: tuple, rows: int, spp: int, batches: int, seed: int,
+                        max_depth: int = 16, progress=None):
+    """Ψ_* (N_v, N_θ, N_θ, N_φ, 3) on axes (v, θ_i, θ_o, φ) and its standard error over ``batches``: the path-traced
+    mean radiance per v bin of the correction stage's yarn, camera and light (module docstring). ``diagonal``: the
+    correction stage's (``correction/radiance``, its error) (N_v, N_θ, N_φ, 3), Ψ_* on θ_o = −θ_i = θ_d measured
+    the same way, which fills those bins instead of tracing them again."""
+    radiance, error = diagonal
+    n_v, n_theta, n_phi = radiance.shape[:3]
+    samples = np.zeros((batches, n_v, n_theta, n_theta, n_phi, 3))
+    per_batch = n_theta * n_theta * n_phi
+    for b in range(batches):
+        geometry = yarn_tracer(spec, seed + b)
+        for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
+            if k + ell == n_theta - 1:
+                continue
+            cam = strip_camera(spec, theta_o, rows)
+            lit = geometry.with_lights(yarn_direction(theta_i, -phi)[None], np.ones((1, 3)))
+            traced, _ = render(lit, cam, spp, seed=seed + 1000 * b + 401 * k + 37 * ell + m, max_depth=max_depth)
+            sums, pixels = v_bin_sums(traced, np.ones(traced.shape[:2]), row_v(rows), n_v)
+            samples[b, :, k, ell, m] = sums / np.maximum(pixels, 1)[:, None]
+            if progress:
+                progress(b * per_batch + (k * n_theta + ell) * n_phi + m + 1, batches * per_batch)
+    mean, stderr = samples.mean(axis=0), samples.std(axis=0, ddof=1) / np.sqrt(batches)
+    for ell in range(n_theta):
+        mean[:, n_theta - 1 - ell, ell], stderr[:, n_theta - 1 - ell, ell] = radiance[:, ell], error[:, ell]
+    return mean, stderr
+
+
+def diagonal_of(view: np.ndarray) -> np.ndarray:
+    """A view table (N_v, N_θ, N_θ, N_φ, ...) on axes (v, θ_i, θ_o, φ) on the diagonal θ_o = −θ_i = θ_d: (N_v, N_θ,
+    N_φ, ...) on axes (v, θ_d, φ) (the θ centres are symmetric, so θ_i = −θ_o[ℓ] is centre N_θ − 1 − ℓ)."""
+    n_theta = view.shape[1]
+    return np.stack([view[:, n_theta - 1 - ell, ell] for ell in range(n_theta)], axis=1)
+
+
 def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=None) -> np.ndarray:
-    """S (N_v, N_θ, N_φ, 3): the strip renderer's mean radiance per v bin of the correction stage's camera, for
-    each bin centre (θ_d, φ), of the yarn drawn from ``pack`` (full model, no flyaways)."""
+    """S (N_v, N_θ, N_θ, N_φ, 3): the strip renderer's mean radiance per v bin of the correction stage's camera,
+    for each bin centre (θ_i, θ_o, φ), of the yarn drawn from ``pack`` (full model without flyaways, ξ from the
+    pack's ``correction/xi_view``)."""
     from knitrun.render.ablations import Features
     from knitrun.render.pipeline import Renderer
 
-    n_v, n_theta, n_phi = shape
-    out = np.zeros((n_v, n_theta, n_phi, 3))
+    n_v, n_theta, _, n_phi = shape
+    out = np.zeros(tuple(shape) + (3,))
     with tempfile.TemporaryDirectory(prefix="knit-closure-") as tmp:
         scene = _scene(Path(tmp), spec, pack)
-        renderer = Renderer(scene, features=Features(flyaways=False, closed_xi=False))  # ξ: the iterate's pack
-        for k, theta_d in enumerate(cell_centres(*THETA_RANGE, n_theta)):
-            for m, phi in enumerate(cell_centres(*PHI_RANGE, n_phi)):
-                renderer.scene = _view(scene, spec, theta_d, phi, rows)
-                image = renderer.render().image.astype(np.float64)
-                sums, pixels = v_bin_sums(image, np.ones(image.shape[:2]), row_v(rows), n_v)
-                out[:, k, m] = sums / np.maximum(pixels, 1)[:, None]
-                if progress:
-                    progress(k * n_phi + m + 1, n_theta * n_phi)
+        renderer = Renderer(scene, features=Features(flyaways=False, view_xi=True))
+        done = 0
+        for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
+            renderer.scene = _view(scene, spec, theta_i, theta_o, phi, rows)
+            image = renderer.render().image.astype(np.float64)
+            sums, pixels = v_bin_sums(image, np.ones(image.shape[:2]), row_v(rows), n_v)
+            out[:, k, ell, m] = sums / np.maximum(pixels, 1)[:, None]
+            done += 1
+            if progress:
+                progress(done, n_theta * n_theta * n_phi)
     return out
 
 
-def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, iterations: int,
-                     progress=None) -> tuple[dict, dict, dict, dict]:
-    """(tables, errors, counts, closure residual {max, rms}) of the closed ξ (module docstring). ``inputs``: stage →
-    StageResult of ``CLOSURE_INPUTS``; ``write_pack_to(path, xi)`` writes them as a pack whose ``correction/xi`` is
-    ``xi``."""
-    target = inputs["correction"].tables["correction/radiance"]
-    target_err = inputs["correction"].errors["correction/radiance"]
-    paper = inputs["correction"].tables["correction/xi"]
+def papers_xi_at_views(xi: np.ndarray) -> np.ndarray:
+    """The paper's ξ (N_v, N_θ, N_φ, 3) on axes (v, θ_d, φ) at every view bin centre: (N_v, N_θ, N_θ, N_φ, 3) on axes
+    (v, θ_i, θ_o, φ), linear in θ_d = (θ_o − θ_i)/2 with the clamp of ASSET_PACK.md §4.3."""
+    n_theta = xi.shape[1]
+    thetas = cell_centres(*THETA_RANGE, n_theta)
+    out = np.empty((xi.shape[0], n_theta, n_theta) + xi.shape[2:])
+    for k, theta_i in enumerate(thetas):
+        for ell, theta_o in enumerate(thetas):
+            i0, i1, f = axis_cell(0.5 * (theta_o - theta_i), THETA_RANGE[0], THETA_RANGE[1], n_theta, False)
+            out[:, k, ell] = (1.0 - f) * xi[:, i0] + f * xi[:, i1]
+    return out
+
+
+def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, iterations: int, spp: int,
+                     batches: int, seed: int, progress=None) -> tuple[dict, dict, dict, dict]:
+    """(tables, errors, counts, closure residuals: table → {max, rms}) of the view-closed ξ, its diagonal and the Ψ_*
+    it closes on (module docstring). ``inputs``: stage → StageResult of ``CLOSURE_INPUTS``; ``write_pack_to(path,
+    xi_view)`` writes them as a pack with ``correction/xi_view`` = ``xi_view``; ``spp``, ``batches``: the
+    correction stage's."""
+    paper_tab = inputs["correction"].tables["correction/xi"]
+    n_v, n_theta, n_phi = paper_tab.shape[:3]
+    shape = (n_v, n_theta, n_theta, n_phi)
+    per_view = n_theta * n_theta * n_phi
+    total = (batches + iterations + 1) * per_view
+    trace_step = None if progress is None else (lambda done, _: progress(done, total))
+    diagonal = inputs["correction"].tables["correction/radiance"], inputs["correction"].errors["correction/radiance"]
+    target, target_err = trace_view_radiance(spec, diagonal, rows, spp, batches, seed, progress=trace_step)
+    paper = papers_xi_at_views(paper_tab)
+    paper_err = papers_xi_at_views(inputs["correction"].errors["correction/xi"])
     xi = paper.copy()
-    shape = xi.shape[:3]
     measured = np.all((target > SIGNAL * target.max()) & (target_err <= MAX_RELATIVE_ERROR * target), axis=-1,
                       keepdims=True)
-    per_sweep = int(np.prod(shape[1:]))
     with tempfile.TemporaryDirectory(prefix="knit-closure-pack-") as tmp:
         pack = Path(tmp) / "inputs.h5"
         for it in range(iterations + 1):
             write_pack_to(pack, xi)
             step = None if progress is None else \
-                (lambda done, _, it=it: progress(it * per_sweep + done, (iterations + 1) * per_sweep))
+                (lambda done, _, it=it: progress((batches + it) * per_view + done, total))
             rendered = render_bins(pack, spec, shape, rows, step)
             used = measured & (rendered > SIGNAL * rendered.max())
             if it == iterations:
                 break
             ratio = np.where(used, target / np.where(used, rendered, 1.0), 1.0)
             xi = np.clip(xi * ratio, paper / CLAMP, paper * CLAMP)
-    miss = np.abs(rendered[used] / target[used] - 1.0)
-    counts = {"iterations": iterations, "bins_closed": int(used.all(axis=-1).sum()), "bins": int(np.prod(shape))}
-    left = {"closure_residual_max": float(miss.max()) if miss.size else 0.0,
-            "closure_residual_rms": float(np.sqrt(np.mean(miss ** 2))) if miss.size else 0.0}
-
+    counts = {"iterations": iterations, "bins_closed": int(used.all(axis=-1).sum()), "bins": int(np.prod(shape)),
+              "batches": batches, "paths_per_pixel": spp}
     closed = np.where(used, xi, paper)
-    relative = np.where(used, target_err / np.where(used, target, 1.0),
-                        inputs["correction"].errors["correction/xi"] / np.maximum(paper, 1e-300))
-    return {"correction/xi_closed": closed}, {"correction/xi_closed": closed * relative}, counts, left
+    relative = np.where(used, target_err / np.where(used, target, 1.0), paper_err / np.maximum(paper, 1e-300))
+    left = {"correction/xi_view": _residual(rendered, target, used),
+            "correction/xi_closed": _residual(diagonal_of(rendered), diagonal_of(target), diagonal_of(used))}
+    tables = {"correction/xi_view": closed, "correction/radiance_view": target,
+              "correction/xi_closed": diagonal_of(closed)}
+    errors = {"correction/xi_view": closed * relative, "correction/radiance_view": target_err,
+              "correction/xi_closed": diagonal_of(closed * relative)}
+    return tables, errors, counts, left
+
+
+def _residual(rendered, target, used) -> dict:
+    """The closure residual |S/Ψ_* − 1| over the ``used`` bins: its largest and RMS value."""
+    miss = np.abs(rendered[used] / target[used] - 1.0)
+    return {"closure_residual_max": float(miss.max()) if miss.size else 0.0,
+            "closure_residual_rms": float(np.sqrt(np.mean(miss ** 2))) if miss.size else 0.0}
 
 
 def bake_closure_stage(spec, settings, seed, progress=None, inputs=None, write_pack_to=None) -> StageResult:
-    """Stage ``closure`` of ``knitbake.bake``: settings ``rows`` (the correction stage's), ``iterations`` and
-    ``inputs`` (the settings of ``CLOSURE_INPUTS``, part of the cache key only). ``inputs``: their StageResults;
-    ``write_pack_to``: see ``close_correction``."""
+    """Stage ``closure`` of ``knitbake.bake``: settings ``rows``, ``spp``, ``batches`` (the correction stage's),
+    ``iterations`` and ``inputs`` (the settings of ``CLOSURE_INPUTS``, part of the cache key only). ``inputs``: their
+    StageResults; ``write_pack_to``: see ``close_correction``."""
     tables, errors, counts, left = close_correction(spec, inputs, write_pack_to, settings["rows"],
-                                                    settings["iterations"], progress)
-    kind = "standard error of the path-traced radiance Ψ_* (correction stage batches) carried into the closed ξ"
+                                                    settings["iterations"], settings["spp"], settings["batches"],
+                                                    seed, progress)
+    kind = (f"standard error of the path-traced radiance Ψ_* over {settings['batches']} independent batches (fiber "
+            f"geometry, paths and pixel jitter reseeded), carried into the closed ξ")
     attrs = {name: {"error_kind": kind} for name in tables}
-    attrs["correction/xi_closed"].update(left)
+    for name, residual in left.items():
+        attrs[name].update(residual)
     return StageResult(tables, errors, attrs, counts)

@@ -26,11 +26,16 @@ rungs without Ψ^Fiber go without it too. Measured in BENCHMARKS.md, "Issue 13: 
 made to close on this renderer where it was measured, instead of the paper's Ψ_*/Ψ_DS. A pack without it (schema
 < 2.3, or baked with ``--only``) is shaded with the paper's ξ, and the render's facts say so (``facts["xi"]``). The
 closed ξ exists only as a full table: the factored rung (``full_tables`` False) uses the paper's factors.
+``view_xi`` shades with the pack's ``correction/xi_view`` (schema 2.4) instead: ξ(v, θ_i, θ_o, φ) closed at every
+view and light, not only on the bake's diagonal θ_o = −θ_i. It is not the default: on the straight yarn it holds
+the brightness at every light angle where the diagonal ξ is up to 1.9× too bright at grazing light, but on the
+patches it is 2–5 % darker and further from the reference at the yarn scale (BENCHMARKS.md, "Issue 13: ξ closed at
+every view").
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
 the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
-factored tables, without the detail, and with the paper's ξ.
+factored tables, without the detail, with the paper's ξ, and with ξ closed at every view.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -50,6 +55,7 @@ class Features:
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
     fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
     closed_xi: bool = True  # ξ closed on this renderer (correction/xi_closed) where the pack has it, else the paper's
+    view_xi: bool = False  # ξ closed at every view (correction/xi_view) where the pack has it, before closed_xi
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -64,13 +70,15 @@ ABLATIONS = {
     "factored": Features(full_tables=False, closed_xi=False),
     "no_detail": Features(fiber_detail=False),
     "papers_xi": Features(closed_xi=False),
+    "view_xi": Features(view_xi=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
                    "interreflection": "+ inter-reflection", "closed": "+ ξ closed on the renderer",
                    "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
                    "factored": "full, the paper's rank-1 factored ξ, Ψ",
-                   "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ"}
+                   "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ",
+                   "view_xi": "full with ξ closed at every view"}
 
 
 def regular_fibers(name: str) -> Features:

@@ -68,7 +68,7 @@ from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
 from knitrun.render.strip_shading import (flyaway_coverage, resolve, same_surface, shade_flyaway, shade_regular,
                                           shading_points)
-from knitrun.render.yarn_look import load_look, no_full_table, ones_factor, shading_look
+from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table
 from knitrun.shading.srbf_cache import cached_fit
@@ -250,11 +250,13 @@ class Renderer:
         looks = [load_look(_pack_path(k, e, packs), e, scene.units,
                            corrections=features.xi or features.fiber_shadowing, full_tables=features.full_tables,
                            flyaways=features.flyaways, environment=environment, detail=features.fiber_detail,
-                           transmission=features.interreflection, closed_xi=features.closed_xi)
+                           transmission=features.interreflection, closed_xi=features.closed_xi,
+                           view_xi=features.view_xi)
                  for k, e in enumerate(scene.yarns)]
         for look in looks:
             if not features.xi:
                 look.xi_full, look.xi_m, look.xi_n = no_full_table(), ones_factor(), ones_factor()
+                look.xi_view = no_view_table()
             if not features.fiber_shadowing:
                 look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
                 look.n_occluded = 0.0

@@ -11,7 +11,9 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
                    ``arclength`` (N,) rest arc length shifted by the view phase, ``v`` (N,) across the strip
                    in [−1, 1], ``footprint`` (N,) pixel size at the point, ``curve`` (N,) int64 curve index
 ``Corrections``    ``xi_full``, ``psi_full`` (N_v, N_θ, N_φ, 3) or (0, 1, 1, 3) for "use the factors";
-                   ``xi_m``, ``xi_n``, ``psi_gm``, ``psi_gn`` (N_v, N, 3) factors (ASSET_PACK.md §6–7)
+                   ``xi_m``, ``xi_n``, ``psi_gm``, ``psi_gn`` (N_v, N, 3) factors (ASSET_PACK.md §6–7);
+                   ``xi_view`` (N_v, N_θi, N_θo, N_φ, 3), ξ closed at every view, or (0, 1, 1, 1, 3): when it
+                   has cells it replaces the other ξ tables
 ``Look``           one yarn entry: ``params`` fiber BCSDF vector, ``ds`` dual-scattering tables (5, N_θ, 3),
                    ``period`` texture period, ``radius`` regular strip half-width, ``flyaway_half_width``,
                    fiber counts ``n_occluded``, ``n_cross``
@@ -48,6 +50,7 @@ class Corrections(NamedTuple):
     psi_full: np.ndarray
     psi_gm: np.ndarray
     psi_gn: np.ndarray
+    xi_view: np.ndarray
 
 
 class Look(NamedTuple):

@@ -268,6 +268,24 @@ def _table_v3(tab, v, theta, phi, out):
 
 
 @njit(cache=True)
+def _table_v4(tab, v, theta_i, theta_o, phi, out):
+    """out[:3] = quadrilinear lookup of a (N_v, N_θ, N_θ, N_φ, 3) table at (v, θ_i, θ_o, φ) (§4.3: v, θ clamp, φ
+    repeats)."""
+    a0, a1, fa = axis_cell(v, -1.0, 1.0, tab.shape[0], False)
+    b0, b1, fb = axis_cell(theta_i, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
+    c0, c1, fc = axis_cell(theta_o, THETA_RANGE[0], THETA_RANGE[1], tab.shape[2], False)
+    d0, d1, fd = axis_cell(phi, -math.pi, math.pi, tab.shape[3], True)
+    for ch in range(3):
+        total = 0.0
+        for a, wa in ((a0, 1.0 - fa), (a1, fa)):
+            for b, wb in ((b0, 1.0 - fb), (b1, fb)):
+                for c, wc in ((c0, 1.0 - fc), (c1, fc)):
+                    w = wa * wb * wc
+                    total += w * ((1.0 - fd) * tab[a, b, c, d0, ch] + fd * tab[a, b, c, d1, ch])
+        out[ch] = total
+
+
+@njit(cache=True)
 def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
     """A correction or shadowing value: the full table when it has cells (``full.shape[0] > 0``), else the product
     of the factor lookups (ASSET_PACK.md §6–7)."""
@@ -282,10 +300,14 @@ def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
 
 @njit(cache=True, inline='always')
 def _corrections(tables, v, t, n, b, theta_o, w, xi, psi, scratch):
-    """ξ(v, θ_d, φ) into ``xi`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` (``tables``: ``shading_inputs.Corrections``)
-    for light direction ω = ``w`` seen from θ_o (θ_i and φ by ``_strip_angles``, θ_d = (θ_o − θ_i)/2)."""
+    """ξ into ``xi`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` (``tables``: ``shading_inputs.Corrections``) for light
+    direction ω = ``w`` seen from θ_o (θ_i and φ by ``_strip_angles``): ξ(v, θ_i, θ_o, φ) from the view-closed table
+    when it has cells, else ξ(v, θ_d, φ) with θ_d = (θ_o − θ_i)/2."""
     theta_i, phi = _strip_angles(w, t, n, b)
-    _factored_or_full(tables.xi_full, tables.xi_m, tables.xi_n, v, 0.5 * (theta_o - theta_i), phi, xi, scratch)
+    if tables.xi_view.shape[0] > 0:
+        _table_v4(tables.xi_view, v, theta_i, theta_o, phi, xi)
+    else:
+        _factored_or_full(tables.xi_full, tables.xi_m, tables.xi_n, v, 0.5 * (theta_o - theta_i), phi, xi, scratch)
     _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, psi, scratch)
 
 

@@ -41,6 +41,7 @@ from knitrun.shading.table_lookup import lookup_theta
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
 CLOSED_XI = "correction/xi_closed"  # optional (schema ≥ 2.3): the paper's ξ where a pack lacks it
+VIEW_XI = "correction/xi_view"  # optional (schema ≥ 2.4): ξ closed at every (θ_i, θ_o), read when asked
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
 
@@ -55,6 +56,7 @@ class YarnLook:
     params: np.ndarray  # (N_PARAMS,) fiber BCSDF with the entry's colour
     ds: np.ndarray  # (5, N_theta, 3) dual-scattering tables (pack_tables order)
     xi_full: np.ndarray  # (N_v, N_theta, N_phi, 3), or (0, 1, 1, 3) to use the factors
+    xi_view: np.ndarray  # (N_v, N_theta_i, N_theta_o, N_phi, 3), or (0, 1, 1, 1, 3): ξ by xi_full / the factors
     xi_m: np.ndarray  # (N_v, N_theta, 3) or a (1, 1, 3) table of ones when corrections are not used
     xi_n: np.ndarray
     psi_full: np.ndarray
@@ -93,6 +95,11 @@ def no_full_table():
     return np.zeros((0, 1, 1, 3))
 
 
+def no_view_table():
+    """An empty view-closed ξ table: ξ comes from the (v, θ_d, φ) table or its factors."""
+    return np.zeros((0, 1, 1, 1, 3))
+
+
 def _tinted_ds(tables, colour):
     if np.all(colour == 1.0):
         return pack_tables(tables)
@@ -120,15 +127,17 @@ def fiber_detail_chain(ao_levels, coverage_levels) -> list:
 
 
 def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
-              environment=False, detail=True, transmission=True, closed_xi=True) -> YarnLook:
+              environment=False, detail=True, transmission=True, closed_xi=True, view_xi=False) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
     ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors; ``detail``: the
     fiber-level detail from the pack's AO texture (``fiber_detail_chain``); ``transmission``: n_cross from the
     pack's transmittance T_Y when it has one (module docstring); ``closed_xi``: ξ from the pack's
-    ``correction/xi_closed`` (schema ≥ 2.3; ASSET_PACK.md §6) instead of the paper's, where the pack has it and
-    ``full_tables`` (the closed ξ is a full table); ``YarnLook.xi_from`` says which ξ was read."""
+    ``correction/xi_closed`` (closed on the diagonal θ_o = −θ_i, schema ≥ 2.3; ASSET_PACK.md §6) instead of the
+    paper's, where the pack has it and ``full_tables`` (the closed ξ is a full table); ``view_xi``: from its
+    ``correction/xi_view`` (closed at every view, schema ≥ 2.4) before either; ``YarnLook.xi_from`` says which ξ
+    was read."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
@@ -143,7 +152,10 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
     if corrections:
         names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
-    closed_xi = corrections and closed_xi and full_tables and CLOSED_XI in stored
+    view_xi = corrections and view_xi and full_tables and VIEW_XI in stored
+    closed_xi = corrections and closed_xi and full_tables and CLOSED_XI in stored and not view_xi
+    if view_xi:
+        names.append(VIEW_XI)
     if closed_xi:
         names.append(CLOSED_XI)
     if flyaways:
@@ -179,10 +191,11 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         n_cross_from = (f"transmittance T_Y = {float(transmittance @ LUMINANCE):.3f}: {n_cross:.2f} "
                         f"(geometric {geometric:.2f})")
     tables = {n: np.asarray(pack.tables[n], np.float64) for n in names
-              if n in CORRECTION_TABLES + FULL_TABLES + (CLOSED_XI,)}
+              if n in CORRECTION_TABLES + FULL_TABLES + (CLOSED_XI, VIEW_XI)}
     if CLOSED_XI in tables:
         tables["correction/xi"] = tables[CLOSED_XI]
-    xi_from = ("none (switched off)" if not corrections else "closed on the renderer" if closed_xi
+    xi_from = ("none (switched off)" if not corrections else "closed on the renderer at every view" if view_xi
+               else "closed on the renderer" if closed_xi
                else "the paper's" + ("" if full_tables else " factors") +
                ("" if CLOSED_XI in stored or not full_tables else f" (the pack has no {CLOSED_XI})"))
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
@@ -195,7 +208,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
                  if corrections}
     return YarnLook(
         name=spec.name, params=params, ds=_tinted_ds(pack.tables, colour),
-        xi_full=tables.get("correction/xi", no_full_table()), xi_m=tables.get("correction/xi_M", ones_factor()),
+        xi_full=tables.get("correction/xi", no_full_table()), xi_view=tables.get(VIEW_XI, no_view_table()),
+        xi_m=tables.get("correction/xi_M", ones_factor()),
         xi_n=tables.get("correction/xi_N", ones_factor()), psi_full=tables.get("shadowing/psi", no_full_table()),
         psi_gm=tables.get("shadowing/psi_GM", ones_factor()), psi_gn=tables.get("shadowing/psi_GN", ones_factor()),
         tangent=mip_stack([pack.mip_chain("textures/tangent")]),
@@ -215,7 +229,7 @@ def shading_look(look: YarnLook) -> tuple:
     ``MipStack``, a one-texel stand-in of its three variants for a yarn without a flyaway layer)."""
     return (Look(look.params, look.ds, float(look.period), float(look.radius), float(look.flyaway_half_width),
                  float(look.n_occluded), float(look.n_cross)),
-            Corrections(look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm, look.psi_gn),
+            Corrections(look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm, look.psi_gn, look.xi_view),
             look.flyaway if look.flyaway is not None else empty_mip_stack(4, 3))
 
 

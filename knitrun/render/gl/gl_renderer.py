@@ -289,6 +289,8 @@ class GLRenderer:
             return (_texture3d(ctx, tab), 1) if tab.shape[0] > 0 else (_texture3d(ctx, np.zeros((1, 1, 1, 3))), 0)
 
         xi_full, use_xi = full(corr.xi_full)
+        view = corr.xi_view  # (N_v, N_θ, N_θ, N_φ, 3) as texel (φ, θ_i·N_θ + θ_o, v)
+        xi_view, use_view = full(view.reshape(view.shape[0], view.shape[1] * view.shape[2], view.shape[3], 3))
         psi_full, use_psi = full(corr.psi_full)
         p = kernel_look.params
         albedo = (look.yarn_albedo or 0.0) if self.features.interreflection else 0.0
@@ -303,13 +305,15 @@ class GLRenderer:
             "twist_sign": float(look.twist_sign), "yarn_albedo": float(albedo),
             "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
             "detail_levels": int(detail_levels),
-            "use_xi_full": use_xi, "use_psi_full": use_psi,
+            "use_xi_full": use_xi, "use_psi_full": use_psi, "use_xi_view": use_view,
+            "xi_view_n_theta": int(view.shape[2]),
             "im_lo": im.lo, "im_hi": im.hi, "im_repeat": [int(r) for r in im.repeat],
             "im_size": [na, nb, nc, nd], "im_code": [int(c) for c in im.codes],
         }
         textures = {
             "ds_table": _texture2d(ctx, kernel_look.ds.reshape(5, -1, 3)),
-            "xi_full": xi_full, "xi_m": _texture2d(ctx, corr.xi_m), "xi_n": _texture2d(ctx, corr.xi_n),
+            "xi_view": xi_view, "xi_full": xi_full,
+            "xi_m": _texture2d(ctx, corr.xi_m), "xi_n": _texture2d(ctx, corr.xi_n),
             "psi_full": psi_full, "psi_gm": _texture2d(ctx, corr.psi_gm), "psi_gn": _texture2d(ctx, corr.psi_gn),
             "im_table": _texture3d(ctx, table.reshape(na, nb * nc, nd, 3)),
             "tangent_tex": tangent, "coverage_tex": coverage, "detail_tex": detail,

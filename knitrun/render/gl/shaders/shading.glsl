@@ -309,6 +309,29 @@ vec3 table_v(sampler2D tab, float v, float x, float lo, float hi, bool repeat_ax
                mix(texelFetch(tab, ivec2(b0, a1), 0).rgb, texelFetch(tab, ivec2(b1, a1), 0).rgb, fb), fa);
 }
 
+// the view-closed ξ (N_v, N_θ, N_θ, N_φ, 3) on axes (v, θ_i, θ_o, φ) as a 3-D texture: texel (φ, θ_i·N_θ + θ_o, v)
+vec3 table_v4(sampler3D tab, int n_theta, float v, float theta_i, float theta_o, float phi) {
+    ivec3 size = textureSize(tab, 0);
+    int a[2], b[2], c[2], d[2];
+    float fa, fb, fc, fd;
+    axis_cell(v, -1.0, 1.0, size.z, false, a[0], a[1], fa);
+    axis_cell(theta_i, -HALF_PI, HALF_PI, n_theta, false, b[0], b[1], fb);
+    axis_cell(theta_o, -HALF_PI, HALF_PI, n_theta, false, c[0], c[1], fc);
+    axis_cell(phi, -PI, PI, size.x, true, d[0], d[1], fd);
+    vec3 out_ = vec3(0.0);
+    for (int bits = 0; bits < 16; ++bits) {
+        float w = ((bits & 1) != 0 ? fa : 1.0 - fa) * ((bits & 2) != 0 ? fb : 1.0 - fb)
+                * ((bits & 4) != 0 ? fc : 1.0 - fc) * ((bits & 8) != 0 ? fd : 1.0 - fd);
+        int ia = a[(bits & 1) != 0 ? 1 : 0], ib = b[(bits & 2) != 0 ? 1 : 0];
+        int ic = c[(bits & 4) != 0 ? 1 : 0], id = d[(bits & 8) != 0 ? 1 : 0];
+        out_ += w * texelFetch(tab, ivec3(id, ib * n_theta + ic, ia), 0).rgb;
+    }
+    return out_;
+}
+
+uniform sampler3D xi_view;
+uniform int use_xi_view;
+uniform int xi_view_n_theta;
 uniform sampler3D xi_full;
 uniform sampler2D xi_m;
 uniform sampler2D xi_n;
@@ -318,13 +341,17 @@ uniform sampler2D psi_gn;
 uniform int use_xi_full;
 uniform int use_psi_full;
 
-// strip_shading._corrections: ξ(v, θ_d, φ) and Ψ^Fiber_G(v, θ_i, φ) toward w, θ_i and φ against the strip frame
+// strip_shading._corrections: ξ(v, θ_i, θ_o, φ) (view-closed) or ξ(v, θ_d, φ), and Ψ^Fiber_G(v, θ_i, φ) toward w,
+// θ_i and φ against the strip frame
 void corrections(float v, vec3 t, vec3 n, vec3 b, float theta_o, vec3 w, out vec3 xi, out vec3 psi) {
     float theta_i = clamped_asin(dot(w, t));
     float phi = -atan(dot(w, b), dot(w, n));
     float theta_d = 0.5 * (theta_o - theta_i);
-    xi = use_xi_full != 0 ? table_v3(xi_full, v, theta_d, phi)
-                          : table_v(xi_m, v, theta_d, -HALF_PI, HALF_PI, false) * table_v(xi_n, v, phi, -PI, PI, true);
+    if (use_xi_view != 0)
+        xi = table_v4(xi_view, xi_view_n_theta, v, theta_i, theta_o, phi);
+    else
+        xi = use_xi_full != 0 ? table_v3(xi_full, v, theta_d, phi)
+                              : table_v(xi_m, v, theta_d, -HALF_PI, HALF_PI, false) * table_v(xi_n, v, phi, -PI, PI, true);
     psi = use_psi_full != 0 ? table_v3(psi_full, v, theta_i, phi)
                             : table_v(psi_gm, v, theta_i, -HALF_PI, HALF_PI, false) * table_v(psi_gn, v, phi, -PI, PI, true);
 }
