@@ -29,8 +29,8 @@ closed ξ exists only as a full table: the factored rung (``full_tables`` False)
 ``view_xi`` shades with the pack's ``correction/xi_view`` (schema 2.4) instead: ξ(v, θ_i, θ_o, φ) closed at every
 view and light, not only on the bake's diagonal θ_o = −θ_i. It is not the default: on the straight yarn it holds
 the brightness at every light angle where the diagonal ξ is up to 1.9× too bright at grazing light, but on the
-patches it is 2–5 % darker and further from the reference at the yarn scale (BENCHMARKS.md, "Issue 13: ξ closed at
-every view").
+patches it is 1–5 % darker and, on three of the four, further from the reference at the yarn scale (BENCHMARKS.md,
+"Issue 13: ξ closed at every view").
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
