@@ -35,14 +35,14 @@ what is left: the closure residual |S/Ψ_* − 1| over those bins (attributes ``
 ``closure_residual_rms`` of ``correction/xi_view``).
 
 The diagonal θ_o = −θ_i of the result is stored as well, ``correction/xi_closed`` (v, θ_d, φ), the ξ of a renderer
-that looks ξ up at θ_d alone (until closure version 2 this stage closed only that diagonal, and a pack's default):
+that looks ξ up at θ_d alone (knit's default ξ; until closure version 2 this stage closed that diagonal only):
 at a diagonal bin centre the two lookups read the same grid value and no other, so the diagonal's fixed point is
 the one that stage ran, on the same Ψ_* (the diagonal bins of ``correction/radiance_view`` are the correction
 stage's ``correction/radiance``, not traced again).
 
 Errors. The closed ξ is Ψ_* over the renderer's estimate per unit ξ, so its relative standard error is Ψ_*'s (over
-the batches); where a bin kept the starting ξ, the paper's error at the nearest θ_d. It does not include the closure
-residual, which is reported beside it.
+the batches); where a bin kept the starting ξ, the paper's error interpolated at its θ_d. It does not include the
+closure residual, which is reported beside it.
 """
 
 from __future__ import annotations
