@@ -327,6 +327,11 @@ def test_resolve_weights_coverage_over_the_background():
     # τ = 1 everywhere: the layer only adds light
     resolve(start, weight, rgb, alpha, np.ones((2, 3)), under, out)
     assert np.allclose(out[0], [0.5, 0.25, 1.0]) and np.allclose(out[1], under[1])
+    # in place (the renderer composites its layers so): the same as into a separate image
+    resolve(start, weight, rgb, alpha, transmit, under, out)
+    layered = under.copy()
+    resolve(start, weight, rgb, alpha, transmit, layered, layered)
+    assert np.array_equal(layered, out)
 
 
 def test_yarn_colour_acts_per_channel(tmp_path, pack):

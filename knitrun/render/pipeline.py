@@ -421,10 +421,10 @@ class Renderer:
         lap("shade")
 
         image = np.empty((h * w, 3))
-        resolve(points["start"], points["weight"], rgb, alpha, np.zeros_like(rgb),
-                np.ascontiguousarray(np.broadcast_to(np.asarray(scene.background, np.float64), (h * w, 3))), image)
+        image[:] = np.asarray(scene.background, np.float64)
+        resolve(points["start"], points["weight"], rgb, alpha, np.zeros_like(rgb), image, image)
         if fly_points is not None:
-            resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image.copy(), image)
+            resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image, image)
         if not np.all(np.isfinite(image)):
             raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
         lap("resolve")
