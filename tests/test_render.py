@@ -420,6 +420,34 @@ def test_the_flyaway_layer_skips_exactly_the_points_its_hairs_do_not_cover(tmp_p
     assert 0 < len(covered) < 0.9 * len(seen["coverage"]) and result.facts["flyaway_points_covered"] == len(covered)
 
 
+def test_a_hair_takes_each_kind_of_light_whether_or_not_the_other_kind_is_compiled(tmp_path, pack, monkeypatch):
+    """``shade_flyaway`` with the directional lights alone (no lobes: that branch not compiled) plus the lobes alone
+    (no directional lights) is the hair radiance of both together; alpha and transmittance do not depend on the
+    lights."""
+    from knitrun.render import pipeline
+
+    seen = {}
+    shade_kernel = pipeline.shade_flyaway
+
+    def shade(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit):
+        shade_kernel(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit)
+        n = len(rgb)
+        parts = []
+        for kinds in ((lights, None, None), (None, lobes, im)):
+            out = (np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)))
+            shade_kernel(idx, points, look, corrections, flyaway, *kinds, *out)
+            parts.append(out)
+        seen.update(both=(rgb[idx], alpha[idx], transmit[idx]), parts=[[a[idx] for a in out] for out in parts])
+
+    monkeypatch.setattr(pipeline, "shade_flyaway", shade)
+    _render(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN + "\n" + SKY), pack)
+    (rgb, alpha, transmit), (sun, sky) = seen["both"], seen["parts"]
+    assert rgb.max() > 0 and sun[0].max() > 0 and sky[0].max() > 0
+    np.testing.assert_allclose(sun[0] + sky[0], rgb, rtol=1e-12, atol=1e-15)
+    for part in (sun, sky):
+        assert np.array_equal(part[1], alpha) and np.array_equal(part[2], transmit)
+
+
 def test_same_surface_pairs_a_point_with_its_pixels_point_of_the_same_curve_nearby():
     """Pixel 0: curves 3 and 5 (regular) against 5 (beside 5's point), 3 (too far) and 7 (none); pixel 1: nothing
     regular; pixel 2: curve 3 twice (the nearer of two positions within reach: the first)."""

@@ -415,9 +415,11 @@ class Renderer:
             fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
             for k in drawn_fly:
                 idx = np.flatnonzero((fly_points["yarn"] == k) & covered)
-                shade_flyaway(idx, hairs, *self.kernel_looks[k], Lights(light_dir, light_e, light_vis[1]),
-                              Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]), self.im_slices[k], fly_rgb,
-                              fly_alpha, fly_transmit)
+                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]), self.im_slices[k]) if len(lobe_dir) \
+                    else (None, None)  # a kind of light the scene lacks is not compiled (``shade_flyaway``)
+                shade_flyaway(idx, hairs, *self.kernel_looks[k],
+                              Lights(light_dir, light_e, light_vis[1]) if len(light_dir) else None, *environment,
+                              fly_rgb, fly_alpha, fly_transmit)
         lap("shade")
 
         image = np.empty((h * w, 3))

@@ -498,7 +498,9 @@ def flyaway_coverage(idx, points, look, flyaway, alpha):
 def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit):
     """Shade the flyaway-layer points ``idx`` of one yarn (the named tuples of ``knitrun.render.shading_inputs``;
     ``flyaway``: its three texture variants); writes rgb[idx], alpha[idx] and transmit[idx] (RGB, the hair's
-    forward fraction ā_f(θ_o): what it passes on of the radiance behind it)."""
+    forward fraction ā_f(θ_o): what it passes on of the radiance behind it). ``lights`` is None without directional
+    lights, ``lobes`` and ``im`` None without an environment: as in ``shade_regular``, a kind of light a scene lacks
+    is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: ~40 % of this kernel's compile)."""
     params, ds, period = look.params, look.ds, look.period
     half_width, radius, n_cross = look.flyaway_half_width, look.radius, look.n_cross
     reach = half_width / radius  # the hair layer's half-width in yarn radii
@@ -531,29 +533,31 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
             # where the ray toward the light crosses the yarn (``_hair_light``)
             v_strip = v * half_width / radius
             on_body = abs(v_strip) <= 1.0
-            for light in range(lights.direction.shape[0]):
-                _copy_row(lights.direction, light, w)
-                wl[0], wl[1], wl[2] = dot(w, tf), dot(w, ny), -dot(w, b)
-                spread_params(params, spread2, azimuth_difference(tf, wo, w), wide)
-                context_into(wide, wo_l, ctx, False)
-                evaluate(wide, ctx, wl, f)
-                cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
-                _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
-                lit = lights.visibility[light, q] * cos_i
-                for ch in range(3):
-                    rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
-            for j in range(lobes.direction.shape[0]):
-                if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
-                    continue
-                _copy_row(lobes.direction, j, w)
-                phi_f = azimuth_difference(tf, wo, w)
-                spread_params(params, spread2, phi_f, wide)
-                r_lobe_context_into(wide, wo_l[0], ctx)
-                im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f, lobes.sharpness[j],
-                                f)
-                _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
-                for ch in range(3):
-                    rgb[q, ch] += lobes.weight[j, ch] * lobes.visibility[j, q] * psi[ch] * f[ch]
+            if lights is not None:
+                for light in range(lights.direction.shape[0]):
+                    _copy_row(lights.direction, light, w)
+                    wl[0], wl[1], wl[2] = dot(w, tf), dot(w, ny), -dot(w, b)
+                    spread_params(params, spread2, azimuth_difference(tf, wo, w), wide)
+                    context_into(wide, wo_l, ctx, False)
+                    evaluate(wide, ctx, wl, f)
+                    cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
+                    _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
+                    lit = lights.visibility[light, q] * cos_i
+                    for ch in range(3):
+                        rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
+            if lobes is not None:
+                for j in range(lobes.direction.shape[0]):
+                    if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
+                        continue
+                    _copy_row(lobes.direction, j, w)
+                    phi_f = azimuth_difference(tf, wo, w)
+                    spread_params(params, spread2, phi_f, wide)
+                    r_lobe_context_into(wide, wo_l[0], ctx)
+                    im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f,
+                                    lobes.sharpness[j], f)
+                    _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
+                    for ch in range(3):
+                        rgb[q, ch] += lobes.weight[j, ch] * lobes.visibility[j, q] * psi[ch] * f[ch]
 
 
 @njit(cache=True, inline='always')
