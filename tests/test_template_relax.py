@@ -178,7 +178,10 @@ def test_cli_relax_writes_the_document(tmp_path, document):
     printed = json.loads(result.stdout)
     assert printed["output"] == str(out) and printed["stitch_types"]["knit"]["contact_after"] == \
         document["stitch_types"]["knit"]["contact_after"]
-    assert st.load_relaxed(out)["knit"]["knots"] == st.load_relaxed()["knit"]["knots"]
+    # the same optimum as the shipped document to 1e-6 cm (a yarn radius is 3e-2): Numba compiles for the host CPU, so
+    # another CPU rounds the relaxation's iterates differently (1.4e-8 cm apart seen on a second machine)
+    np.testing.assert_allclose(np.array(st.load_relaxed(out)["knit"]["knots"], float),
+                               np.array(st.load_relaxed()["knit"]["knots"], float), rtol=0, atol=1e-6)
     assert CliRunner().invoke(knitrun, ["templates", "relax", "-o", str(tmp_path / "t.txt")]).exit_code != 0
 
 
