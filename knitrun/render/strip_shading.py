@@ -500,7 +500,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
     ``flyaway``: its three texture variants); writes rgb[idx], alpha[idx] and transmit[idx] (RGB, the hair's
     forward fraction ā_f(θ_o): what it passes on of the radiance behind it). ``lights`` is None without directional
     lights, ``lobes`` and ``im`` None without an environment: as in ``shade_regular``, a kind of light a scene lacks
-    is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: ~40 % of this kernel's compile)."""
+    is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: about half this kernel's compile)."""
     params, ds, period = look.params, look.ds, look.period
     half_width, radius, n_cross = look.flyaway_half_width, look.radius, look.n_cross
     reach = half_width / radius  # the hair layer's half-width in yarn radii
