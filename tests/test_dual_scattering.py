@@ -262,3 +262,24 @@ def test_forward_fraction_is_the_interpolated_a_f_and_matches_the_brute_force_in
     centre = cell_centres(-0.5 * math.pi, 0.5 * math.pi, N_THETA)[11]
     ds.forward_fraction(tab, centre, out)
     np.testing.assert_allclose(out, brute_force(p, centre)["a_f"], rtol=2e-3)
+
+
+def test_terms_of_zero_weight_read_zero_and_the_total_is_continuous_at_both_ends():
+    """``ds_kernel`` skips the terms its direct fraction D weighs by zero (the direct ones at D = 0, the scattered
+    ones at D = 1): they read 0, and L_o/E at D = 0 and D = 1 is the limit of D → 0⁺ and D → 1⁻, so skipping them
+    is not a change of the estimate."""
+    p = params(COLOURS, *ROUGHNESS[0])
+    tables = precompute_dual_scattering(p, n_theta=9)
+    theta_i, theta_o, n = 0.3, -0.2, 1.5
+    for phi in (0.4, 2.6):  # back half (N_b > 0), front half
+        at = {d: ds.ds_components(tables, theta_i, theta_o, phi, n, params=p, direct_fraction=d)
+              for d in (0.0, 1e-12, 1.0 - 1e-12, 1.0)}
+        for name in ("f_back_direct", "F_direct"):
+            assert np.all(at[0.0][name] == 0.0), name
+        for name in ("f_back_scatter", "F_scatter"):
+            assert np.all(at[1.0][name] == 0.0), name
+        if phi < math.pi / 2:
+            assert np.all(at[1e-12]["f_back_direct"] > 0.0)
+        assert np.all(at[1.0 - 1e-12]["f_back_scatter"] > 0.0)
+        np.testing.assert_allclose(at[0.0]["L_over_E"], at[1e-12]["L_over_E"], rtol=1e-9)
+        np.testing.assert_allclose(at[1.0]["L_over_E"], at[1.0 - 1e-12]["L_over_E"], rtol=1e-9)

@@ -178,8 +178,9 @@ def ds_scratch():
 def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, work, single=True):
     """One DS evaluation. ``p``: BCSDF parameters; ``tab``: ``pack_tables`` output (5, N_theta, 3); ``direct``: D in
     [0, 1]; ``out`` (7, 3) receives the rows of ``COMPONENTS`` (the last is L_o/E); ``work``: ``DS_WORK`` floats of
-    scratch (``ds_scratch``). Terms of weight zero are not evaluated and read 0: f (in F_direct) when D = 0,
-    f_back^scatter and f_s^scatter when D = 1, f_back^direct on the front half (N_b = 0). ``single`` False leaves f
+    scratch (``ds_scratch``). Terms of weight zero are not evaluated and read 0: f and f_back^direct (in F_direct)
+    when D = 0, f_back^scatter and f_s^scatter when D = 1 (nor their azimuthal functions), f_back^direct on the front
+    half (N_b = 0). ``single`` False leaves f
     out too (F_direct and L_o/E then lack it), for callers that take single scattering from elsewhere (the
     renderer's multiple-scattering lights: f is in I_M)."""
     i0, i1, fr = axis_cell(theta_i, THETA_RANGE[0], THETA_RANGE[1], tab.shape[1], False)
@@ -192,9 +193,12 @@ def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, wor
         wi[0], wi[1], wi[2] = math.sin(theta_i), cos_i * math.cos(phi), -cos_i * math.sin(phi)
         context_into(p, wo, ctx, False)
         evaluate(p, ctx, wi, f_single)
-    n_r_g = 0.5 * INV_PI
-    n_tt_g = n_tt_global(phi, p[P_GAMMA_TT])
-    n_b, n_b_g = n_back(phi), n_back_global(phi)
+    n_b = n_back(phi)
+    n_r_g = n_tt_g = n_b_g = 0.0
+    if direct < 1.0:  # the global azimuthal functions weigh only the scattered terms (weight 1 − D)
+        n_r_g = 0.5 * INV_PI
+        n_tt_g = n_tt_global(phi, p[P_GAMMA_TT])
+        n_b_g = n_back_global(phi)
     theta_o = math.asin(sin_o)  # θ_o clamped to [−π/2, π/2] as the caller's lobes see it
     for ch in range(3):
         a_f = (1.0 - fr) * tab[R_A_F, i0, ch] + fr * tab[R_A_F, i1, ch]
@@ -204,7 +208,9 @@ def ds_kernel(p, tab, theta_i, theta_o, phi, n_front, d_f, d_b, direct, out, wor
         sigma_b = (1.0 - fr) * tab[R_SIGMA_B, i0, ch] + fr * tab[R_SIGMA_B, i1, ch]
         t_f = d_f * min(max(a_f, 0.0), 1.0) ** n_front
         s2 = n_front * beta_f * beta_f
-        back_direct = a_back * _lobe(theta_i, theta_o, delta_b, sigma_b) * n_b if n_b > 0.0 else 0.0
+        back_direct = 0.0
+        if n_b > 0.0 and direct > 0.0:  # the local back-scattering (weight D)
+            back_direct = a_back * _lobe(theta_i, theta_o, delta_b, sigma_b) * n_b
         back_scatter = single_scatter = 0.0
         if direct < 1.0:  # the scattered terms (weight 1 − D)
             back_scatter = a_back * _lobe(theta_i, theta_o, delta_b, math.sqrt(sigma_b * sigma_b + s2)) * n_b_g
