@@ -4,8 +4,9 @@
 Views: "front" (pinhole, fov 40°, the whole patch in view, strips ~5 px wide) and "grazing" (pinhole, fov 40°, 20°
 above the patch plane, 12 cm from its centre on the side of its first row: near rows large, far rows thin and
 overlapping).
-Every timing is the median over ``--frames`` calls of ``rasterize_strips`` (G-buffer reused, as in an animation
-loop) after one warm-up call (which pays Numba compile or cache load); "best" is the fastest call.
+Every timing is the median over ``--frames`` calls after one warm-up call (which pays Numba compile or cache load);
+"best" is the fastest call. Two buffers: "visibility" (``rasterize_visibility``: triangle, curve and depth per sample,
+what the renderer draws) and "g-buffer" (``rasterize_strips``: every attribute at every covered sample).
 
     .venv/bin/python benchmarks/bench_strip_raster.py [--frames 9]
 """
@@ -17,7 +18,7 @@ import numba
 import numpy as np
 
 from knitrun.render.camera import Camera
-from knitrun.render.strip_raster import rasterize_strips
+from knitrun.render.strip_raster import rasterize_strips, rasterize_visibility
 from knitrun.sim.crane_stockinette import stockinette_curves
 
 WIDTH, HEIGHT = 1280, 960
@@ -39,22 +40,22 @@ def main():
     points, n_curves = yc.points[0], len(yc.offsets) - 1
     radius = np.full(n_curves, 0.03)
     print(f"## Strip rasterizer, {WIDTH}×{HEIGHT}, {points.shape[0]} control points, {n_curves} curves")
-    print(f"{'view':>8}{'k':>3}{'threads':>8}{'ms/frame':>10}{'best ms':>9}{'coverage':>10}")
+    print(f"{'view':>8}{'buffer':>11}{'k':>3}{'threads':>8}{'ms/frame':>10}{'best ms':>9}{'coverage':>10}")
     default_threads = numba.get_num_threads()
     for name, cam in views():
-        for k in (1, 4):
-            for threads in sorted({1, min(2, default_threads)}):
-                numba.set_num_threads(threads)
-                g = rasterize_strips(points, yc.offsets, yc.closed, yc.rest_arclength, radius, yc.yarn_type, cam,
-                                     msaa=k)
-                times = []
-                for _ in range(args.frames):
-                    t0 = time.perf_counter()
-                    rasterize_strips(points, yc.offsets, yc.closed, yc.rest_arclength, radius, yc.yarn_type, cam,
-                                     msaa=k, out=g)
-                    times.append(time.perf_counter() - t0)
-                print(f"{name:>8}{k:>3}{threads:>8}{1e3 * np.median(times):>10.1f}{1e3 * min(times):>9.1f}"
-                      f"{g.coverage.mean():>10.3f}")
+        for buffer, draw in (("visibility", rasterize_visibility), ("g-buffer", rasterize_strips)):
+            for k in (1, 4):
+                for threads in sorted({1, min(2, default_threads)}):
+                    numba.set_num_threads(threads)
+                    times = []
+                    for _ in range(args.frames + 1):
+                        t0 = time.perf_counter()
+                        out = draw(points, yc.offsets, yc.closed, yc.rest_arclength, radius, yc.yarn_type, cam,
+                                   msaa=k)
+                        times.append(time.perf_counter() - t0)
+                    times = times[1:]
+                    print(f"{name:>8}{buffer:>11}{k:>3}{threads:>8}{1e3 * np.median(times):>10.1f}"
+                          f"{1e3 * min(times):>9.1f}{out.coverage.mean():>10.3f}")
     numba.set_num_threads(default_threads)
 
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from knitrun.render.camera import Camera, project, tan_half_fov
-from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_depth, rasterize_strips
+from knitrun.render.strip_raster import (SAMPLE_PATTERNS, rasterize_depth, rasterize_strips,
+                                         rasterize_visibility, sample_attributes)
 
 Z_UP = np.array([0.0, 0.0, 1.0])
 Y_UP = np.array([0.0, 1.0, 0.0])
@@ -143,15 +144,15 @@ def test_deterministic_across_thread_counts():
 
 
 @pytest.mark.parametrize("ortho", [False, True])
-def test_depth_alone_is_the_g_buffers_depth_and_reused_buffers_are_overwritten(ortho):
+def test_depth_alone_is_the_g_buffers_depth_and_a_reused_depth_map_is_overwritten(ortho):
     """``rasterize_depth`` (shadow maps) writes the G-buffer's msaa-1 depth bit for bit and +inf where no strip is;
-    drawing another scene into buffers of a previous one (``out``) gives what fresh buffers give."""
+    drawing another scene into the depth map of a previous one (``out``) gives what a fresh map gives."""
     cam = ortho_camera(80, 60) if ortho else Camera(np.array([0.4, 0.3, 2.5]), np.array([0.0, 0.1, 0.0]), Y_UP, 80,
                                                    60, fov_deg=45.0)
     xs = np.linspace(-1, 1, 30)
     scenes = [(np.stack([xs, np.full(30, y), 0.2 * np.sin(7 * xs + y)], 1), 0.15) for y in (-0.5, 0.0, 0.4)]
     scenes.append((np.stack([np.full(30, 0.3), xs, 0.1 * xs], 1), 0.3))
-    depth_out, g_out = None, None
+    depth_out = None
     for pts, radius in scenes:
         rest = np.linspace(0, 2, 30)
         g = rasterize_strips(pts, [0, 30], [False], rest, radius, [0], cam)
@@ -160,11 +161,33 @@ def test_depth_alone_is_the_g_buffers_depth_and_reused_buffers_are_overwritten(o
         assert np.array_equal(depth, np.where(g.coverage[:, :, 0], g.depth[:, :, 0], np.float32(np.inf)))
         assert np.isfinite(depth).any() and not np.isfinite(depth).all()
         depth_out = rasterize_depth(pts, [0, 30], [False], rest, radius, cam, out=depth_out)
-        g_out = rasterize_strips(pts, [0, 30], [False], rest, radius, [0], cam, msaa=4, out=g_out)
-        fresh = rasterize_strips(pts, [0, 30], [False], rest, radius, [0], cam, msaa=4)
         assert np.array_equal(depth_out, depth)
-        for field in ("coverage", "depth", "curve", "yarn", "segment", "arclength", "v", "tangent"):
-            assert np.array_equal(getattr(g_out, field), getattr(fresh, field)), field
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_attributes_of_some_samples_of_the_visibility_buffer_are_the_g_buffers(ortho):
+    """The renderer's path (``rasterize_visibility``, then ``sample_attributes`` at a few samples) gives the
+    G-buffer's attributes bit for bit at those samples, whatever samples are asked, and refuses uncovered ones."""
+    cam = ortho_camera(80, 60) if ortho else Camera(np.array([0.4, 0.3, 2.5]), np.array([0.0, 0.1, 0.0]), Y_UP, 80,
+                                                   60, fov_deg=45.0)
+    xs = np.linspace(-1, 1, 30)
+    pts = np.concatenate([np.stack([xs, np.full(30, y), 0.2 * np.sin(7 * xs + y)], 1) for y in (-0.5, 0.0, 0.4)])
+    offsets, rest, yarn = [0, 30, 60, 90], np.tile(np.linspace(0, 2, 30), 3), [3, 1, 2]
+    g = rasterize_strips(pts, offsets, False, rest, 0.15, yarn, cam, msaa=4)
+    vis = rasterize_visibility(pts, offsets, False, rest, 0.15, yarn, cam, msaa=4)
+    assert np.array_equal(vis.coverage, g.coverage) and np.array_equal(vis.curve, g.curve)
+    assert np.array_equal(vis.depth, g.depth)
+    covered = np.argwhere(g.coverage)
+    assert len(covered) > 100 and len(set(g.curve[g.coverage].tolist())) == 3
+    rng = np.random.default_rng(5)
+    some = covered[rng.choice(len(covered), 50, replace=False)]
+    attributes = sample_attributes(vis, *some.T)
+    for name in ("yarn", "segment", "arclength", "v", "tangent"):
+        expected = getattr(g, name)[tuple(some.T)]
+        assert attributes[name].dtype == expected.dtype and np.array_equal(attributes[name], expected), name
+    uncovered = np.argwhere(~g.coverage)[:1]
+    with pytest.raises(ValueError, match="not covered"):
+        sample_attributes(vis, *uncovered.T)
 
 
 def test_project_matches_the_camera_rays():

@@ -15,8 +15,10 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    (``knitrun.shading.srbf_fit``), or read from the fit cache by the map's content (``srbf_cache``); the fit's
    errors are in ``RenderResult.facts``. Lobes the fit leaves at zero weight are not drawn (no shadow map, no
    shading): they add nothing.
-3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample G-buffer (``strip_raster``);
-   with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second one. A flyaway
+3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample visibility buffer
+   (``strip_raster``: triangle, curve and depth per sample; the other attributes are interpolated at the shading
+   points alone); with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second
+   one. A flyaway
    sample is kept where no regular strip is nearer than the yarn radius, and a flyaway shading point where its
    hair texture covers anything (``strip_shading.flyaway_coverage``): one of zero coverage adds nothing to the
    image, so the passes below skip it.
@@ -65,7 +67,7 @@ from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
-from knitrun.render.strip_raster import SAMPLE_PATTERNS, rasterize_strips
+from knitrun.render.strip_raster import rasterize_visibility
 from knitrun.render.strip_shading import (flyaway_coverage, resolve, same_surface, shade_flyaway, shade_regular,
                                           shading_points)
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
@@ -326,21 +328,20 @@ class Renderer:
 
         camera = scene_camera(scene)
         msaa = scene.render.msaa
-        pattern = SAMPLE_PATTERNS[msaa]
         radius = np.array([looks[k].radius for k in lines.entry])
         fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
-        gbuffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
-        points = shading_points(gbuffer, camera, pattern)
+        vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
+        points = shading_points(vis, camera)
         drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
         fly_points = None
         if drawn_fly and len(lines.entry):
             fly_curves = np.isin(lines.entry, drawn_fly)
-            fly_buffer = rasterize_strips(lines.points, lines.offsets, False, lines.rest,
-                                          np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
+            fly_buffer = rasterize_visibility(lines.points, lines.offsets, False, lines.rest,
+                                              np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
             tolerance = float(radius.max())
-            mask = ~gbuffer.coverage | (fly_buffer.depth <= gbuffer.depth + tolerance)
-            mask &= np.isin(fly_buffer.yarn, drawn_fly)
-            fly_points = shading_points(fly_buffer, camera, pattern, mask=mask)
+            mask = ~vis.coverage | (fly_buffer.depth <= vis.depth + tolerance)
+            mask &= fly_curves[fly_buffer.curve]  # uncovered samples (curve −1) are dropped by the coverage anyway
+            fly_points = shading_points(fly_buffer, camera, mask=mask)
             hairs = _kernel_points(fly_points, lines, looks)
             covered = self._hair_coverage(hairs, fly_points["yarn"], drawn_fly) > 0.0
         facts.update(shading_points=int(len(points["weight"])),

@@ -36,9 +36,11 @@ triangles belongs to exactly one of them.
 Pipeline: ``_vertex_frames`` (per point; serial: 2 ms for 60K points, where ``parallel=True`` cost 0.8 s more to
 compile on a cold start) and ``_setup`` (per segment: cull, build, clip, project; up to 4 triangles, in parallel);
 ``_bin`` (serial, in triangle order) lists the triangles overlapping each square tile of ``tile`` px; ``_raster``
-(parallel over tiles, each tile owns its pixels) depth-tests (``_depth_test``) and resolves. ``rasterize_depth`` runs
-the same depth test and writes the depth alone (``_raster_depth``: shadow maps). Buffers are identical for any
-thread count.
+(parallel over tiles, each tile owns its pixels) depth-tests (``_depth_test``) and writes a visibility buffer:
+triangle slot, curve and depth per sample (``rasterize_visibility``). ``_attributes`` interpolates the other
+attributes at the samples asked for (``sample_attributes``; the renderer asks at its shading points, about a tenth
+of the samples of a knit at MSAA 4; ``rasterize_strips`` at every covered sample). ``rasterize_depth`` runs the same
+depth test and writes the depth alone (``_raster_depth``: shadow maps). Buffers are identical for any thread count.
 """
 
 import math
@@ -78,38 +80,83 @@ class StripGBuffer:
     tangent: np.ndarray  # float32
 
 
-def empty_gbuffer(height, width, msaa):
-    """An uninitialized ``StripGBuffer`` of (height, width, msaa) samples (every sample is written by a render)."""
-    shape = (height, width, msaa)
-    return StripGBuffer(np.empty(shape, np.bool_), np.empty(shape, np.float32), np.empty(shape, np.int32),
-                        np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32),
-                        np.empty(shape, np.float32), np.empty(shape + (3,), np.float32))
+@dataclass
+class StripVisibility:
+    """Per-sample visibility buffer: the nearest triangle at each sample (``slot``, −1 uncovered), its ``curve``
+    (−1 uncovered) and ``depth`` (float32 scene units, 0 uncovered), each (H, W, k), with the triangles they index.
+    ``sample_attributes`` derives the other G-buffer attributes at the samples that need them, bit for bit as
+    ``rasterize_strips`` writes them for every sample."""
+
+    slot: np.ndarray  # int32
+    curve: np.ndarray  # int32
+    depth: np.ndarray  # float32
+    tri: np.ndarray  # (T, 3, _NREC) vertex records of the clipped triangles
+    seg_first: np.ndarray  # int32 (S,): global index of each segment's first control point
+    seg_curve: np.ndarray  # int32 (S,)
+    yarn_id: np.ndarray  # int32 (C,)
+    pattern: np.ndarray  # (k, 2) sample positions in the pixel
+
+    @property
+    def coverage(self):
+        return self.slot >= 0
+
+
+def rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_id, camera: Camera, msaa=1,
+                         near=1e-3, far=math.inf, closing_length=None, tile=32):
+    """The strips' ``StripVisibility`` of camera.height × camera.width × ``msaa`` samples (arguments as
+    ``rasterize_strips``): the depth test of ``rasterize_strips`` writing 12 bytes per sample instead of 37, for a
+    renderer that shades a fraction of the samples (``strip_shading.shading_points``)."""
+    if msaa not in SAMPLE_PATTERNS:
+        raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
+    n_curves = len(offsets) - 1
+    yarn_id = np.ascontiguousarray(np.broadcast_to(np.asarray(yarn_id, dtype=np.int32), (max(n_curves, 0),)))
+    tri, tile_start, tile_tris, seg_a, seg_curve = _triangles(points, offsets, closed, rest_arclength, radius, camera,
+                                                              near, far, closing_length, tile)
+    w, h = int(camera.width), int(camera.height)
+    shape = (h, w, msaa)
+    out = StripVisibility(np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32), tri,
+                          seg_a.astype(np.int32), seg_curve.astype(np.int32), yarn_id, SAMPLE_PATTERNS[msaa])
+    _raster(tri, tile_start, tile_tris, out.seg_curve, w, h, tile, -(-w // tile), out.pattern,
+            float(camera.ortho_height) > 0, tan_half_fov(camera), out.slot, out.curve, out.depth)
+    return out
+
+
+def sample_attributes(vis: StripVisibility, i, j, a):
+    """The G-buffer attributes of the covered samples (i, j, a) (row, column, sample index arrays of one length N)
+    of ``vis``: a dict of ``yarn``, ``segment`` (int32 (N,)), ``arclength``, ``v`` (float32 (N,)) and ``tangent``
+    (float32 (N, 3)), as the module docstring defines them. ValueError if a sample is not covered."""
+    slot = vis.slot[i, j, a]
+    if np.any(slot < 0):
+        raise ValueError("sample_attributes: a requested sample is not covered")
+    n = len(slot)
+    out = {"yarn": np.empty(n, np.int32), "segment": np.empty(n, np.int32), "arclength": np.empty(n, np.float32),
+           "v": np.empty(n, np.float32), "tangent": np.empty((n, 3), np.float32)}
+    _attributes(vis.tri, vis.seg_first, vis.seg_curve, vis.yarn_id, vis.pattern, slot,
+                np.asarray(i, np.int64), np.asarray(j, np.int64), np.asarray(a, np.int64), out["yarn"],
+                out["segment"], out["arclength"], out["v"], out["tangent"])
+    return out
 
 
 def rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera: Camera, msaa=1, near=1e-3,
-                     far=math.inf, closing_length=None, tile=32, out=None):
+                     far=math.inf, closing_length=None, tile=32):
     """Rasterize the strips of polylines into a ``StripGBuffer`` of camera.height × camera.width × ``msaa`` samples.
 
     ``points`` (P, 3) and ``offsets`` (C+1,) as in ``YarnCurves`` (one frame; curve c is points[offsets[c]:
     offsets[c+1]]); ``closed`` (C,) bool; ``rest_arclength`` (P,) scene units; ``radius`` (C,) or a scalar, the
     yarn radius (strip half-width) in scene units; ``yarn_id`` (C,) ints; ``msaa`` ∈ {1, 2, 4, 8, 16}; ``near`` > 0 and
     ``far`` view depths in scene units; ``closing_length`` (C,) the rest length of each closed curve's closing
-    segment (default: its current length); ``tile`` the tile size in px; ``out`` a ``StripGBuffer`` of the right
-    shape to reuse. ValueError for non-finite points (naming the curve) or bad arguments.
+    segment (default: its current length); ``tile`` the tile size in px. ValueError for non-finite points (naming
+    the curve) or bad arguments. Every sample's attributes: ``rasterize_visibility`` then ``sample_attributes``.
     """
-    if msaa not in SAMPLE_PATTERNS:
-        raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
-    n_curves = len(offsets) - 1
-    yarn_id = np.broadcast_to(np.asarray(yarn_id, dtype=np.int32), (max(n_curves, 0),))
-    tri, tile_start, tile_tris, seg_a, seg_curve = _triangles(points, offsets, closed, rest_arclength, radius, camera,
-                                                              near, far, closing_length, tile)
-    w, h = int(camera.width), int(camera.height)
-    if out is None or out.coverage.shape != (h, w, msaa):
-        out = empty_gbuffer(h, w, msaa)
-    _raster(tri, tile_start, tile_tris, seg_a.astype(np.int32), seg_curve.astype(np.int32),
-            np.ascontiguousarray(yarn_id), w, h, tile, -(-w // tile), SAMPLE_PATTERNS[msaa],
-            float(camera.ortho_height) > 0, tan_half_fov(camera), out.coverage, out.depth, out.curve, out.yarn,
-            out.segment, out.arclength, out.v, out.tangent)
+    vis = rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_id, camera, msaa, near, far,
+                               closing_length, tile)
+    shape = vis.slot.shape
+    out = StripGBuffer(vis.coverage, vis.depth, vis.curve, np.full(shape, -1, np.int32),
+                       np.full(shape, -1, np.int32), np.zeros(shape, np.float32), np.zeros(shape, np.float32),
+                       np.zeros(shape + (3,), np.float32))
+    covered = np.nonzero(out.coverage)
+    for name, value in sample_attributes(vis, *covered).items():
+        getattr(out, name)[covered] = value
     return out
 
 
@@ -407,9 +454,10 @@ def _bin(count, boxes, tiles_x, tiles_y):
 
 
 @njit(cache=True, error_model="numpy")
-def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, best_z, best_tri, best_l):
+def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, best_z, best_tri):
     """Depth-test triangles tile_tris[first:stop] at the ``pattern`` samples of the pixels [x_lo, x_hi) × [y_lo,
-    y_hi): for each sample the nearest view z (1/q-interpolated), its triangle slot (−1: none) and barycentrics."""
+    y_hi): for each sample the nearest view z (1/q-interpolated) and its triangle slot (−1: none). The barycentrics
+    are e_k/area (``_barycentrics`` repeats the arithmetic for a kept sample)."""
     k_samples = pattern.shape[0]
     best_z[:] = np.inf
     best_tri[:] = -1
@@ -450,7 +498,6 @@ def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, be
                     if z < best_z[i, j, s]:
                         best_z[i, j, s] = z
                         best_tri[i, j, s] = slot
-                        best_l[i, j, s, 0], best_l[i, j, s, 1], best_l[i, j, s, 2] = l0, l1, l2
 
 
 @njit(cache=True, error_model="numpy")
@@ -473,9 +520,8 @@ def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, patt
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
         best_z = np.empty((y_hi - y_lo, x_hi - x_lo, 1))
         best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, 1), np.int64)
-        best_l = np.empty((y_hi - y_lo, x_hi - x_lo, 1, 3))
         _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, best_z,
-                    best_tri, best_l)
+                    best_tri)
         for i in range(y_hi - y_lo):
             for j in range(x_hi - x_lo):
                 depth[y_lo + i, x_lo + j] = np.inf if best_tri[i, j, 0] < 0 else \
@@ -483,46 +529,67 @@ def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, patt
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _raster(tri, tile_start, tile_tris, seg_first, seg_curve, yarn_id, width, height, tile, tiles_x,
-            pattern, ortho, tan_half, coverage, depth, curve, yarn, segment, arclength, v, tangent):
-    """Depth-test every tile's triangles at the ``pattern`` samples and resolve the G-buffer of its pixels."""
+def _raster(tri, tile_start, tile_tris, seg_curve, width, height, tile, tiles_x, pattern, ortho, tan_half, slot,
+            curve, depth):
+    """Depth-test every tile's triangles at the ``pattern`` samples and write the visibility buffer of its pixels."""
     k_samples = pattern.shape[0]
     n_tiles = tile_start.shape[0] - 1
+    n_seg = seg_curve.shape[0]
     for t in prange(n_tiles):
         x_lo, y_lo = (t % tiles_x) * tile, (t // tiles_x) * tile
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
         best_z = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples))
         best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples), np.int64)
-        best_l = np.zeros((y_hi - y_lo, x_hi - x_lo, k_samples, 3))
         _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, best_z,
-                    best_tri, best_l)
+                    best_tri)
         for i in range(y_hi - y_lo):
             for j in range(x_hi - x_lo):
+                py, px = y_lo + i, x_lo + j
                 for s in range(k_samples):
-                    py, px = y_lo + i, x_lo + j
-                    slot = best_tri[i, j, s]
-                    coverage[py, px, s] = slot >= 0
-                    if slot < 0:
+                    kept = best_tri[i, j, s]
+                    slot[py, px, s] = kept
+                    if kept < 0:
+                        curve[py, px, s] = -1
                         depth[py, px, s] = 0.0
-                        curve[py, px, s] = yarn[py, px, s] = segment[py, px, s] = -1
-                        arclength[py, px, s] = v[py, px, s] = 0.0
-                        tangent[py, px, s, 0] = tangent[py, px, s, 1] = tangent[py, px, s, 2] = 0.0
-                        continue
-                    rec = tri[slot]
-                    l0, l1, l2 = best_l[i, j, s, 0], best_l[i, j, s, 1], best_l[i, j, s, 2]
-                    inv_q = 1.0 / (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
-                    depth[py, px, s] = _sample_depth(best_z[i, j, s], px, py, pattern[s], width, height, ortho,
-                                                     tan_half)
-                    g = slot % seg_first.shape[0]
-                    curve[py, px, s] = seg_curve[g]
-                    yarn[py, px, s] = yarn_id[seg_curve[g]]
-                    segment[py, px, s] = seg_first[g]
-                    arclength[py, px, s] = (l0 * rec[0, 4] + l1 * rec[1, 4] + l2 * rec[2, 4]) * inv_q
-                    v[py, px, s] = min(max((l0 * rec[0, 5] + l1 * rec[1, 5] + l2 * rec[2, 5]) * inv_q, -1.0), 1.0)
-                    tx = l0 * rec[0, 6] + l1 * rec[1, 6] + l2 * rec[2, 6]
-                    ty = l0 * rec[0, 7] + l1 * rec[1, 7] + l2 * rec[2, 7]
-                    tz = l0 * rec[0, 8] + l1 * rec[1, 8] + l2 * rec[2, 8]
-                    norm = math.sqrt(tx * tx + ty * ty + tz * tz)
-                    if norm > 0.0:
-                        tx, ty, tz = tx / norm, ty / norm, tz / norm
-                    tangent[py, px, s, 0], tangent[py, px, s, 1], tangent[py, px, s, 2] = tx, ty, tz
+                    else:
+                        curve[py, px, s] = seg_curve[kept % n_seg]
+                        depth[py, px, s] = _sample_depth(best_z[i, j, s], px, py, pattern[s], width, height, ortho,
+                                                         tan_half)
+
+
+@njit(cache=True, error_model="numpy")
+def _barycentrics(rec, sx, sy):
+    """(l0, l1, l2) of the sample (sx, sy) px in the triangle ``rec``: ``_depth_test``'s arithmetic, so a kept
+    sample gets the barycentrics its depth was interpolated with, bit for bit."""
+    x0, y0, x1, y1, x2, y2 = rec[0, 0], rec[0, 1], rec[1, 0], rec[1, 1], rec[2, 0], rec[2, 1]
+    bx0, by0, dx0, dy0, sg0, _ = _edge_setup(x1, y1, x2, y2)
+    bx1, by1, dx1, dy1, sg1, _ = _edge_setup(x2, y2, x0, y0)
+    bx2, by2, dx2, dy2, sg2, _ = _edge_setup(x0, y0, x1, y1)
+    inv_area = 1.0 / (sg2 * ((x2 - bx2) * dy2 - (y2 - by2) * dx2))
+    e0 = sg0 * ((sx - bx0) * dy0 - (sy - by0) * dx0)
+    e1 = sg1 * ((sx - bx1) * dy1 - (sy - by1) * dx1)
+    e2 = sg2 * ((sx - bx2) * dy2 - (sy - by2) * dx2)
+    return e0 * inv_area, e1 * inv_area, e2 * inv_area
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _attributes(tri, seg_first, seg_curve, yarn_id, pattern, slot, row, col, sample, yarn, segment, arclength, v,
+                tangent):
+    """The interpolated attributes of the samples (row, col, sample) whose nearest triangle is ``slot``."""
+    n_seg = seg_first.shape[0]
+    for m in prange(slot.shape[0]):
+        rec = tri[slot[m]]
+        l0, l1, l2 = _barycentrics(rec, col[m] + pattern[sample[m], 0], row[m] + pattern[sample[m], 1])
+        inv_q = 1.0 / (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
+        g = slot[m] % n_seg
+        yarn[m] = yarn_id[seg_curve[g]]
+        segment[m] = seg_first[g]
+        arclength[m] = (l0 * rec[0, 4] + l1 * rec[1, 4] + l2 * rec[2, 4]) * inv_q
+        v[m] = min(max((l0 * rec[0, 5] + l1 * rec[1, 5] + l2 * rec[2, 5]) * inv_q, -1.0), 1.0)
+        tx = l0 * rec[0, 6] + l1 * rec[1, 6] + l2 * rec[2, 6]
+        ty = l0 * rec[0, 7] + l1 * rec[1, 7] + l2 * rec[2, 7]
+        tz = l0 * rec[0, 8] + l1 * rec[1, 8] + l2 * rec[2, 8]
+        norm = math.sqrt(tx * tx + ty * ty + tz * tz)
+        if norm > 0.0:
+            tx, ty, tz = tx / norm, ty / norm, tz / norm
+        tangent[m, 0], tangent[m, 1], tangent[m, 2] = tx, ty, tz

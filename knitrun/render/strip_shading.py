@@ -5,10 +5,11 @@ Shading points
 --------------
 MSAA shades once per primitive per pixel (as a GPU does): the covered samples of a pixel are grouped by the curve
 that covers them, and each group is one shading point with the attributes of its first sample and the weight
-(samples in the group)/k. ``shading_points`` builds them from a ``StripGBuffer``, in pixel order (pixel p owns the
-points start[p]:start[p+1], so the resolve runs in parallel over pixels without races); an optional per-sample mask
-drops samples (the flyaway layer's depth test against the regular layer). ``same_surface`` pairs a flyaway point
-with the regular point of its pixel and curve, whose yarn-level shadow lookups it can share.
+(samples in the group)/k. ``shading_points`` builds them from the rasterizer's visibility buffer
+(``strip_raster.StripVisibility``) and interpolates the G-buffer attributes at them alone, in pixel order (pixel p
+owns the points start[p]:start[p+1], so the resolve runs in parallel over pixels without races); an optional
+per-sample mask drops samples (the flyaway layer's depth test against the regular layer). ``same_surface`` pairs
+a flyaway point with the regular point of its pixel and curve, whose yarn-level shadow lookups it can share.
 
 Regular fibers (``shade_regular``), per point, angles by ``ASSET_PACK.md`` §3
 ----------------------------------------------------------------------------
@@ -86,6 +87,7 @@ from numba import njit, prange
 
 from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
+from knitrun.render.strip_raster import sample_attributes
 from knitrun.render.texture_sampling import mip_level, sample_mip
 from knitrun.shading.dual_scattering import (D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel, ds_scratch,
                                              forward_fraction)
@@ -169,16 +171,16 @@ def _group_fill(curve, use, depth, start, pattern, cam_pos, basis, tan_half, ort
                 q += 1
 
 
-def shading_points(gbuffer, camera, pattern, mask=None):
-    """Group a ``StripGBuffer``'s covered samples into shading points (module docstring). Returns a dict of arrays:
-    ``start`` (H·W + 1,), ``weight`` (N,), ``position`` (N, 3) world,
+def shading_points(vis, camera, mask=None):
+    """Group the covered samples of a ``strip_raster.StripVisibility`` into shading points (module docstring).
+    Returns a dict of arrays: ``start`` (H·W + 1,), ``weight`` (N,), ``position`` (N, 3) world,
     ``view_dir`` (N, 3) unit toward the camera, ``footprint`` (N,) pixel size at the point (scene units), and the
-    G-buffer attributes ``curve``, ``yarn``, ``segment``, ``arclength``, ``v``, ``tangent`` of each point's
-    sample."""
-    use = gbuffer.coverage if mask is None else (gbuffer.coverage & mask)
+    G-buffer attributes ``curve``, ``yarn``, ``segment``, ``arclength``, ``v``, ``tangent`` (float64) of each point's
+    sample (``strip_raster.sample_attributes``, evaluated at the points alone)."""
+    use = vis.coverage if mask is None else (vis.coverage & mask)
     height, width, _ = use.shape
     counts = np.empty(height * width, np.int64)
-    _group_counts(gbuffer.curve, use, counts)
+    _group_counts(vis.curve, use, counts)
     start = np.zeros(height * width + 1, np.int64)
     np.cumsum(counts, out=start[1:])
     n = int(start[-1])
@@ -186,16 +188,15 @@ def shading_points(gbuffer, camera, pattern, mask=None):
     weight, footprint = np.empty(n), np.empty(n)
     position, view_dir = np.empty((n, 3)), np.empty((n, 3))
     fwd, right, up = camera.basis()
-    _group_fill(gbuffer.curve, use, gbuffer.depth, start, np.asarray(pattern, np.float64),
+    _group_fill(vis.curve, use, vis.depth, start, np.asarray(vis.pattern, np.float64),
                 np.asarray(camera.position, np.float64), np.stack([right, up, fwd]),
                 tan_half_fov(camera), float(camera.ortho_height), pixel_sample, weight,
                 position, view_dir, footprint)
     i, j, a = pixel_sample.T
     points = {"start": start, "weight": weight, "position": position,
               "view_dir": view_dir, "footprint": footprint}
-    for name in ("curve", "yarn", "segment", "arclength", "v"):
-        points[name] = getattr(gbuffer, name)[i, j, a]
-    points["tangent"] = gbuffer.tangent[i, j, a].astype(np.float64)
+    points.update(sample_attributes(vis, i, j, a), curve=vis.curve[i, j, a])
+    points["tangent"] = points["tangent"].astype(np.float64)
     return points
 
 
