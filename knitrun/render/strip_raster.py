@@ -45,6 +45,7 @@ depth test and writes the depth alone (``_raster_depth``: shadow maps). Buffers 
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -80,6 +81,27 @@ class StripGBuffer:
     tangent: np.ndarray  # float32
 
 
+class StripTriangles(NamedTuple):
+    """The clipped triangles a visibility buffer's slots index, with what ``_attributes`` needs to interpolate at a
+    sample."""
+
+    records: np.ndarray  # (T, 3, _NREC) vertex records
+    seg_first: np.ndarray  # int32 (S,): global index of each segment's first control point
+    seg_curve: np.ndarray  # int32 (S,)
+    yarn_id: np.ndarray  # int32 (C,)
+    pattern: np.ndarray  # (k, 2) sample positions in the pixel
+
+
+class SampleAttributes(NamedTuple):
+    """G-buffer attributes of N samples (module docstring)."""
+
+    yarn: np.ndarray  # int32 (N,)
+    segment: np.ndarray  # int32 (N,)
+    arclength: np.ndarray  # float32 (N,), scene units
+    v: np.ndarray  # float32 (N,)
+    tangent: np.ndarray  # float32 (N, 3)
+
+
 @dataclass
 class StripVisibility:
     """Per-sample visibility buffer: the nearest triangle at each sample (``slot``, −1 uncovered), its ``curve``
@@ -90,11 +112,11 @@ class StripVisibility:
     slot: np.ndarray  # int32
     curve: np.ndarray  # int32
     depth: np.ndarray  # float32
-    tri: np.ndarray  # (T, 3, _NREC) vertex records of the clipped triangles
-    seg_first: np.ndarray  # int32 (S,): global index of each segment's first control point
-    seg_curve: np.ndarray  # int32 (S,)
-    yarn_id: np.ndarray  # int32 (C,)
-    pattern: np.ndarray  # (k, 2) sample positions in the pixel
+    triangles: StripTriangles
+
+    @property
+    def pattern(self):
+        return self.triangles.pattern
 
     @property
     def coverage(self):
@@ -114,9 +136,9 @@ def rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_i
                                                               near, far, closing_length, tile)
     w, h = int(camera.width), int(camera.height)
     shape = (h, w, msaa)
-    out = StripVisibility(np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32), tri,
-                          seg_a.astype(np.int32), seg_curve.astype(np.int32), yarn_id, SAMPLE_PATTERNS[msaa])
-    _raster(tri, tile_start, tile_tris, out.seg_curve, w, h, tile, -(-w // tile), out.pattern,
+    triangles = StripTriangles(tri, seg_a.astype(np.int32), seg_curve.astype(np.int32), yarn_id, SAMPLE_PATTERNS[msaa])
+    out = StripVisibility(np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32), triangles)
+    _raster(tri, tile_start, tile_tris, triangles.seg_curve, w, h, tile, -(-w // tile), triangles.pattern,
             float(camera.ortho_height) > 0, tan_half_fov(camera), out.slot, out.curve, out.depth)
     return out
 
@@ -129,12 +151,10 @@ def sample_attributes(vis: StripVisibility, i, j, a):
     if np.any(slot < 0):
         raise ValueError("sample_attributes: a requested sample is not covered")
     n = len(slot)
-    out = {"yarn": np.empty(n, np.int32), "segment": np.empty(n, np.int32), "arclength": np.empty(n, np.float32),
-           "v": np.empty(n, np.float32), "tangent": np.empty((n, 3), np.float32)}
-    _attributes(vis.tri, vis.seg_first, vis.seg_curve, vis.yarn_id, vis.pattern, slot,
-                np.asarray(i, np.int64), np.asarray(j, np.int64), np.asarray(a, np.int64), out["yarn"],
-                out["segment"], out["arclength"], out["v"], out["tangent"])
-    return out
+    out = SampleAttributes(np.empty(n, np.int32), np.empty(n, np.int32), np.empty(n, np.float32),
+                           np.empty(n, np.float32), np.empty((n, 3), np.float32))
+    _attributes(vis.triangles, slot, np.asarray(i, np.int64), np.asarray(j, np.int64), np.asarray(a, np.int64), out)
+    return out._asdict()
 
 
 def rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera: Camera, msaa=1, near=1e-3,
@@ -573,17 +593,18 @@ def _barycentrics(rec, sx, sy):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _attributes(tri, seg_first, seg_curve, yarn_id, pattern, slot, row, col, sample, yarn, segment, arclength, v,
-                tangent):
-    """The interpolated attributes of the samples (row, col, sample) whose nearest triangle is ``slot``."""
-    n_seg = seg_first.shape[0]
+def _attributes(triangles, slot, row, col, sample, out):
+    """``out`` (``SampleAttributes``): the interpolated attributes of the samples (row, col, sample) whose nearest
+    triangle of ``triangles`` (``StripTriangles``) is ``slot``."""
+    pattern, n_seg = triangles.pattern, triangles.seg_first.shape[0]
+    yarn, segment, arclength, v, tangent = out  # bound before the loop: a parfor's writes through ``out.x[m]`` are lost
     for m in prange(slot.shape[0]):
-        rec = tri[slot[m]]
+        rec = triangles.records[slot[m]]
         l0, l1, l2 = _barycentrics(rec, col[m] + pattern[sample[m], 0], row[m] + pattern[sample[m], 1])
         inv_q = 1.0 / (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
         g = slot[m] % n_seg
-        yarn[m] = yarn_id[seg_curve[g]]
-        segment[m] = seg_first[g]
+        yarn[m] = triangles.yarn_id[triangles.seg_curve[g]]
+        segment[m] = triangles.seg_first[g]
         arclength[m] = (l0 * rec[0, 4] + l1 * rec[1, 4] + l2 * rec[2, 4]) * inv_q
         v[m] = min(max((l0 * rec[0, 5] + l1 * rec[1, 5] + l2 * rec[2, 5]) * inv_q, -1.0), 1.0)
         tx = l0 * rec[0, 6] + l1 * rec[1, 6] + l2 * rec[2, 6]
