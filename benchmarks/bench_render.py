@@ -50,16 +50,17 @@ height = {height}
 msaa = 4
 shadow_map_size = 2048
 srbf_count = 16
+layers = {layers}
 """
 LIGHTS = {"directional": 'type = "directional"\ndirection = [0.4, 0.6, 1.0]\nirradiance = [3.0, 3.0, 3.0]',
           "sky16": 'type = "environment"\nbuiltin = "sky"'}
 
 
-def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu"):
+def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", layers=2):
     """(median seconds per frame, its timings, facts, set-up seconds): one renderer set up once (``Renderer`` or
     ``GLRenderer``), then its frames (what a viewer pays per frame)."""
     write_yarn_curves(folder / "patch.h5", stockinette_curves(rows, 21))
-    (folder / "scene.toml").write_text(SCENE.format(width=width, height=height, light=LIGHTS[light]))
+    (folder / "scene.toml").write_text(SCENE.format(width=width, height=height, light=LIGHTS[light], layers=layers))
     scene = load_scene(folder / "scene.toml")
     start = time.perf_counter()
     if backend == "gl":
@@ -88,6 +89,8 @@ def main():
     parser.add_argument("--no-sweep", action="store_true", help="only the 60K-point 1280×960 cases, not the sweep")
     parser.add_argument("--backend", choices=("cpu", "gl"), default="cpu",
                         help="gl: the OpenGL backend, plus the paper's 200K-point size under the sky")
+    parser.add_argument("--layers", type=int, choices=(1, 2), default=2,
+                        help="render.layers: 2 (default) draws the depth-peeled strips behind the front ones")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="knit_bench_render_"))
     pack = args.pack
@@ -99,7 +102,7 @@ def main():
         from knitrun.render.gl.gl_renderer import gl_context
 
         where = f"GL: {gl_context().info['GL_RENDERER']}"
-    print(f"## Strip renderer (cotton1, {where}, pack {Path(pack).name})")
+    print(f"## Strip renderer (cotton1, {where}, pack {Path(pack).name}, render.layers = {args.layers})")
     print("| light | control points | pixels | shading points | set-up ms (once) | frame ms | load | raster | shadow "
           "| shade | resolve |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -111,7 +114,8 @@ def main():
     if args.no_sweep:
         cases = cases[:3 if args.backend == "gl" else 2]
     for light, rows, width, height in [c for c in cases if args.light in (None, c[0])]:
-        total, timings, facts, setup = time_scene(folder, pack, rows, width, height, light, args.frames, args.backend)
+        total, timings, facts, setup = time_scene(folder, pack, rows, width, height, light, args.frames, args.backend,
+                                                  args.layers)
         passes = " | ".join(f"{1e3 * timings.get(k, 0.0):.0f}" for k in
                             ("load", "raster", "shadow", "shade", "resolve"))
         points = facts.get("shading_points", "—")

@@ -55,6 +55,8 @@ RENDER_FIELDS = {
     "srbf_count": (16, 1, 64, "J, spherical Gaussians fitted to an environment light"),
     "shadow_map_size": (2048, 64, 16384, "yarn-level shadow-map resolution (a power of two)"),
     "frame": (0, 0, 2**31 - 1, "frame of the yarn curves to draw (0-based)"),
+    "layers": (2, 1, 2, "layers of regular strips the CPU strip renderer composites per sample (2: the yarn behind a "
+                        "strip shows through its partial coverage)"),
 }
 
 
@@ -120,6 +122,7 @@ class RenderSettings:
     srbf_count: int
     shadow_map_size: int
     frame: int
+    layers: int
 
 
 @dataclasses.dataclass(frozen=True)

@@ -20,7 +20,7 @@ from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import radius_mismatch, render
-from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, shade_regular, variant_of
+from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, resolve_behind, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor
@@ -332,6 +332,48 @@ def test_resolve_weights_coverage_over_the_background():
     layered = under.copy()
     resolve(start, weight, rgb, alpha, transmit, layered, layered)
     assert np.array_equal(layered, out)
+
+
+def test_the_second_layer_shows_through_the_front_only_where_the_front_is_transparent():
+    """``resolve_behind`` then ``resolve``, per pixel (MSAA 2): the front at alpha 0.5 over the whole pixel with the
+    back layer opaque behind it gives half of each; a front covering one sample opaquely, with the back layer behind
+    that sample only, hides it (the other sample shows the background); no front, the background."""
+    bg = np.array([0.1, 0.1, 0.1])
+    front = {"start": np.array([0, 1, 2, 2]), "weight": np.array([1.0, 0.5])}
+    back = {"start": np.array([0, 1, 2, 2]), "weight": np.array([1.0, 0.5])}
+    red, green = np.array([[1.0, 0, 0], [1.0, 0, 0]]), np.array([[0, 1.0, 0], [0, 1.0, 0]])
+    shaded = [(red, np.array([0.5, 1.0])), (green, np.array([1.0, 1.0]))]
+    image = np.empty((3, 3))
+    resolve_behind(front["start"], front["weight"], shaded[0][1], back["start"], back["weight"], *shaded[1], bg, image)
+    resolve(front["start"], front["weight"], red, shaded[0][1], np.zeros((2, 3)), image, image)
+    assert np.allclose(image[0], [0.5, 0.5, 0.0])
+    assert np.allclose(image[1], [0.55, 0.05, 0.05])  # half red, half background; the green behind is hidden
+    assert np.allclose(image[2], bg)
+
+
+def test_a_yarn_shows_through_the_gaps_of_the_one_in_front(tmp_path, pack):
+    """Two layers (the default): where a yarn crosses in front of another, the pixels of the front yarn's partial
+    coverage take the back yarn's light instead of the background's; elsewhere the image is the one-layer image
+    bit for bit."""
+    lower, upper = straight(z=0.0), straight(z=0.2)[:, [1, 0, 2]]
+    path = write_scene(tmp_path, [lower, upper], camera=FRONT, lights=SUN, name="cross")
+    scene = load_scene(path)
+    one = render(dataclasses.replace(scene, render=dataclasses.replace(scene.render, layers=1)),
+                 {"cotton1": str(pack)}).image
+    two = render(scene, {"cotton1": str(pack)}).image
+    alone = [render(load_scene(write_scene(tmp_path, [y], camera=FRONT, lights=SUN, name=f"y{k}")),
+                    {"cotton1": str(pack)}).image for k, y in enumerate((lower, upper))]
+    background = one[0, 0]
+    drawn = [np.abs(a - background).sum(axis=-1) > 1e-4 for a in alone]
+    both = drawn[0] & drawn[1]
+    assert both.sum() > 20 and np.all(np.isfinite(two))
+    assert np.array_equal(one[~both], two[~both])
+    moved = np.abs(two - one).sum(axis=-1) > 1e-4
+    assert moved[both].mean() > 0.2 and not moved[~both].any()
+    # what changed is the background swapped for the yarn behind: the change points from the background's colour
+    # toward that yarn's (drawn alone) at nearly every moved pixel
+    toward = ((two - one) * (alone[0] - background)).sum(axis=-1)
+    assert (toward[both & moved] > 0).mean() > 0.95
 
 
 def test_yarn_colour_acts_per_channel(tmp_path, pack):

@@ -234,3 +234,33 @@ def test_frustum_culling_drops_only_invisible_segments():
     visible = np.flatnonzero(np.abs(x[:-1]) < 2.8)
     drawn = np.unique(g.segment[g.coverage])
     assert set(drawn) <= set(visible) and len(drawn) >= len(visible) - 2
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_a_peeled_layer_is_the_next_strip_behind_the_front_one(ortho):
+    """Depth peeling (``behind=``): where a strip lies over two others, the peeled layer holds the nearest strip more
+    than the gap behind the front one (the same sample's depth the front layer would give that strip alone), and
+    nothing where the front layer has no strip; a strip within the gap of the front (its own tube) is skipped."""
+    cam = ortho_camera(64, 64) if ortho else Camera(np.array([0.0, 0.0, 6.0]), np.zeros(3), Y_UP, 64, 64,
+                                                    fov_deg=40.0)
+    front = [[-1.0, 0.0, 0.3], [1.0, 0.0, 0.3]]  # horizontal, nearest
+    within = [[-1.0, 0.1, 0.25], [1.0, 0.1, 0.25]]  # inside the front yarn's tube (0.05 behind, radius 0.2)
+    middle = [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]]  # vertical
+    back = [[-1.0, -1.0, -0.5], [1.0, 1.0, -0.5]]  # diagonal, farthest
+    pts = np.array(front + within + middle + back)
+    offsets, rest, radius = [0, 2, 4, 6, 8], np.tile([0.0, 2.0], 4), np.full(4, 0.2)
+    vis = rasterize_visibility(pts, offsets, False, rest, radius, [0, 1, 2, 3], cam, msaa=4)
+    peeled = rasterize_visibility(pts, offsets, False, rest, radius, [0, 1, 2, 3], cam, msaa=4, behind=vis, gap=radius)
+    alone = {c: rasterize_visibility(pts[2 * c:2 * c + 2], [0, 2], False, rest[:2], 0.2, [c], cam, msaa=4)
+             for c in (2, 3)}
+    assert np.all(vis.curve[31:33, 31:33] == 0)
+    assert np.all(peeled.curve[31:33, 31:33] == 2)  # the middle strip, not the one inside the front tube
+    assert np.array_equal(peeled.depth[31:33, 31:33], alone[2].depth[31:33, 31:33])
+    assert np.all(peeled.curve[~vis.coverage] == -1)  # nothing behind where nothing is in front
+    where = (vis.curve == 2) & alone[3].coverage  # the middle strip over the diagonal one, off the front strip
+    assert where.sum() > 20 and np.all(peeled.curve[where] == 3)
+    assert np.array_equal(peeled.depth[where], alone[3].depth[where])
+    lone = vis.coverage & ~(alone[2].coverage | alone[3].coverage) & (vis.curve != 1)
+    assert lone.sum() > 20 and np.all(peeled.curve[lone] == -1)  # the front strip alone: nothing behind it
+    with pytest.raises(ValueError, match="behind has samples"):
+        rasterize_visibility(pts, offsets, False, rest, radius, [0, 1, 2, 3], cam, msaa=1, behind=vis, gap=radius)

@@ -18,7 +18,10 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
 3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample visibility buffer
    (``strip_raster``: triangle, curve and depth per sample; the other attributes are interpolated at the shading
    points alone); with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second
-   one. A flyaway
+   one. With ``render.layers`` = 2 (the default) the regular strips are rasterized once more, depth-peeled
+   (``rasterize_visibility(behind=…)``): at each sample the nearest strip more than the front yarn's radius behind
+   the front strip, so the yarn behind shows through a strip's partial coverage (gaps between plies, the fuzzy
+   edge) instead of the background. A flyaway
    sample is kept where no regular strip is nearer than the yarn radius, and a flyaway shading point where its
    hair texture covers anything (``strip_shading.flyaway_coverage``): one of zero coverage adds nothing to the
    image, so the passes below skip it.
@@ -41,7 +44,9 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    u = (s − twist_sign·γ/(2π)·period)/period, γ = atan2(ω_o·(T × N), ω_o·N) with N of the curve's yarn frame
    (``data_formats.curve_eval.yarn_frame``, the frame the reference sweeps its fibers in). The ply pattern is
    then where the reference has it, and moves along the yarn as the camera circles it, as a real yarn's does.
-6. ``resolve``: coverage-weighted MSAA resolve over the background, the flyaway layer on top.
+   The second layer's points are shaded like the front's (its own shadow lookups).
+6. ``resolve``: coverage-weighted MSAA resolve, the second layer over the background, the front over that
+   (``strip_shading.resolve_behind``), the flyaway layer on top.
 
 ``Features`` (``knitrun.render.ablations``) switch the baked terms off for the ablations of Huang et al. 2025
 Fig. 7.
@@ -68,8 +73,8 @@ from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import rasterize_visibility
-from knitrun.render.strip_shading import (flyaway_coverage, resolve, same_surface, shade_flyaway, shade_regular,
-                                          shading_points)
+from knitrun.render.strip_shading import (flyaway_coverage, resolve, resolve_behind, same_surface, shade_flyaway,
+                                          shade_regular, shading_points)
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table
@@ -311,7 +316,8 @@ class Renderer:
         called as each pass ends. Timings are this frame's passes (``load``: evaluating its curves)."""
         scene, features, looks, fit = self.scene, self.features, self.looks, self.fit
         frame = self.frame_index(frame)
-        timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
+        timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame,
+                              "layers": scene.render.layers}
         clock = [time.perf_counter()]
 
         def lap(name):
@@ -332,6 +338,11 @@ class Renderer:
         fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
         vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
         points = shading_points(vis, camera)
+        behind_points = None
+        if scene.render.layers > 1 and len(lines.entry):
+            behind = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera,
+                                          msaa, behind=vis, gap=radius)
+            behind_points = shading_points(behind, camera)
         drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
         fly_points = None
         if drawn_fly and len(lines.entry):
@@ -353,8 +364,9 @@ class Renderer:
         # coverage adds nothing to the image, so it gets no shadow lookups and no shading; its visibility reads 1)
         # that are not at the sample of a regular point of their curve (``SHARE_REACH``: such a point shares its
         # lookups, module docstring)
-        sets = [points] + ([fly_points] if fly_points is not None else [])
-        where = [slice(None)]
+        layers = [points] + ([behind_points] if behind_points is not None else [])  # regular fibers, front to back
+        sets = layers + ([fly_points] if fly_points is not None else [])
+        where = [slice(None)] * len(layers)
         facts["flyaway_points_shared"] = 0
         if fly_points is not None:
             partner = np.empty(len(fly_points["weight"]), np.int64)
@@ -386,7 +398,7 @@ class Renderer:
                 out[j, at] = vis
         if fly_points is not None:
             for vis in (light_vis, lobe_vis):
-                vis[1][:, shared] = vis[0][:, partner[shared]]
+                vis[-1][:, shared] = vis[0][:, partner[shared]]
         albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
             np.zeros(len(looks))
         if len(lobe_dir) and albedo.any():
@@ -401,30 +413,38 @@ class Renderer:
         lap("shadow")
 
         h, w = camera.height, camera.width
-        rgb, alpha = np.zeros((len(points["weight"]), 3)), np.zeros(len(points["weight"]))
-        regular = _kernel_points(points, lines, looks)
-        for k, look in enumerate(looks):
-            idx = np.flatnonzero(points["yarn"] == k)
-            kernel_look, corrections, _ = self.kernel_looks[k]
-            environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[0]), Lights(ms_dir, ms_e, ms_vis[0]),
-                           self.im_slices[k]) if len(lobe_dir) else (None, None, None)
-            shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
-                          Lights(light_dir, light_e, light_vis[0]) if len(light_dir) else None, *environment, rgb,
-                          alpha)
+        shaded = []  # (rgb, alpha) of each layer of regular fibers
+        for m, layer in enumerate(layers):
+            rgb, alpha = np.zeros((len(layer["weight"]), 3)), np.zeros(len(layer["weight"]))
+            regular = _kernel_points(layer, lines, looks)
+            for k, look in enumerate(looks):
+                idx = np.flatnonzero(layer["yarn"] == k)
+                kernel_look, corrections, _ = self.kernel_looks[k]
+                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m]), Lights(ms_dir, ms_e, ms_vis[m]),
+                               self.im_slices[k]) if len(lobe_dir) else (None, None, None)
+                shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
+                              Lights(light_dir, light_e, light_vis[m]) if len(light_dir) else None, *environment,
+                              rgb, alpha)
+            shaded.append((rgb, alpha))
         if fly_points is not None:
             n_fly = len(fly_points["weight"])
             fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
             for k in drawn_fly:
                 idx = np.flatnonzero((fly_points["yarn"] == k) & covered)
-                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[1]), self.im_slices[k]) if len(lobe_dir) \
+                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1]), self.im_slices[k]) if len(lobe_dir) \
                     else (None, None)  # a kind of light the scene lacks is not compiled (``shade_flyaway``)
                 shade_flyaway(idx, hairs, *self.kernel_looks[k],
-                              Lights(light_dir, light_e, light_vis[1]) if len(light_dir) else None, *environment,
+                              Lights(light_dir, light_e, light_vis[-1]) if len(light_dir) else None, *environment,
                               fly_rgb, fly_alpha, fly_transmit)
         lap("shade")
 
+        background = np.asarray(scene.background, np.float64)
         image = np.empty((h * w, 3))
-        image[:] = np.asarray(scene.background, np.float64)
+        image[:] = background
+        if len(layers) > 1:
+            resolve_behind(points["start"], points["weight"], shaded[0][1], behind_points["start"],
+                           behind_points["weight"], shaded[1][0], shaded[1][1], background, image)
+        rgb, alpha = shaded[0]
         resolve(points["start"], points["weight"], rgb, alpha, np.zeros_like(rgb), image, image)
         if fly_points is not None:
             resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image, image)

@@ -64,6 +64,7 @@ DEGENERATE_SIN = 1e-6  # |ω_o × t| below this: the strip is skipped (ASSET_PAC
 
 # Per clipped-triangle vertex record: screen X, Y (px), q (1/z pinhole, 1 orthographic), then q·(z, s, v, tx, ty, tz).
 _NREC = 9
+_NO_FLOOR = np.zeros((1, 1, 1))  # the floor of a depth test that does not peel (never read)
 
 
 @dataclass
@@ -124,10 +125,16 @@ class StripVisibility:
 
 
 def rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_id, camera: Camera, msaa=1,
-                         near=1e-3, far=math.inf, closing_length=None, tile=32):
+                         near=1e-3, far=math.inf, closing_length=None, tile=32, behind=None, gap=None):
     """The strips' ``StripVisibility`` of camera.height × camera.width × ``msaa`` samples (arguments as
     ``rasterize_strips``): the depth test of ``rasterize_strips`` writing 12 bytes per sample instead of 37, for a
-    renderer that shades a fraction of the samples (``strip_shading.shading_points``)."""
+    renderer that shades a fraction of the samples (``strip_shading.shading_points``).
+
+    Depth peeling: with ``behind`` (a ``StripVisibility`` of the same camera and msaa) and ``gap`` ((C,) scene units,
+    per curve of ``behind``), each sample keeps the nearest strip more than gap[c] behind the view depth of the strip
+    c that ``behind`` has there (the next layer: what shows through a strip of partial coverage), and nothing where
+    ``behind`` has none. A gap of the front yarn's radius skips the front strip itself and any strip within its tube.
+    """
     if msaa not in SAMPLE_PATTERNS:
         raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
     n_curves = len(offsets) - 1
@@ -138,9 +145,33 @@ def rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_i
     shape = (h, w, msaa)
     triangles = StripTriangles(tri, seg_a.astype(np.int32), seg_curve.astype(np.int32), yarn_id, SAMPLE_PATTERNS[msaa])
     out = StripVisibility(np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32), triangles)
-    _raster(tri, tile_start, tile_tris, triangles.seg_curve, w, h, tile, -(-w // tile), triangles.pattern,
-            float(camera.ortho_height) > 0, tan_half_fov(camera), out.slot, out.curve, out.depth)
+    ortho, tan_half = float(camera.ortho_height) > 0, tan_half_fov(camera)
+    floor = _NO_FLOOR
+    if behind is not None:
+        if behind.slot.shape != shape:
+            raise ValueError(f"rasterize_visibility: behind has samples {behind.slot.shape}, expected {shape}")
+        gap = np.ascontiguousarray(np.broadcast_to(np.asarray(gap, np.float64), (len(behind.triangles.yarn_id),)))
+        floor = np.empty(shape)
+        _peel_floor(behind.depth, behind.curve, gap, triangles.pattern, ortho, tan_half, floor)
+    _raster(tri, tile_start, tile_tris, triangles.seg_curve, w, h, tile, -(-w // tile), triangles.pattern, ortho,
+            tan_half, floor, behind is not None, out.slot, out.curve, out.depth)
     return out
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _peel_floor(depth, curve, gap, pattern, ortho, tan_half, floor):
+    """floor = the view z of each sample's ``depth`` (``_sample_depth`` inverted) + gap[curve]; +inf where no curve
+    covers the sample (a peeled layer has nothing there)."""
+    height, width, k = depth.shape
+    for py in prange(height):
+        for px in range(width):
+            for s in range(k):
+                c = curve[py, px, s]
+                if c < 0:
+                    floor[py, px, s] = np.inf
+                else:
+                    floor[py, px, s] = _sample_depth(1.0, px, py, pattern[s], width, height, ortho, tan_half)
+                    floor[py, px, s] = depth[py, px, s] / floor[py, px, s] + gap[c]
 
 
 def sample_attributes(vis: StripVisibility, i, j, a):
@@ -474,10 +505,11 @@ def _bin(count, boxes, tiles_x, tiles_y):
 
 
 @njit(cache=True, error_model="numpy")
-def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, best_z, best_tri):
+def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, floor, peel, best_z, best_tri):
     """Depth-test triangles tile_tris[first:stop] at the ``pattern`` samples of the pixels [x_lo, x_hi) × [y_lo,
     y_hi): for each sample the nearest view z (1/q-interpolated) and its triangle slot (−1: none). The barycentrics
-    are e_k/area (``_barycentrics`` repeats the arithmetic for a kept sample)."""
+    are e_k/area (``_barycentrics`` repeats the arithmetic for a kept sample). With ``peel``, a fragment counts only
+    beyond the sample's floor: view z > floor[py, px, s] (a full-frame array; unread without ``peel``)."""
     k_samples = pattern.shape[0]
     best_z[:] = np.inf
     best_tri[:] = -1
@@ -515,6 +547,8 @@ def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, be
                     z = (l0 * rec[0, 3] + l1 * rec[1, 3] + l2 * rec[2, 3]) / \
                         (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
                     j, i = px - x_lo, py - y_lo
+                    if peel and z <= floor[py, px, s]:
+                        continue
                     if z < best_z[i, j, s]:
                         best_z[i, j, s] = z
                         best_tri[i, j, s] = slot
@@ -540,8 +574,8 @@ def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, patt
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
         best_z = np.empty((y_hi - y_lo, x_hi - x_lo, 1))
         best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, 1), np.int64)
-        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, best_z,
-                    best_tri)
+        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, _NO_FLOOR,
+                    False, best_z, best_tri)
         for i in range(y_hi - y_lo):
             for j in range(x_hi - x_lo):
                 depth[y_lo + i, x_lo + j] = np.inf if best_tri[i, j, 0] < 0 else \
@@ -549,9 +583,10 @@ def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, patt
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _raster(tri, tile_start, tile_tris, seg_curve, width, height, tile, tiles_x, pattern, ortho, tan_half, slot,
-            curve, depth):
-    """Depth-test every tile's triangles at the ``pattern`` samples and write the visibility buffer of its pixels."""
+def _raster(tri, tile_start, tile_tris, seg_curve, width, height, tile, tiles_x, pattern, ortho, tan_half, floor, peel,
+            slot, curve, depth):
+    """Depth-test every tile's triangles at the ``pattern`` samples and write the visibility buffer of its pixels
+    (with ``peel``: the nearest beyond ``floor``, ``_depth_test``)."""
     k_samples = pattern.shape[0]
     n_tiles = tile_start.shape[0] - 1
     n_seg = seg_curve.shape[0]
@@ -560,8 +595,8 @@ def _raster(tri, tile_start, tile_tris, seg_curve, width, height, tile, tiles_x,
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
         best_z = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples))
         best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples), np.int64)
-        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, best_z,
-                    best_tri)
+        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, floor, peel,
+                    best_z, best_tri)
         for i in range(y_hi - y_lo):
             for j in range(x_hi - x_lo):
                 py, px = y_lo + i, x_lo + j

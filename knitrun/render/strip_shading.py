@@ -614,3 +614,31 @@ def resolve(start, weight, rgb, alpha, transmit, under, out):
                 acc += a * rgb[q, ch]
                 cov += a * (1.0 - transmit[q, ch])
             out[p, ch] = acc + (1.0 - min(cov, 1.0)) * under[p, ch]
+
+
+@njit(parallel=True, cache=True)
+def resolve_behind(front_start, front_weight, front_alpha, back_start, back_weight, back_rgb, back_alpha, background,
+                   out):
+    """out[p] (H·W, 3): what the front layer of regular points lets through at pixel p, for ``resolve`` to draw the
+    front over. The front's points cover the fraction c1 = Σ w of the pixel's samples with s1 = Σ w α; the back layer
+    (depth-peeled: it has samples only where the front has) over the background, averaged over those samples, is
+    X = (Σ w₂ α₂ L₂ + (c1 − Σ w₂ α₂)·bg)/c1; through the front's transparent part T1 = c1 − s1 shows X and through
+    the rest of the pixel the background: out = (T1·X + (1 − c1)·bg)/(1 − s1), so ``resolve`` gives
+    Σ w α L + T1·X + (1 − c1)·bg. The background where the front is opaque (s1 = 1)."""
+    for p in prange(out.shape[0]):
+        c1, s1 = 0.0, 0.0
+        for q in range(front_start[p], front_start[p + 1]):
+            c1 += front_weight[q]
+            s1 += front_weight[q] * front_alpha[q]
+        open_ = 1.0 - s1
+        for ch in range(3):  # scalar sums per channel, as ``resolve``
+            if open_ <= 1e-9 or c1 <= 0.0:
+                out[p, ch] = background[ch]
+                continue
+            acc, cov = 0.0, 0.0
+            for q in range(back_start[p], back_start[p + 1]):
+                a = back_weight[q] * back_alpha[q]
+                acc += a * back_rgb[q, ch]
+                cov += a
+            x = (acc + (c1 - cov) * background[ch]) / c1
+            out[p, ch] = ((c1 - s1) * x + (1.0 - c1) * background[ch]) / open_

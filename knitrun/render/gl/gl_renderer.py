@@ -39,6 +39,7 @@ composited over the regular image as the CPU's resolve does.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -245,6 +246,9 @@ class GLRenderer:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
                               f"{MAX_LIGHTS}")
         self.ctx = gl_context() if ctx is None else ctx
+        # one layer of strips (depth peeling is not ported, SCENE.md ``layers``): the CPU twin (shading inputs; the
+        # image the tests compare with) draws what this one does; facts["layers"] says so
+        scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, layers=1))
         self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
         start = time.perf_counter()
         self.scene, self.features = scene, features
@@ -261,7 +265,7 @@ class GLRenderer:
         self.light_dir = np.array([light.unit_direction for light in lights], np.float64).reshape(-1, 3)
         self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
-        self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"])
+        self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1)
 
     @property
     def frame_count(self):
