@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from knitrun.render.camera import Camera, project, tan_half_fov
-from knitrun.render.strip_raster import (SAMPLE_PATTERNS, rasterize_depth, rasterize_strips,
+from knitrun.render.strip_raster import (SAMPLE_PATTERNS, rasterize_behind, rasterize_depth, rasterize_strips,
                                          rasterize_visibility, sample_attributes)
 
 Z_UP = np.array([0.0, 0.0, 1.0])
@@ -238,9 +238,10 @@ def test_frustum_culling_drops_only_invisible_segments():
 
 @pytest.mark.parametrize("ortho", [False, True])
 def test_a_peeled_layer_is_the_next_strip_behind_the_front_one(ortho):
-    """Depth peeling (``behind=``): where a strip lies over two others, the peeled layer holds the nearest strip more
-    than the gap behind the front one (the same sample's depth the front layer would give that strip alone), and
-    nothing where the front layer has no strip; a strip within the gap of the front (its own tube) is skipped."""
+    """Depth peeling (``rasterize_behind``): where a strip lies over two others, the peeled layer holds the nearest
+    strip more than the gap behind the front one (the same sample's depth the front layer would give that strip
+    alone), and nothing where the front layer has no strip; a strip within the gap of the front (its own tube) is
+    skipped."""
     cam = ortho_camera(64, 64) if ortho else Camera(np.array([0.0, 0.0, 6.0]), np.zeros(3), Y_UP, 64, 64,
                                                     fov_deg=40.0)
     front = [[-1.0, 0.0, 0.3], [1.0, 0.0, 0.3]]  # horizontal, nearest
@@ -250,7 +251,7 @@ def test_a_peeled_layer_is_the_next_strip_behind_the_front_one(ortho):
     pts = np.array(front + within + middle + back)
     offsets, rest, radius = [0, 2, 4, 6, 8], np.tile([0.0, 2.0], 4), np.full(4, 0.2)
     vis = rasterize_visibility(pts, offsets, False, rest, radius, [0, 1, 2, 3], cam, msaa=4)
-    peeled = rasterize_visibility(pts, offsets, False, rest, radius, [0, 1, 2, 3], cam, msaa=4, behind=vis, gap=radius)
+    peeled = rasterize_behind(vis, cam, radius)
     alone = {c: rasterize_visibility(pts[2 * c:2 * c + 2], [0, 2], False, rest[:2], 0.2, [c], cam, msaa=4)
              for c in (2, 3)}
     assert np.all(vis.curve[31:33, 31:33] == 0)
@@ -262,5 +263,3 @@ def test_a_peeled_layer_is_the_next_strip_behind_the_front_one(ortho):
     assert np.array_equal(peeled.depth[where], alone[3].depth[where])
     lone = vis.coverage & ~(alone[2].coverage | alone[3].coverage) & (vis.curve != 1)
     assert lone.sum() > 20 and np.all(peeled.curve[lone] == -1)  # the front strip alone: nothing behind it
-    with pytest.raises(ValueError, match="behind has samples"):
-        rasterize_visibility(pts, offsets, False, rest, radius, [0, 1, 2, 3], cam, msaa=1, behind=vis, gap=radius)

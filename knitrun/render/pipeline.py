@@ -18,10 +18,10 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
 3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample visibility buffer
    (``strip_raster``: triangle, curve and depth per sample; the other attributes are interpolated at the shading
    points alone); with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second
-   one. With ``render.layers`` = 2 (the default) the regular strips are rasterized once more, depth-peeled
-   (``rasterize_visibility(behind=…)``): at each sample the nearest strip more than the front yarn's radius behind
-   the front strip, so the yarn behind shows through a strip's partial coverage (gaps between plies, the fuzzy
-   edge) instead of the background. A flyaway
+   one. With ``render.layers`` = 2 (the default) the regular strips are depth-peeled
+   (``strip_raster.rasterize_behind``, on the front pass's triangles): at each sample the nearest strip more than
+   the front yarn's radius behind the front strip, so the yarn behind shows through a strip's partial coverage
+   (gaps between plies, the fuzzy edge) instead of the background. A flyaway
    sample is kept where no regular strip is nearer than the yarn radius, and a flyaway shading point where its
    hair texture covers anything (``strip_shading.flyaway_coverage``): one of zero coverage adds nothing to the
    image, so the passes below skip it.
@@ -72,7 +72,7 @@ from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
-from knitrun.render.strip_raster import rasterize_visibility
+from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility
 from knitrun.render.strip_shading import (flyaway_coverage, resolve, resolve_behind, same_surface, shade_flyaway,
                                           shade_regular, shading_points)
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
@@ -340,8 +340,7 @@ class Renderer:
         points = shading_points(vis, camera)
         behind_points = None
         if scene.render.layers > 1 and len(lines.entry):
-            behind = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera,
-                                          msaa, behind=vis, gap=radius)
+            behind = rasterize_behind(vis, camera, radius)
             behind_points = shading_points(behind, camera)
         drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
         fly_points = None

@@ -40,7 +40,9 @@ compile on a cold start) and ``_setup`` (per segment: cull, build, clip, project
 triangle slot, curve and depth per sample (``rasterize_visibility``). ``_attributes`` interpolates the other
 attributes at the samples asked for (``sample_attributes``; the renderer asks at its shading points, about a tenth
 of the samples of a knit at MSAA 4; ``rasterize_strips`` at every covered sample). ``rasterize_depth`` runs the same
-depth test and writes the depth alone (``_raster_depth``: shadow maps). Buffers are identical for any thread count.
+depth test and writes the depth alone (``_raster_depth``: shadow maps); ``rasterize_behind`` runs it again on a
+buffer's own binned triangles, keeping at each sample the nearest strip beyond a floor behind the first (depth
+peeling). Buffers are identical for any thread count.
 """
 
 import math
@@ -108,12 +110,14 @@ class StripVisibility:
     """Per-sample visibility buffer: the nearest triangle at each sample (``slot``, −1 uncovered), its ``curve``
     (−1 uncovered) and ``depth`` (float32 scene units, 0 uncovered), each (H, W, k), with the triangles they index.
     ``sample_attributes`` derives the other G-buffer attributes at the samples that need them, bit for bit as
-    ``rasterize_strips`` writes them for every sample."""
+    ``rasterize_strips`` writes them for every sample. ``bins`` (tile_start, tile_tris, tile px): the triangles'
+    tile lists, which ``rasterize_behind`` depth-tests again."""
 
     slot: np.ndarray  # int32
     curve: np.ndarray  # int32
     depth: np.ndarray  # float32
     triangles: StripTriangles
+    bins: tuple
 
     @property
     def pattern(self):
@@ -125,16 +129,10 @@ class StripVisibility:
 
 
 def rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_id, camera: Camera, msaa=1,
-                         near=1e-3, far=math.inf, closing_length=None, tile=32, behind=None, gap=None):
+                         near=1e-3, far=math.inf, closing_length=None, tile=32):
     """The strips' ``StripVisibility`` of camera.height × camera.width × ``msaa`` samples (arguments as
     ``rasterize_strips``): the depth test of ``rasterize_strips`` writing 12 bytes per sample instead of 37, for a
-    renderer that shades a fraction of the samples (``strip_shading.shading_points``).
-
-    Depth peeling: with ``behind`` (a ``StripVisibility`` of the same camera and msaa) and ``gap`` ((C,) scene units,
-    per curve of ``behind``), each sample keeps the nearest strip more than gap[c] behind the view depth of the strip
-    c that ``behind`` has there (the next layer: what shows through a strip of partial coverage), and nothing where
-    ``behind`` has none. A gap of the front yarn's radius skips the front strip itself and any strip within its tube.
-    """
+    renderer that shades a fraction of the samples (``strip_shading.shading_points``)."""
     if msaa not in SAMPLE_PATTERNS:
         raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
     n_curves = len(offsets) - 1
@@ -144,17 +142,32 @@ def rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_i
     w, h = int(camera.width), int(camera.height)
     shape = (h, w, msaa)
     triangles = StripTriangles(tri, seg_a.astype(np.int32), seg_curve.astype(np.int32), yarn_id, SAMPLE_PATTERNS[msaa])
-    out = StripVisibility(np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32), triangles)
-    ortho, tan_half = float(camera.ortho_height) > 0, tan_half_fov(camera)
-    floor = _NO_FLOOR
-    if behind is not None:
-        if behind.slot.shape != shape:
-            raise ValueError(f"rasterize_visibility: behind has samples {behind.slot.shape}, expected {shape}")
-        gap = np.ascontiguousarray(np.broadcast_to(np.asarray(gap, np.float64), (len(behind.triangles.yarn_id),)))
-        floor = np.empty(shape)
-        _peel_floor(behind.depth, behind.curve, gap, triangles.pattern, ortho, tan_half, floor)
-    _raster(tri, tile_start, tile_tris, triangles.seg_curve, w, h, tile, -(-w // tile), triangles.pattern, ortho,
-            tan_half, floor, behind is not None, out.slot, out.curve, out.depth)
+    return _draw(triangles, (tile_start, tile_tris, tile), camera, shape, _NO_FLOOR, False)
+
+
+def rasterize_behind(front: StripVisibility, camera: Camera, gap):
+    """Depth peeling: the ``StripVisibility`` of the strips behind ``front`` (``rasterize_visibility``'s buffer of
+    the same ``camera``), from its own triangles: each sample keeps the nearest strip more than gap[c] (scene units,
+    (C,) per curve or a scalar) behind the view depth of the strip c that ``front`` has there (the next layer: what
+    shows through a strip of partial coverage), and nothing where ``front`` has none. A gap of the front yarn's
+    radius skips the front strip itself and any strip within its tube."""
+    n_curves = len(front.triangles.yarn_id)
+    gap = np.ascontiguousarray(np.broadcast_to(np.asarray(gap, np.float64), (n_curves,)))
+    floor = np.empty(front.slot.shape)
+    _peel_floor(front.depth, front.curve, gap, front.pattern, float(camera.ortho_height) > 0, tan_half_fov(camera),
+                floor)
+    return _draw(front.triangles, front.bins, camera, front.slot.shape, floor, True)
+
+
+def _draw(triangles, bins, camera, shape, floor, peel):
+    """Depth-test the binned ``triangles`` into a new ``StripVisibility`` of ``shape`` (``_raster``)."""
+    out = StripVisibility(np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32),
+                          triangles, bins)
+    tile_start, tile_tris, tile = bins
+    height, width = shape[:2]
+    _raster(triangles.records, tile_start, tile_tris, triangles.seg_curve, width, height, tile, -(-width // tile),
+            triangles.pattern, float(camera.ortho_height) > 0, tan_half_fov(camera), floor, peel, out.slot,
+            out.curve, out.depth)
     return out
 
 
