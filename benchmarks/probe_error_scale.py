@@ -18,7 +18,7 @@ regular strips, ``strip_raster.rasterize_visibility``):
   error lies below that scale.
 
 Printed per scene: the instance floor, the model's error, and each oracle's error (and ratio to the floor). Needs
-the references of ``bench_floors.py`` (``<scene>.exr`` and ``<scene>_instance.exr``). About 10 s per scene on 2 cores.
+the references of ``bench_floors.py`` (``<scene>.exr`` and ``<scene>_instance.exr``). About 5 s per scene on 2 cores.
 
     .venv/bin/python benchmarks/probe_error_scale.py --pack out/bench/cotton1_standard.h5 \\
         --reference-dir out/bench/refs2 [--scenes knit_patch_directional,knit_patch_sky] [--ablation full]
@@ -90,12 +90,15 @@ def probe(name, pack, reference_dir, ablation):
     lum = np.asarray(LUMINANCE, np.float64)
     lm, lr, li = model @ lum, reference @ lum, instance @ lum
     floor = yarn_scale_metrics(instance, reference, d)["rel_l1"]
-    error = lambda img, gain: yarn_scale_metrics(img * gain[..., None], reference, d)["rel_l1"]  # noqa: E731
+
+    def error(img, gain):
+        return yarn_scale_metrics(img * gain[..., None], reference, d)["rel_l1"]
+
     rows, cols, v, angle = front_strips(scene, packs)
     v_bin = np.clip(((v + 1.0) * 0.5 * V_BINS).astype(np.int64), 0, V_BINS - 1)
     angle_bin = np.clip((angle / 180.0 * ANGLE_BINS).astype(np.int64), 0, ANGLE_BINS - 1)
-    lines = [f"{name}: d = {d:.1f} px, instance floor {floor:.4f}, {ablation} {error(model, np.ones(lm.shape)):.4f} "
-             f"({error(model, np.ones(lm.shape)) / floor:.2f}× floor)"]
+    plain = error(model, np.ones(lm.shape))
+    lines = [f"{name}: d = {d:.1f} px, instance floor {floor:.4f}, {ablation} {plain:.4f} ({plain / floor:.2f}× floor)"]
     for label, bins in (("one gain", np.zeros(len(rows), np.int64)), ("v", v_bin),
                         ("v × angle", v_bin * ANGLE_BINS + angle_bin)):
         e = error(model, binned_gain(lm, lr, rows, cols, bins))
