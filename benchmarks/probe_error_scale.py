@@ -10,8 +10,8 @@ regular strips, ``strip_raster.rasterize_visibility``):
 * ``one gain``: one factor for the whole image (the mean ratio's part of the error);
 * ``v``: one factor per 1/8 of the strip's width (16 bins of v ∈ [−1, 1]): a profile across the yarn, as the baked
   tables in v would give;
-* ``v × angle``: per v bin and 10° bin of the strip tangent's direction on screen: a brightness per part of the
-  yarn and orientation to the light, as any table in (v, θ, φ) would give;
+* ``v × angle``: per v bin and 10° bin of the strip tangent's direction on screen (in x–y: the examples look
+  along −z): a brightness per part of the yarn and orientation to the light, as any table in (v, θ, φ) would give;
 * ``gain at k·d``: the local ratio of the reference to the model, both box-filtered k·d pixels wide (k = 2, 4, 8):
   a brightness per stitch neighbourhood (shadows, inter-reflection between yarns). The same gain is applied to the
   reference's other fiber instance as a control: where it leaves the instance at its floor, the rest of the model's
@@ -48,10 +48,10 @@ ANGLE_BINS = 18  # 10° each over [0°, 180°): a line on screen has no sign
 GAIN_SCALES = (2, 4, 8)
 
 
-def front_strips(scene, packs):
-    """Pixel rows, columns, v and the tangent's angle on screen (degrees in [0, 180)) of the samples the front regular
-    strips cover, at one sample per pixel."""
-    renderer = pipeline.Renderer(scene, packs)
+def front_strips(scene, renderer):
+    """Pixel rows, columns, v and the tangent's angle in the x–y plane (degrees in [0, 180); the screen's for the
+    example scenes' cameras, which look along −z) of the samples the front regular strips of ``renderer``
+    (a ``pipeline.Renderer`` of ``scene``) cover, at one sample per pixel."""
     lines = pipeline._polylines(scene, renderer.curves, renderer.frame_index(None), renderer.samples_per_segment)
     radius = np.array([renderer.looks[k].radius for k in lines.entry])
     vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry,
@@ -85,7 +85,8 @@ def probe(name, pack, reference_dir, ablation):
     packs = {"cotton1": str(pack)}  # the example scenes draw cotton1, as bench_compare.py
     reference = read_exr(Path(reference_dir) / f"{name}.exr").astype(np.float64)[..., :3]
     instance = read_exr(Path(reference_dir) / f"{name}_instance.exr").astype(np.float64)[..., :3]
-    model = np.asarray(pipeline.render(scene, packs, features=ABLATIONS[ablation]).image, np.float64)[..., :3]
+    renderer = pipeline.Renderer(scene, packs, features=ABLATIONS[ablation])  # the packs loaded once for both uses
+    model = np.asarray(renderer.render().image, np.float64)[..., :3]
     d = yarn_diameter_px(scene)
     lum = np.asarray(LUMINANCE, np.float64)
     lm, lr, li = model @ lum, reference @ lum, instance @ lum
@@ -94,7 +95,7 @@ def probe(name, pack, reference_dir, ablation):
     def error(img, gain):
         return yarn_scale_metrics(img * gain[..., None], reference, d)["rel_l1"]
 
-    rows, cols, v, angle = front_strips(scene, packs)
+    rows, cols, v, angle = front_strips(scene, renderer)
     v_bin = np.clip(((v + 1.0) * 0.5 * V_BINS).astype(np.int64), 0, V_BINS - 1)
     angle_bin = np.clip((angle / 180.0 * ANGLE_BINS).astype(np.int64), 0, ANGLE_BINS - 1)
     plain = error(model, np.ones(lm.shape))
