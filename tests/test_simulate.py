@@ -5,6 +5,7 @@ length, the seed-000 Fig. 9 comparison with naive interpolation, the built-in de
 import dataclasses
 import functools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -273,3 +274,20 @@ def test_a_radius_off_the_templates_sizing_is_named():
     assert "overlap" in thick and "1.4" in thick and "\n" not in thick
     (thin,) = simulate(mesh, mesh.vertices[None], radius=0.02)[1]["warnings"]
     assert "leave gaps" in thin
+
+
+def test_example_simulated_patch_is_what_its_scene_file_says(tmp_path, monkeypatch):
+    """The example scene's curves are the output of the commands its header gives, run by this simulator: a change to
+    the simulator or its templates must regenerate the file (it went stale once, after the relaxed templates)."""
+    examples = Path(__file__).resolve().parent.parent / "examples" / "scenes"
+    header = (examples / "simulated_patch_directional.toml").read_text().splitlines()
+    commands = [line.lstrip("# ").split()[1:] for line in header if line.startswith("#   knitrun ")]
+    assert [c[0] for c in commands] == ["pattern", "simulate"]
+    monkeypatch.chdir(tmp_path)  # the commands name their files relative to where they run
+    for command in commands:
+        result = CliRunner().invoke(knitrun, command, catch_exceptions=False)
+        assert result.exit_code == 0, result.output
+    written = read_yarn_curves(tmp_path / commands[1][-1])
+    example = read_yarn_curves(examples / "simulated_patch_6x6.h5")
+    assert written.points.shape == example.points.shape
+    np.testing.assert_allclose(written.points, example.points, rtol=0, atol=1e-5)
