@@ -14,8 +14,15 @@ models of ``--models`` (``knitrun.render.ablations.ABLATIONS``); reported per mo
 yarn-scale rel L1 at d as a ratio to the instance floor (``knitbake.compare.image_metrics.yarn_scale_metrics``).
 About 9 s per tilt and model set at 16 spp on 2 cores.
 
+``--bins-from DIR`` instead bins an existing comparison of the simulated patch (``bench_compare.py``'s folder for
+``simulated_patch_directional``: ``reference.exr`` and ``strip_<model>.exr``) along the scene's yarn curves: at each
+control point's pixel, both images filtered to the yarn scale d, grouped by |ω_o · t| — where on the patch the
+strips lose light to the reference.
+
     .venv/bin/python benchmarks/probe_tilt.py --pack out/bench/cotton1_standard.h5 [--tilts 0,30,50,70] [--spp 16] \\
         [--light turn|fixed] [--models plain_ds,no_tables,full]
+    .venv/bin/python benchmarks/probe_tilt.py --bins-from out/compare43/simulated_patch_directional \\
+        [--models full,view_xi]
 """
 
 from __future__ import annotations
@@ -29,15 +36,20 @@ from pathlib import Path
 
 import numpy as np
 
+from data_formats.images import read_exr
 from data_formats.scene import load_scene
-from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
-from knitbake.compare.image_metrics import yarn_scale_metrics
+from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves, write_yarn_curves
+from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
 from knitrun.render import pipeline
 from knitrun.render.ablations import ABLATIONS
+from knitrun.render.camera import project, scene_camera
 
-SCENE = Path(__file__).parent.parent / "examples" / "scenes" / "straight_yarn_directional.toml"
+EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
+SCENE = EXAMPLES / "straight_yarn_directional.toml"
+PATCH = EXAMPLES / "simulated_patch_directional.toml"
+TILT_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)  # |ω_o · t|
 HALF_LENGTH = 3.0  # cm: 2 · 3 · cos 70° = 2.05 cm, wider than the frame (1.2 cm)
 
 
@@ -74,9 +86,40 @@ def probe(pack, psi_deg, spp, models, folder, turn_light):
     return "| " + " | ".join(cells + [f"{trace_s:.0f}"]) + " |"
 
 
+def patch_bins(folder: Path, models) -> str:
+    """Mean of the yarn-scale filtered reference and strip images at the simulated patch's control points, by
+    |ω_o · t| (the last bin closed)."""
+    scene = load_scene(PATCH)
+    camera = scene_camera(scene)
+    curves = read_yarn_curves(scene.yarns[0].curves)
+    points = curves.points[scene.render.frame if curves.points.shape[0] > 1 else 0]
+    d = yarn_diameter_px(scene)
+    x, y, _ = project(camera, points)
+    col = np.clip(np.round(x).astype(int), 0, scene.camera.width - 1)
+    row = np.clip(np.round(y).astype(int), 0, scene.camera.height - 1)
+    tilt = np.empty(len(points))
+    for a, b in zip(curves.offsets[:-1], curves.offsets[1:]):
+        t = np.gradient(points[a:b], axis=0)
+        t /= np.linalg.norm(t, axis=1)[:, None]
+        view = camera.position - points[a:b]
+        tilt[a:b] = np.abs(np.einsum("ij,ij->i", t, view / np.linalg.norm(view, axis=1)[:, None]))
+    sampled = {name: yarn_filter(read_exr(folder / f"{name}.exr")[..., :3], d).mean(-1)[row, col]
+               for name in ("reference", *(f"strip_{m}" for m in models))}
+    lines = ["| |ω_o · t| | points | reference | " + " | ".join(f"{m}: mean / ratio" for m in models) + " |",
+             "|---" * (3 + len(models)) + "|"]
+    for lo, hi in zip(TILT_BINS[:-1], TILT_BINS[1:]):
+        at = (tilt >= lo) & ((tilt < hi) | (hi == TILT_BINS[-1]))
+        ref = sampled["reference"][at].mean()
+        cells = [f"{sampled[f'strip_{m}'][at].mean():.4f} / {sampled[f'strip_{m}'][at].mean() / ref:.2f}"
+                 for m in models]
+        lines.append(f"| {lo:.1f}–{hi:.1f} | {int(at.sum())} | {ref:.4f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--pack", required=True)
+    parser.add_argument("--pack", help="the asset pack of cotton1 (the tilt sweep)")
+    parser.add_argument("--bins-from", type=Path, help="bin this comparison folder of the simulated patch instead")
     parser.add_argument("--tilts", default="0,30,50,70", help="tilts ψ toward the camera in degrees")
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--light", choices=("turn", "fixed"), default="turn",
@@ -87,6 +130,11 @@ def main():
     unknown = sorted(set(models) - set(ABLATIONS))
     if unknown:
         parser.error(f"--models: unknown model {unknown[0]!r} ({', '.join(ABLATIONS)})")
+    if args.bins_from is not None:
+        print(patch_bins(args.bins_from, models))
+        return
+    if args.pack is None:
+        parser.error("--pack is required for the tilt sweep")
     print("| tilt ψ | ω_o · t | instance mean ratio | instance rel L1 (d) | "
           + " | ".join(f"{m}: mean ratio / ×floor" for m in models) + " | trace s |")
     print("|---" * (5 + len(models)) + "|")
