@@ -1,9 +1,9 @@
 """How the strip model's brightness and yarn-scale error change as a straight yarn tilts toward the camera
 (issue 13, the look).
 
-On the simulated patch the strips fall further below the reference the more the yarn points at the camera (scratch
-binning of the yarn-scale difference along the curves, BENCHMARKS.md, stop 43), and the patches' loops turn toward
-the camera at every stitch. This probe isolates that on the simplest scene: ``straight_yarn_directional`` with the
+On the simulated patch the strips fall further below the reference the more the yarn points at the camera
+(``--bins-from`` below; BENCHMARKS.md, stop 43), and the patches' loops turn toward the camera at every stitch. This
+probe isolates that on the simplest scene: ``straight_yarn_directional`` with the
 yarn 6 cm long (its projection still crosses the frame at the largest tilt) and turned by ψ about the image's y axis
 toward the camera, ω_o · t = sin ψ. ``--light turn`` turns its light with it (the light's relation to the yarn stays
 fixed, θ_i = 0, and only the view moves); ``--light fixed`` keeps the scene's light (near the camera, as on the

@@ -285,7 +285,7 @@ def test_example_simulated_patch_is_what_its_scene_file_says(tmp_path, monkeypat
     assert [c[0] for c in commands] == ["pattern", "simulate"]
     monkeypatch.chdir(tmp_path)  # the commands name their files relative to where they run
     for command in commands:
-        result = CliRunner().invoke(knitrun, command, catch_exceptions=False)
+        result = run(*command)
         assert result.exit_code == 0, result.output
     written = read_yarn_curves(tmp_path / commands[1][-1])
     example = read_yarn_curves(examples / "simulated_patch_6x6.h5")
