@@ -12,8 +12,9 @@ import tomli_w
 from data_formats import scene as sc
 from data_formats.bcc import write_bcc
 from data_formats.errors import FormatError
-from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
+from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import load_preset, save_spec
+from knitrun.sim.crane_stockinette import write_example_patch
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
 
@@ -109,6 +110,18 @@ def test_examples_load_validate_and_describe_as_json():
         assert sc.sniff(path) and sc.validate(path) == []
         d = sc.describe(path)
         assert d["kind"] == "scene" and json.loads(json.dumps(d, allow_nan=False)) == d
+
+
+def test_example_knit_patch_is_what_its_scene_file_says(tmp_path):
+    """The example patch's curves are what the call in its scene file's header writes today (as the simulated patch's
+    are its commands' output: tests/test_simulate.py)."""
+    header = (EXAMPLES / "knit_patch_directional.toml").read_text()
+    assert "write_example_patch('examples/scenes/knit_patch_6x6.h5', 6, 6)" in header
+    write_example_patch(tmp_path / "patch.h5", 6, 6)
+    written, example = read_yarn_curves(tmp_path / "patch.h5"), read_yarn_curves(EXAMPLES / "knit_patch_6x6.h5")
+    assert written.points.shape == example.points.shape
+    np.testing.assert_array_equal(written.offsets, example.offsets)
+    np.testing.assert_allclose(written.points, example.points, rtol=0, atol=1e-6)
 
 
 def test_sniff_is_content_based_and_never_raises(folder):
