@@ -1,14 +1,16 @@
 """Where the strip renderer's shading time goes (issue 15: profile before optimising).
 
-1. The `shade_regular` call of the bench_render frame (1280×960, 60,540 control points, MSAA 4) is captured from
-   the pipeline and timed alone (best of 3 after a warm-up), with all lights, with none (frames and texture
-   lookups), and with one kind of light at a time (directional; SRBF lobes' I_M terms; multiple-scattering
-   clusters). A kind of light the scene lacks is None, as the pipeline passes it.
+1. The `shade_regular` calls of the bench_render frame (1280×960, 60,540 control points, MSAA 4; the front layer
+   and, at ``--layers 2``, the default, the layer behind it) are captured from the pipeline and timed alone (best
+   of 3 after a warm-up), with all lights, with none (frames and texture lookups), and with one kind of light at a
+   time (directional; SRBF lobes' I_M terms; multiple-scattering clusters). A kind of light the scene lacks is
+   None, as the pipeline passes it.
 2. Per-call costs on 1M random inputs, 2 threads: one DS evaluation (``dual_scattering._ds_batch``, D inside
    (0, 1), D = 0, D = 1) and one I_M evaluation (view context + table + R rule, ``im_lookup._im_batch``) at the
    sky's sun-sized λ and at wide ones.
 
-    .venv/bin/python benchmarks/profile_shading.py --pack out/bench/cotton1_standard.h5 [--light directional|sky16]
+    .venv/bin/python benchmarks/profile_shading.py --pack out/bench/cotton1_standard.h5 \
+        [--light directional|sky16] [--layers 1|2]
 """
 
 import argparse
@@ -32,24 +34,26 @@ from knitrun.shading.im_lookup import _im_batch, no_im_table  # noqa: E402
 from knitrun.sim.crane_stockinette import stockinette_curves  # noqa: E402
 
 
-def captured_call(pack, light):
-    """The arguments of the frame's (single-yarn) ``shade_regular`` call."""
-    captured = {}
+def captured_calls(pack, light, layers):
+    """The arguments of the frame's (single-yarn) ``shade_regular`` calls: the front layer's, then (``layers`` 2)
+    the depth-peeled layer's behind it."""
+    captured = []
 
     def capture(*args):
-        captured["args"] = args
+        captured.append(list(args))
         return shade_regular(*args)
 
     folder = Path(tempfile.mkdtemp(prefix="knit_profile_"))
     write_yarn_curves(folder / "patch.h5", stockinette_curves(60, 21))
     (folder / "scene.toml").write_text(bench_render.SCENE.format(width=1280, height=960,
-                                                                 light=bench_render.LIGHTS[light]))
+                                                                 light=bench_render.LIGHTS[light],
+                                                                 layers=layers))
     original, pipeline.shade_regular = pipeline.shade_regular, capture
     try:
         pipeline.render(load_scene(folder / "scene.toml"), {"cotton1": str(pack)})
     finally:
         pipeline.shade_regular = original
-    return list(captured["args"])
+    return captured
 
 
 def best_ms(args, repeats=3):
@@ -71,14 +75,17 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pack", required=True)
     parser.add_argument("--light", choices=sorted(bench_render.LIGHTS), default=None)
+    parser.add_argument("--layers", type=int, choices=(1, 2), default=2, help="render.layers of the frame")
     args = parser.parse_args()
+    cases = []
     for light in [args.light] if args.light else sorted(bench_render.LIGHTS):
-        call = captured_call(args.pack, light)
+        cases += zip([light] * 2, ("front", "behind"), captured_calls(args.pack, light, args.layers))
+    for light, layer, call in cases:
         idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, rgb, alpha = call
         n = len(points.view_dir)
         off = Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
         no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)))
-        print(f"## {light}: shade_regular on {len(idx)} shading points ({_count(lights)} directional, "
+        print(f"## {light}, {layer} layer: shade_regular on {len(idx)} shading points ({_count(lights)} directional, "
               f"{_count(lobes)} SRBF lobes, {_count(ms)} multiple-scattering clusters)")
         base = call[:7]
         rows = [("all lights", call), ("no light (frames, textures)", base + [None, None, None, None] + call[11:])]
