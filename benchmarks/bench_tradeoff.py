@@ -198,18 +198,24 @@ def plot(path, by_scene, floors):
         front = sorted((r for r in rows if r["pareto"]), key=lambda r: r["ms"])
         if len(front) > 1:
             draw.line([xy(r["ms"], r["err"]) for r in front], fill=(120, 120, 120), width=2)
-        placed = []  # label boxes drawn in this panel: a label that would cover one moves down a line
-        for r in sorted(rows, key=lambda r: (r["ms"], r["err"])):
+        marks = []
+        for r in rows:
             cx, cy = xy(r["ms"], r["err"])
             size = 2 + r.get("msaa", 2)
-            draw.ellipse([cx - size, cy - size, cx + size, cy + size], outline=colours.get(r["quality"], "black"),
+            marks.append([cx - size, cy - size, cx + size, cy + size])
+            draw.ellipse(marks[-1], outline=colours.get(r["quality"], "black"),
                          width=2 if "2048" in r["knob"] or "label" in r else 1)
-            if "label" in r:
-                box = list(draw.textbbox((cx + 6, cy - 6), r["label"]))
-                while any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed):
-                    box[1], box[3] = box[1] + 12, box[3] + 12
-                placed.append(box)
-                draw.text((box[0], box[1] - (draw.textbbox((0, 0), r["label"])[1])), r["label"], fill="black")
+        placed = []  # labels after every mark: a label that would cover a mark or a label moves down a line
+        for k_row, r in sorted(enumerate(rows), key=lambda item: (item[1]["ms"], item[1]["err"])):
+            if "label" not in r:
+                continue
+            cx, cy = xy(r["ms"], r["err"])
+            box = list(draw.textbbox((cx + 6, cy - 6), r["label"]))
+            others = placed + marks[:k_row] + marks[k_row + 1:]
+            while any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in others):
+                box[1], box[3] = box[1] + 12, box[3] + 12
+            placed.append(box)
+            draw.text((box[0], box[1] - draw.textbbox((0, 0), r["label"])[1]), r["label"], fill="black")
         legend = ("orange draft, blue standard, green final; size: MSAA; thick: 2048 x 2048 shadow map"
                   if name in QUALITY_SCENES else "labels: SRBF count J" if name in SKY_SCENES
                   else "labels: Gauss-Newton iterations (time includes the solve)")
