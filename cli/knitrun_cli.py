@@ -335,9 +335,11 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
     if backend == "gl":
         from knitrun.render.gl.gl_renderer import GLRenderer as Renderer
         from knitrun.render.gl.gl_renderer import render as render_scene
+        ahead = {}
     else:
         from knitrun.render.pipeline import Renderer
         from knitrun.render.pipeline import render as render_scene
+        ahead = {"compile_ahead": True}  # on an empty kernel cache, a helper compiles the later passes' kernels
 
     scene = load_scene(scene_path)
     check_outputs({"--output": output, "--exr": exr_path, "--gif": gif_path},
@@ -347,11 +349,11 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
     if gif_path is not None and frame_range is None:
         raise FormatError("--gif needs --frames (the frames to animate)")
     if frame_range is not None:
-        _render_frames(Renderer(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment),
-                       scene_path, frame_range, output, exr_path, gif_path, fps, exposure, as_json)
+        _render_frames(Renderer(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
+                                **ahead), scene_path, frame_range, output, exr_path, gif_path, fps, exposure, as_json)
         return
     result = render_scene(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
-                          progress=lambda name, s: click.echo(f"  {name}: {s * 1e3:.0f} ms", err=True))
+                          progress=lambda name, s: click.echo(f"  {name}: {s * 1e3:.0f} ms", err=True), **ahead)
     for warning in result.facts["warnings"]:
         click.echo(f"warning: {warning}", err=True)
     write_png(output, result.image, exposure)

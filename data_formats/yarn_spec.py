@@ -114,7 +114,9 @@ SECTIONS = ("geometry", "flyaways", "optics")
 
 def _section_class(section):
     names = [(f.key, object) for f in FIELDS if f.section == section]
-    return dataclasses.make_dataclass(section.capitalize(), names, frozen=True)
+    cls = dataclasses.make_dataclass(section.capitalize(), names, frozen=True)
+    cls.__module__ = __name__  # make_dataclass says "types", where pickle cannot find the class
+    return cls
 
 
 Geometry = _section_class("geometry")

@@ -59,6 +59,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -68,13 +69,14 @@ from data_formats.errors import FormatError
 from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitrun.render.ablations import Features
 from knitrun.render.camera import scene_camera
+from knitrun.render.compile_ahead import start_compile_ahead
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility
-from knitrun.render.strip_shading import (flyaway_coverage, resolve, resolve_behind, same_surface, shade_flyaway,
-                                          shade_regular, shading_points)
+from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, resolve, resolve_behind, same_surface,
+                                          shade_flyaway, shade_regular, shading_points)
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table
@@ -92,6 +94,20 @@ class RenderResult:
     image: np.ndarray  # (H, W, 3) float32, linear RGB
     timings: dict  # pass → seconds
     facts: dict = field(default_factory=dict)
+
+
+class _FrameRaster(NamedTuple):
+    """What a frame's ``raster`` pass hands on: the shading points of the front layer, of the layer behind it (None at
+    ``render.layers`` 1) and of the flyaway layer (None without flyaways) as ``strip_shading.shading_points`` gives
+    them, the flyaway points as the kernels read them (``hairs``), which of them a hair covers (``covered``), and the
+    yarn entries whose flyaways are drawn."""
+
+    points: dict
+    behind_points: dict | None
+    fly_points: dict | None
+    hairs: Points | None
+    covered: np.ndarray | None
+    drawn_fly: list
 
 
 @dataclass
@@ -244,10 +260,13 @@ class Renderer:
     overriding the scene's ``pack``; ``use_cache`` False fits the environment again instead of reading the fit cache
     (``knitrun.shading.srbf_cache``). FormatError (one line) for a scene the renderer cannot draw (a missing pack, a
     pack for another yarn, a ``packs`` key that names no yarn). ``setup_timings`` holds the seconds of ``load`` and
-    ``srbf_fit`` spent here."""
+    ``srbf_fit`` spent here. ``compile_ahead``: on an empty kernel cache, start a helper process that compiles the
+    ``shade`` and ``resolve`` passes' kernels while the first frame compiles the rasterizer's
+    (``knitrun.render.compile_ahead``; the frame waits for it before its ``shade`` pass). Off by default: a caller
+    that runs renderers side by side (Dask workers) has no core to spare."""
 
     def __init__(self, scene: Scene, packs: dict | None = None, features: Features = Features(),
-                 samples_per_segment: int = 4, use_cache: bool = True, progress=None):
+                 samples_per_segment: int = 4, use_cache: bool = True, progress=None, compile_ahead: bool = False):
         packs = packs or {}
         _check_pack_keys(scene, packs)
         self.scene, self.features, self.samples_per_segment = scene, features, samples_per_segment
@@ -302,6 +321,10 @@ class Renderer:
         lambdas = np.zeros(0) if fit is None else fit.sharpness
         self.im_slices = [im_slices(table, lambdas) for table in self.im_tables]
         self.shadow_depth = {}  # shadow maps by size, drawn over by the next map of that size
+        # a helper process compiling the later passes' kernels while the first frame compiles the rasterizer's
+        # (``knitrun.render.compile_ahead``); None when not asked for or when the kernel cache has them
+        self._compile_helper = start_compile_ahead(scene, packs, features, samples_per_segment) if compile_ahead \
+            else None
 
     def frame_index(self, frame: int | None) -> int:
         """``frame`` as an index into the curves' frames (None: the scene's ``render.frame``); FormatError (one line)
@@ -314,7 +337,7 @@ class Renderer:
     def render(self, frame: int | None = None, progress=None) -> RenderResult:
         """Draw ``frame`` of the yarn curves (default: the scene's ``render.frame``); ``progress(name, seconds)`` is
         called as each pass ends. Timings are this frame's passes (``load``: evaluating its curves)."""
-        scene, features, looks, fit = self.scene, self.features, self.looks, self.fit
+        scene, looks = self.scene, self.looks
         frame = self.frame_index(frame)
         timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame,
                               "layers": scene.render.layers}
@@ -333,6 +356,18 @@ class Renderer:
         lap("load")
 
         camera = scene_camera(scene)
+        raster = self._raster(lines, camera)
+        facts.update(shading_points=int(len(raster.points["weight"])),
+                     flyaway_points=0 if raster.fly_points is None else int(len(raster.fly_points["weight"])),
+                     flyaway_points_covered=0 if raster.fly_points is None else int(raster.covered.sum()))
+        lap("raster")
+        image = self._light_and_shade(lines, camera, raster, facts, lap)
+        facts["residuals"] = {look.name: look.residuals for look in looks}
+        return RenderResult(image, timings, facts)
+
+    def _raster(self, lines, camera) -> _FrameRaster:
+        """The ``raster`` pass of a frame's polylines (module docstring)."""
+        looks, scene = self.looks, self.scene
         msaa = scene.render.msaa
         radius = np.array([looks[k].radius for k in lines.entry])
         fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
@@ -343,7 +378,7 @@ class Renderer:
             behind = rasterize_behind(vis, camera, radius)
             behind_points = shading_points(behind, camera)
         drawn_fly = [k for k, look in enumerate(looks) if look.flyaway is not None]
-        fly_points = None
+        fly_points = hairs = covered = None
         if drawn_fly and len(lines.entry):
             fly_curves = np.isin(lines.entry, drawn_fly)
             fly_buffer = rasterize_visibility(lines.points, lines.offsets, False, lines.rest,
@@ -354,10 +389,15 @@ class Renderer:
             fly_points = shading_points(fly_buffer, camera, mask=mask)
             hairs = _kernel_points(fly_points, lines, looks)
             covered = self._hair_coverage(hairs, fly_points["yarn"], drawn_fly) > 0.0
-        facts.update(shading_points=int(len(points["weight"])),
-                     flyaway_points=0 if fly_points is None else int(len(fly_points["weight"])),
-                     flyaway_points_covered=0 if fly_points is None else int(covered.sum()))
-        lap("raster")
+        return _FrameRaster(points, behind_points, fly_points, hairs, covered, drawn_fly)
+
+    def _light_and_shade(self, lines, camera, raster, facts, lap) -> np.ndarray:
+        """The ``shadow``, ``shade`` and ``resolve`` passes of a frame (module docstring): its (H, W, 3) float32 image.
+        ``facts`` gets the passes' facts, ``lap(name)`` is called as each pass ends."""
+        scene, features, looks, fit = self.scene, self.features, self.looks, self.fit
+        points, behind_points, fly_points = raster.points, raster.behind_points, raster.fly_points
+        hairs, covered, drawn_fly = raster.hairs, raster.covered, raster.drawn_fly
+        radius = np.array([looks[k].radius for k in lines.entry])
 
         # the receivers of each set of points: all regular points; the flyaway points the hairs cover (a point of zero
         # coverage adds nothing to the image, so it gets no shadow lookups and no shading; its visibility reads 1)
@@ -411,6 +451,11 @@ class Renderer:
         facts["ms_lights"] = int(len(ms_dir))
         lap("shadow")
 
+        if self._compile_helper is not None:  # its kernels are in the cache by now, or soon: load them, not compile
+            if self._compile_helper.wait() != 0:
+                facts["warnings"].append(f"the compile-ahead helper failed (exit {self._compile_helper.returncode}): "
+                                         "this frame compiled its kernels itself")
+            self._compile_helper = None
         h, w = camera.height, camera.width
         shaded = []  # (rgb, alpha) of each layer of regular fibers
         for m, layer in enumerate(layers):
@@ -450,8 +495,26 @@ class Renderer:
         if not np.all(np.isfinite(image)):
             raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
         lap("resolve")
-        facts["residuals"] = {look.name: look.residuals for look in looks}
-        return RenderResult(image.reshape(h, w, 3).astype(np.float32), timings, facts)
+        return image.reshape(h, w, 3).astype(np.float32)
+
+    def compile_shading(self):
+        """Compile the kernels of the ``shade`` and ``resolve`` passes, the flyaway coverage and the shadow pass's
+        ``same_surface`` for this scene (its lights, layers, flyaways and features decide their argument types, its
+        size does not) by running them on a frame with no shading point: what ``compile_ahead``'s helper does while
+        the first frame compiles the rasterizer. Draws nothing, costs only the compilation (or the cache's load)."""
+        camera = scene_camera(self.scene)
+        lines = _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64),
+                           np.zeros((0, 3)))
+        pixels = camera.height * camera.width
+        drawn_fly = [k for k, look in enumerate(self.looks) if look.flyaway is not None]
+        fly_points = hairs = covered = None
+        if drawn_fly:
+            fly_points = no_shading_points(pixels)
+            hairs = _kernel_points(fly_points, lines, self.looks)
+            covered = self._hair_coverage(hairs, fly_points["yarn"], drawn_fly) > 0.0
+        behind = no_shading_points(pixels) if self.scene.render.layers > 1 else None
+        raster = _FrameRaster(no_shading_points(pixels), behind, fly_points, hairs, covered, drawn_fly)
+        self._light_and_shade(lines, camera, raster, {}, lambda name: None)
 
     def _hair_coverage(self, hairs, yarn, drawn_fly):
         """The coverage the flyaway layer's points get from their yarn's hair texture (``flyaway_coverage``)."""
@@ -463,10 +526,10 @@ class Renderer:
 
 
 def render(scene: Scene, packs: dict | None = None, features: Features = Features(), samples_per_segment: int = 4,
-           progress=None, use_cache: bool = True) -> RenderResult:
+           progress=None, use_cache: bool = True, compile_ahead: bool = False) -> RenderResult:
     """Render one frame of ``scene`` (its ``render.frame``): a ``Renderer`` set up and used once (arguments there);
     the timings include the setup (``load``: packs, curves and this frame's polylines; ``srbf_fit``)."""
-    renderer = Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
+    renderer = Renderer(scene, packs, features, samples_per_segment, use_cache, progress, compile_ahead)
     result = renderer.render(progress=progress)
     timings = {name: renderer.setup_timings.get(name, 0.0) + result.timings.get(name, 0.0)
                for name in ("load", "srbf_fit") if name in renderer.setup_timings or name in result.timings}

@@ -200,6 +200,15 @@ def shading_points(vis, camera, mask=None):
     return points
 
 
+def no_shading_points(pixels: int):
+    """``shading_points``' dict for a frame of ``pixels`` pixels that has no shading point, with the dtypes it has
+    for a frame that has some (``pipeline.Renderer.compile_shading`` compiles the kernels on it)."""
+    return {"start": np.zeros(pixels + 1, np.int64), "weight": np.empty(0), "position": np.empty((0, 3)),
+            "view_dir": np.empty((0, 3)), "footprint": np.empty(0), "yarn": np.empty(0, np.int32),
+            "segment": np.empty(0, np.int32), "arclength": np.empty(0, np.float32), "v": np.empty(0, np.float32),
+            "tangent": np.empty((0, 3)), "curve": np.empty(0, np.int32)}
+
+
 @njit(parallel=True, cache=True)
 def same_surface(start, curve, position, other_start, other_curve, other_position, reach, out):
     """out[q] for each point q of another set of shading points (``other_*``, e.g. the flyaway layer's): the point

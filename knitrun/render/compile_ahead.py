@@ -1,0 +1,64 @@
+"""Compile-ahead for a cold first frame: a helper process compiles the later passes' kernels while the frame compiles
+the rasterizer's.
+
+On an empty kernel cache the strip renderer's first frame spends nearly all its time compiling Numba kernels, on one
+core, one kernel after another (``benchmarks/profile_compile.py``: 37 s for the example patch, ~15 s of it the
+``raster`` pass's kernels and ~14 s the ``shade`` pass's). The kernels' argument types depend on the scene (its
+lights, layers, flyaways and the renderer's ``Features``), not on the frame, so a second process can compile the
+``shade`` and ``resolve`` kernels, the flyaway coverage and ``same_surface`` (``pipeline.Renderer.compile_shading``:
+the passes run on a frame with no shading point) into the shared on-disk cache while this one rasterizes. Numba looks
+in its cache before it compiles, so when this process reaches those kernels it loads them; ``Renderer.render``
+waits for the helper before the ``shade`` pass rather than compile the same kernels twice. The result is the same
+machine code either way: the images do not change.
+
+The helper runs only when asked (``Renderer(..., compile_ahead=True)``; ``knitrun render`` asks) and only when the
+cache lacks ``shade_regular``: on a warm cache it would only take a core from the frame. It is a fresh interpreter
+(``python -m knitrun.render.compile_ahead``, the renderer's arguments pickled on its stdin; not ``multiprocessing``,
+whose ``spawn`` re-runs the caller's main script) with this process's environment, so the same cache folder. If it
+fails, the frame compiles what it needs itself (slower, never wrong) and says so in ``RenderResult.facts``. Numba
+writes each cache file atomically, so the two processes may write the same entry.
+"""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+
+def kernels_cached() -> bool:
+    """Whether the on-disk kernel cache has an entry for ``strip_shading.shade_regular`` (any signature): then the
+    scene's kernels are most likely there already. Reads Numba's cache index path, a private attribute: a Numba
+    that moved it reads as cached (no helper), the safe side."""
+    from knitrun.render.strip_shading import shade_regular
+
+    try:
+        index = shade_regular._cache._cache_file._index_path
+    except AttributeError:
+        return True
+    return Path(index).exists()
+
+
+def start_compile_ahead(scene, packs, features, samples_per_segment: int):
+    """Start the helper for ``scene`` (arguments as ``pipeline.Renderer``'s) and return its ``subprocess.Popen``, or
+    None when the cache has the kernels already."""
+    if kernels_cached():
+        return None
+    process = subprocess.Popen([sys.executable, "-m", "knitrun.render.compile_ahead"], stdin=subprocess.PIPE,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    with process.stdin:
+        process.stdin.write(pickle.dumps((scene, dict(packs or {}), features, samples_per_segment)))
+    return process
+
+
+def compile_shading(scene, packs, features, samples_per_segment):
+    """The helper's work: a renderer of the same scene (packs and the environment fit read from their caches) whose
+    later passes run on no shading point."""
+    from knitrun.render.pipeline import Renderer
+
+    Renderer(scene, packs, features, samples_per_segment).compile_shading()
+
+
+if __name__ == "__main__":
+    compile_shading(*pickle.load(sys.stdin.buffer))

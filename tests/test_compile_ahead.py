@@ -1,0 +1,70 @@
+"""Compile-ahead (``knitrun.render.compile_ahead``): ``Renderer.compile_shading`` compiles every signature of the
+later passes' kernels that a frame of the same scene then calls (else the helper's work would be wasted and the cold
+frame would compile them again); the helper process runs, the frame waits for it and draws the same image; a helper
+that fails costs time, not the image, and the frame says so."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_formats.scene import load_scene
+from knitrun.render import compile_ahead, pipeline
+from knitrun.render.ablations import ABLATIONS
+from knitrun.render.strip_shading import (flyaway_coverage, resolve, resolve_behind, same_surface, shade_flyaway,
+                                          shade_regular)
+from tests.helpers import FRONT, SKY, SUN, straight, write_scene
+
+KERNELS = (shade_regular, shade_flyaway, resolve, resolve_behind, flyaway_coverage, same_surface)
+
+
+def _scene(folder, lights, layers=2):
+    """Two yarns, one in front of the other, so both layers and the flyaway layer have points. (Cases: a directional
+    light with both layers and the flyaway layer; the sky with one layer and no flyaways: each kind of light, layer
+    count and flyaway switch changes the kernels' argument types.)"""
+    return load_scene(write_scene(folder, [straight(), straight(z=-0.05)[:, [1, 0, 2]]], camera=FRONT, lights=lights,
+                                  render=f"layers = {layers}"))
+
+
+@pytest.mark.parametrize("lights, ablation, layers", [(SUN, "full", 2), (SKY, "closed", 1)],
+                         ids=["sun-flyaways-2-layers", "sky-1-layer"])
+def test_compile_shading_compiles_every_signature_the_frame_calls(tmp_path, pack, lights, ablation, layers):
+    renderer = pipeline.Renderer(_scene(tmp_path, lights, layers), {"cotton1": str(pack)}, ABLATIONS[ablation])
+    renderer.compile_shading()
+    before = {k.__name__: set(k.signatures) for k in KERNELS}
+    result = renderer.render()
+    assert {k.__name__: set(k.signatures) for k in KERNELS} == before
+    assert result.facts["shading_points"] > 0 and result.image.std() > 0  # the frame did call them
+
+
+def test_the_kernel_cache_index_is_where_kernels_cached_looks(tmp_path, pack):
+    """``kernels_cached`` reads a private attribute of Numba's cache; if a Numba upgrade moves it, this fails (the
+    function itself would then always answer True: no helper, the safe side)."""
+    pipeline.render(_scene(tmp_path, SUN), {"cotton1": str(pack)})
+    assert Path(shade_regular._cache._cache_file._index_path).is_file()
+    assert compile_ahead.kernels_cached()
+
+
+def test_the_helper_runs_and_the_frame_is_the_same(tmp_path, pack, monkeypatch):
+    scene = _scene(tmp_path, SUN)
+    alone = pipeline.Renderer(scene, {"cotton1": str(pack)}).render()
+    monkeypatch.setattr(compile_ahead, "kernels_cached", lambda: False)  # as on an empty cache
+    renderer = pipeline.Renderer(scene, {"cotton1": str(pack)}, compile_ahead=True)
+    helper = renderer._compile_helper
+    assert helper is not None
+    result = renderer.render()
+    assert helper.returncode == 0 and renderer._compile_helper is None
+    assert np.array_equal(result.image, alone.image) and result.facts["warnings"] == alone.facts["warnings"]
+    assert pipeline.Renderer(scene, {"cotton1": str(pack)}, compile_ahead=False)._compile_helper is None
+
+
+def test_a_failed_helper_costs_time_not_the_image(tmp_path, pack, monkeypatch):
+    scene = _scene(tmp_path, SUN)
+    alone = pipeline.Renderer(scene, {"cotton1": str(pack)}).render()
+    monkeypatch.setattr(pipeline, "start_compile_ahead", lambda *args: subprocess.Popen(
+        [sys.executable, "-c", "raise SystemExit(3)"]))
+    result = pipeline.Renderer(scene, {"cotton1": str(pack)}, compile_ahead=True).render()
+    assert np.array_equal(result.image, alone.image)
+    assert [w for w in result.facts["warnings"] if "compile-ahead helper failed (exit 3)" in w]
