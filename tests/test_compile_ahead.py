@@ -1,7 +1,7 @@
-"""Compile-ahead (``knitrun.render.compile_ahead``): ``Renderer.compile_shading`` compiles every signature of the
-later passes' kernels that a frame of the same scene then calls (else the helper's work would be wasted and the cold
-frame would compile them again); the helper process runs, the frame waits for it and draws the same image; a helper
-that fails costs time, not the image, and the frame says so."""
+"""Compile-ahead (``knitrun.render.compile_ahead``): ``Renderer.compile_shading`` of the helper's scene compiles
+every signature of the later passes' kernels that a frame of the caller's scene then calls (else the helper's work
+would be wasted and the cold frame would compile them again); the helper process runs, the frame waits for it and
+draws the same image; a helper that fails costs time, not the image, and the frame says so."""
 
 import subprocess
 import sys
@@ -31,10 +31,10 @@ def _scene(folder, lights, layers=2):
 @pytest.mark.parametrize("lights, ablation, layers", [(SUN, "full", 2), (SKY, "closed", 1)],
                          ids=["sun-flyaways-2-layers", "sky-1-layer"])
 def test_compile_shading_compiles_every_signature_the_frame_calls(tmp_path, pack, lights, ablation, layers):
-    renderer = pipeline.Renderer(_scene(tmp_path, lights, layers), {"cotton1": str(pack)}, ABLATIONS[ablation])
-    renderer.compile_shading()
+    scene, packs = _scene(tmp_path, lights, layers), {"cotton1": str(pack)}
+    pipeline.Renderer(compile_ahead.helper_scene(scene), packs, ABLATIONS[ablation]).compile_shading()
     before = {k.__name__: set(k.signatures) for k in KERNELS}
-    result = renderer.render()
+    result = pipeline.Renderer(scene, packs, ABLATIONS[ablation]).render()
     assert {k.__name__: set(k.signatures) for k in KERNELS} == before
     assert result.facts["shading_points"] > 0 and result.image.std() > 0  # the frame did call them
 

@@ -6,7 +6,8 @@ core, one kernel after another (``benchmarks/profile_compile.py``: 37 s for the 
 ``raster`` pass's kernels and ~14 s the ``shade`` pass's). The kernels' argument types depend on the scene (its
 lights, layers, flyaways and the renderer's ``Features``), not on the frame, so a second process can compile the
 ``shade`` and ``resolve`` kernels, the flyaway coverage and ``same_surface`` (``pipeline.Renderer.compile_shading``:
-the passes run on a frame with no shading point) into the shared on-disk cache while this one rasterizes. Numba looks
+the passes run on a frame with no shading point) into the shared on-disk cache while this one loads the packs, fits
+the environment and rasterizes. Numba looks
 in its cache before it compiles, so when this process reaches those kernels it loads them; ``Renderer.render``
 waits for the helper before the ``shade`` pass rather than compile the same kernels twice. The result is the same
 machine code either way: the images do not change.
@@ -21,6 +22,7 @@ writes each cache file atomically, so the two processes may write the same entry
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import subprocess
 import sys
@@ -40,11 +42,19 @@ def kernels_cached() -> bool:
     return Path(index).exists()
 
 
+def helper_scene(scene):
+    """The scene the helper compiles for: ``scene`` with one SRBF lobe. The lobes' count does not change the kernels'
+    argument types, and one lobe fits in a fraction of a second where 16 take ~5 s (the helper starts before the
+    caller's fit has filled the fit cache)."""
+    return dataclasses.replace(scene, render=dataclasses.replace(scene.render, srbf_count=1))
+
+
 def start_compile_ahead(scene, packs, features, samples_per_segment: int):
     """Start the helper for ``scene`` (arguments as ``pipeline.Renderer``'s) and return its ``subprocess.Popen``, or
     None when the cache has the kernels already."""
     if kernels_cached():
         return None
+    scene = helper_scene(scene)
     process = subprocess.Popen([sys.executable, "-m", "knitrun.render.compile_ahead"], stdin=subprocess.PIPE,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     with process.stdin:

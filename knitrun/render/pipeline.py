@@ -269,6 +269,10 @@ class Renderer:
                  samples_per_segment: int = 4, use_cache: bool = True, progress=None, compile_ahead: bool = False):
         packs = packs or {}
         _check_pack_keys(scene, packs)
+        # a helper process compiling the later passes' kernels while this one loads, fits and rasterizes
+        # (``knitrun.render.compile_ahead``); None when not asked for or when the kernel cache has them
+        self._compile_helper = start_compile_ahead(scene, packs, features, samples_per_segment) if compile_ahead \
+            else None
         self.scene, self.features, self.samples_per_segment = scene, features, samples_per_segment
         self.setup_timings, self.setup_facts = {}, {}
         start = time.perf_counter()
@@ -321,10 +325,6 @@ class Renderer:
         lambdas = np.zeros(0) if fit is None else fit.sharpness
         self.im_slices = [im_slices(table, lambdas) for table in self.im_tables]
         self.shadow_depth = {}  # shadow maps by size, drawn over by the next map of that size
-        # a helper process compiling the later passes' kernels while the first frame compiles the rasterizer's
-        # (``knitrun.render.compile_ahead``); None when not asked for or when the kernel cache has them
-        self._compile_helper = start_compile_ahead(scene, packs, features, samples_per_segment) if compile_ahead \
-            else None
 
     def frame_index(self, frame: int | None) -> int:
         """``frame`` as an index into the curves' frames (None: the scene's ``render.frame``); FormatError (one line)
