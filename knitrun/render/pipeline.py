@@ -108,6 +108,10 @@ class _FrameRaster(NamedTuple):
     hairs: Points | None
     covered: np.ndarray | None
     drawn_fly: list
+    # the visibility buffers, held to the end of the frame: freed after the raster pass, their pages went to the
+    # shadow pass's arrays and the next frame's rasterizer faulted in fresh ones (+45 ms a frame, BENCHMARKS.md
+    # "Stop 44: a cold first frame on both cores")
+    buffers: tuple = ()
 
 
 @dataclass
@@ -373,7 +377,7 @@ class Renderer:
         fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
         vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
         points = shading_points(vis, camera)
-        behind_points = None
+        behind_points = behind = fly_buffer = None
         if scene.render.layers > 1 and len(lines.entry):
             behind = rasterize_behind(vis, camera, radius)
             behind_points = shading_points(behind, camera)
@@ -389,7 +393,7 @@ class Renderer:
             fly_points = shading_points(fly_buffer, camera, mask=mask)
             hairs = _kernel_points(fly_points, lines, looks)
             covered = self._hair_coverage(hairs, fly_points["yarn"], drawn_fly) > 0.0
-        return _FrameRaster(points, behind_points, fly_points, hairs, covered, drawn_fly)
+        return _FrameRaster(points, behind_points, fly_points, hairs, covered, drawn_fly, (vis, behind, fly_buffer))
 
     def _light_and_shade(self, lines, camera, raster, facts, lap) -> np.ndarray:
         """The ``shadow``, ``shade`` and ``resolve`` passes of a frame (module docstring): its (H, W, 3) float32 image.
