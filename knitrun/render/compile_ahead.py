@@ -7,17 +7,18 @@ core, one kernel after another (``benchmarks/profile_compile.py``: 37 s for the 
 lights, layers, flyaways and the renderer's ``Features``), not on the frame, so a second process can compile the
 ``shade`` and ``resolve`` kernels, the flyaway coverage and ``same_surface`` (``pipeline.Renderer.compile_shading``:
 the passes run on a frame with no shading point) into the shared on-disk cache while this one loads the packs, fits
-the environment and rasterizes. Numba looks
-in its cache before it compiles, so when this process reaches those kernels it loads them; ``Renderer.render``
-waits for the helper before the ``shade`` pass rather than compile the same kernels twice. The result is the same
-machine code either way: the images do not change.
+the environment and rasterizes. Numba looks in its cache before it compiles, so when this process reaches those
+kernels it loads them; ``Renderer.render`` waits for the helper before the ``shade`` pass rather than compile the
+same kernels twice. The result is the same machine code either way: the images do not change.
 
 The helper runs only when asked (``Renderer(..., compile_ahead=True)``; ``knitrun render`` asks) and only when the
 cache lacks ``shade_regular``: on a warm cache it would only take a core from the frame. It is a fresh interpreter
 (``python -m knitrun.render.compile_ahead``, the renderer's arguments pickled on its stdin; not ``multiprocessing``,
 whose ``spawn`` re-runs the caller's main script) with this process's environment, so the same cache folder. If it
 fails, the frame compiles what it needs itself (slower, never wrong) and says so in ``RenderResult.facts``. Numba
-writes each cache file atomically, so the two processes may write the same entry.
+writes each cache file atomically, so the two processes may write the same entry. A caller that exits first leaves
+the helper to finish (its entries serve the next run). The helper reads the scene's curves like any renderer (a
+stitch-mesh entry is simulated at rest there too), which it does not need; a scene of many stitch meshes gains less.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def helper_scene(scene):
 
 def start_compile_ahead(scene, packs, features, samples_per_segment: int):
     """Start the helper for ``scene`` (arguments as ``pipeline.Renderer``'s) and return its ``subprocess.Popen``, or
-    None when the cache has the kernels already."""
+    None when the cache has the kernels already. ``scene`` must pickle (``Scene`` does)."""
     if kernels_cached():
         return None
     scene = helper_scene(scene)
@@ -63,8 +64,8 @@ def start_compile_ahead(scene, packs, features, samples_per_segment: int):
 
 
 def compile_shading(scene, packs, features, samples_per_segment):
-    """The helper's work: a renderer of the same scene (packs and the environment fit read from their caches) whose
-    later passes run on no shading point."""
+    """The helper's work: a renderer of ``helper_scene`` (packs read, one lobe fitted or read from the fit cache)
+    whose later passes run on no shading point."""
     from knitrun.render.pipeline import Renderer
 
     Renderer(scene, packs, features, samples_per_segment).compile_shading()
