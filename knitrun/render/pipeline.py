@@ -147,6 +147,11 @@ def radius_mismatch(curves, drawn: float, where: str) -> str | None:
             f"simulate with the drawn radius or set the entry's radius")
 
 
+def _no_polylines() -> _Polylines:
+    """A frame without a yarn to draw."""
+    return _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)))
+
+
 def _polylines(scene: Scene, entry_curves: list, frame: int, samples_per_segment: int) -> _Polylines:
     """The scene's yarns at ``frame`` as polylines (an entry with a single frame is drawn at it whatever ``frame``)."""
     pts, rest, normals, entry_of, sizes = [], [], [], [], [0]
@@ -164,7 +169,7 @@ def _polylines(scene: Scene, entry_curves: list, frame: int, samples_per_segment
             entry_of.append(k)
             sizes.append(len(xyz))
     if not pts:
-        return _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)))
+        return _no_polylines()
     return _Polylines(np.concatenate(pts), np.cumsum(sizes), np.concatenate(rest), np.array(entry_of, np.int64),
                       np.concatenate(normals))
 
@@ -507,8 +512,7 @@ class Renderer:
         size does not) by running them on a frame with no shading point: what ``compile_ahead``'s helper does while
         the first frame compiles the rasterizer. Draws nothing, costs only the compilation (or the cache's load)."""
         camera = scene_camera(self.scene)
-        lines = _Polylines(np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(0), np.zeros(0, np.int64),
-                           np.zeros((0, 3)))
+        lines = _no_polylines()
         pixels = camera.height * camera.width
         drawn_fly = [k for k, look in enumerate(self.looks) if look.flyaway is not None]
         fly_points = hairs = covered = None
