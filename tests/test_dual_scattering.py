@@ -179,6 +179,21 @@ def test_no_fibers_in_front_and_no_backscatter_is_single_scattering():
     np.testing.assert_allclose(got, f * np.cos(ti)[:, None], rtol=1e-12)
 
 
+def test_zero_density_factors_leave_single_scattering_at_any_count():
+    """d_f = d_b = 0 (the renderer's single-scattering split, ``Features.multiple_scattering``): D f cos θ_i for
+    every fiber count and direct fraction; with the default factors the same points carry more light."""
+    p = params(COLOURS, *ROUGHNESS[1])
+    tables = precompute_dual_scattering(p, n_theta=16)
+    rng = np.random.default_rng(5)
+    ti, to, ph = rng.uniform(-1.5, 1.5, 60), rng.uniform(-1.5, 1.5, 60), rng.uniform(-math.pi, math.pi, 60)
+    n, direct = rng.uniform(0.0, 9.0, 60), rng.uniform(0.0, 1.0, 60)
+    got = ds.evaluate_ds(tables, ti, to, ph, n, d_f=0.0, d_b=0.0, params=p, direct_fraction=direct)
+    f = fb.eval_batch(p, fb.direction(to, 0.0), fb.direction(ti, -ph))
+    np.testing.assert_allclose(got, direct[:, None] * f * np.cos(ti)[:, None], rtol=1e-12)
+    full = ds.evaluate_ds(tables, ti, to, ph, n, params=p, direct_fraction=direct)
+    assert np.all(full >= got) and np.all(full.sum(axis=1) > got.sum(axis=1))
+
+
 def test_runtime_is_finite_at_the_extremes():
     p = EXTREMES["smooth"]
     cases = [precompute_dual_scattering(q, n_theta=8, quality=16) for q in EXTREMES.values()]

@@ -140,6 +140,10 @@ def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
         gl_renderer.GLRenderer(load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=many, name="m")),
                                {"cotton1": str(pack)})
     assert "\n" not in str(e.value)
+    one = load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="one"))
+    with pytest.raises(FormatError, match="single scattering") as e:
+        gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(multiple_scattering=False))
+    assert "\n" not in str(e.value)
 
 
 def test_a_machine_without_egl_gets_a_one_line_reason(monkeypatch):

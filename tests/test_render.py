@@ -26,6 +26,7 @@ from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
+from knitrun.shading.dual_scattering import D_B, D_F
 from knitrun.shading.equirect import texel_directions
 from knitrun.shading.im_lookup import im_slices, im_table_from
 from knitrun.shading.srbf_fit import fit_srbf
@@ -143,7 +144,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         fit = fit_srbf(sky, n_lobes=j, seed=0)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
         points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
-        look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0)
+        look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0, D_F, D_B)
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
                       Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n),
                       im_slices(i_m, fit.sharpness), rgb, alpha)
@@ -189,6 +190,31 @@ def test_ablations_change_the_image(tmp_path, pack):
         assert not np.array_equal(images[a], images[b]), (a, b)
     for other in ("no_tables", "factored", "no_detail", "papers_xi"):  # the tiny pack stores both forms and both ξ
         assert not np.array_equal(images["full"], images[other]), other
+
+
+def test_the_single_scattering_split_is_darker_and_blind_to_what_crosses_yarns(tmp_path, pack):
+    """``Features(multiple_scattering=False)`` keeps single scattering alone: never brighter than the full image
+    under the sun and the sky, clearly darker over the yarns, not black; and, its DS density factors being 0, blind
+    to the fiber count of light crossing another yarn (the pack's transmittance count with ``interreflection``, the
+    geometric one without), which only the forward-scattered (multiple) light passes: under the sun, without the
+    hairs (whose own single scattering crosses their yarn), both counts draw the same image."""
+    pair = [straight(), straight(z=0.1) + [0, 0.05, 0]]
+    both = write_scene(tmp_path, pair, camera=FRONT, lights=SKY + "\n" + SUN, name="both")
+    full = _render(both, pack).image - [0.1, 0.2, 0.3]
+    single = _render(both, pack, features=Features(multiple_scattering=False)).image - [0.1, 0.2, 0.3]
+    covered = np.abs(full).sum(axis=2) > 1e-3
+    assert covered.sum() > 100
+    assert np.all(single <= full + 1e-6 * np.abs(full).max())
+    assert 0.05 * full[covered].mean() < single[covered].mean() < 0.9 * full[covered].mean()
+    sun = write_scene(tmp_path, pair, camera=FRONT, lights=SUN, name="sun")
+    split = dict(multiple_scattering=False, flyaways=False)
+    a = _render(sun, pack, features=Features(**split)).image
+    b = _render(sun, pack, features=Features(interreflection=False, **split)).image
+    assert np.array_equal(a, b)
+    # ... which the full light transport is not: there the count moves the yarn in the other's shadow
+    c = _render(sun, pack, features=Features(flyaways=False)).image
+    d = _render(sun, pack, features=Features(interreflection=False, flyaways=False)).image
+    assert np.abs(c - d).max() > 1e-4
 
 
 def test_pack_errors_are_one_line(tmp_path, pack):

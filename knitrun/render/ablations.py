@@ -32,6 +32,13 @@ the brightness at every light angle where the diagonal ξ is up to 1.9× too bri
 patches it is 1–5 % darker and, on three of the four, further from the reference at the yarn scale (BENCHMARKS.md,
 "Issue 13: ξ closed at every view").
 
+``multiple_scattering`` False keeps single scattering alone: the fiber BCSDF f of every directional light and the
+environment's I_M, with Zinke's density factors d_f = d_b = 0 so that the DS terms of multiple scattering (local
+back-scattering, forward-scattered light through other fibers, and the environment's multiple-scattering cells)
+vanish. It is no rung of the ladder but a split: the reference traced with one scattering event
+(``trace_reference(..., max_depth=1)``) is its counterpart, and ``benchmarks/probe_split.py`` compares the two
+halves of the light, single and multiple, scene by scene.
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
 the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
@@ -56,6 +63,7 @@ class Features:
     fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
     closed_xi: bool = True  # ξ closed on this renderer (correction/xi_closed) where the pack has it, else the paper's
     view_xi: bool = False  # ξ closed at every view (correction/xi_view) where the pack has it, before closed_xi
+    multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs

@@ -299,6 +299,8 @@ class Renderer:
             if not features.fiber_shadowing:
                 look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
                 look.n_occluded = 0.0
+            if not features.multiple_scattering:
+                look.d_f = look.d_b = 0.0
         self.looks = looks
         self.setup_facts["n_cross"] = {look.name: look.n_cross_from for look in looks}
         self.setup_facts["xi"] = {look.name: look.xi_from if features.xi else "none (switched off)" for look in looks}

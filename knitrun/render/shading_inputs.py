@@ -61,6 +61,8 @@ class Look(NamedTuple):
     flyaway_half_width: float
     n_occluded: float
     n_cross: float
+    d_f: float  # Zinke's forward-scattering density factor (``dual_scattering.D_F``; 0: single scattering alone)
+    d_b: float  # his back-scattering density factor (``dual_scattering.D_B``; 0: single scattering alone)
 
 
 class Lights(NamedTuple):

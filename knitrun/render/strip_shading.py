@@ -66,6 +66,10 @@ the body sends on toward the camera as it receives it. Without τ a hair over th
 scattered radiance by its own single scattering and darkens it, where in the path-traced reference hairs over the
 body add light.
 
+Zinke's density factors d_f, d_b come with the look (``Look.d_f``, ``d_b``: ``dual_scattering.D_F``, ``D_B``); both
+0 (``Features.multiple_scattering`` False) leave single scattering alone, the split that ``benchmarks/probe_split.py``
+compares with the reference traced with one scattering event.
+
 Resolve (``resolve``): C = Σ w α L + (1 − Σ w α)·background for the regular layer, then the flyaway layer over it:
 C ← Σ w A L_fly + (1 − Σ w A (1 − τ))·C. All radiances linear RGB in the units of E and W.
 
@@ -89,7 +93,7 @@ from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
 from knitrun.render.strip_raster import sample_attributes
 from knitrun.render.texture_sampling import mip_level, sample_mip
-from knitrun.shading.dual_scattering import (D_B, D_F, K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel, ds_scratch,
+from knitrun.shading.dual_scattering import (K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel, ds_scratch,
                                              forward_fraction)
 from knitrun.shading.fiber_bcsdf import N_CONTEXT, context_into, evaluate, r_lobe_context_into, spread_params
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
@@ -379,7 +383,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
     None argument before it compiles, so a scene never compiles the terms of a kind of light it lacks (the I_M and
     multiple-scattering terms are ~40 % of this kernel's compile time)."""
     params, ds, period = look.params, look.ds, look.period
-    n_occluded, n_cross = look.n_occluded, look.n_cross
+    n_occluded, n_cross, d_f, d_b = look.n_occluded, look.n_cross, look.d_f, look.d_b
     texel_u = period / tangent.cols[0, 0]
     texel_v = 2.0 * look.radius / tangent.rows[0, 0]
     for block in prange((idx.shape[0] + POINT_BLOCK - 1) // POINT_BLOCK):
@@ -415,7 +419,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     n_front = n_occluded + (1.0 - vis) * n_cross
                     phi_f = azimuth_difference(tf, wo, w)
                     spread_params(params, spread2, phi_f, wide)
-                    ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, D_F, D_B, vis * fiber_lit,
+                    ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, d_f, d_b, vis * fiber_lit,
                               comp, ds_work)
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
@@ -442,11 +446,11 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     theta_c_f = longitudinal_angle(tf, w)
                     phi_f = azimuth_difference(tf, wo, w)
                     spread_params(params, spread2, phi_f, wide)
-                    ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, D_F, D_B, lit,
+                    ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, d_f, d_b, lit,
                               comp, ds_work, False)  # f itself is in the lobes' I_M
                     cos_c = math.cos(theta_c_f)
                     for ch in range(3):
-                        multiple = (lit * D_B * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
+                        multiple = (lit * d_b * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
                         rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
             for ch in range(3):
                 rgb[q, ch] *= fiber_detail[0]

@@ -32,8 +32,8 @@ from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
 from knitrun.render.shading_inputs import Corrections, Look
 from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
-from knitrun.shading.dual_scattering import (DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts, pack_tables,
-                                             transmittance_count)
+from knitrun.shading.dual_scattering import (D_B, D_F, DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts,
+                                             pack_tables, transmittance_count)
 from knitrun.shading.fiber_bcsdf import params_from_pack, tinted
 from knitrun.shading.im_lookup import IMTable, im_table_from
 from knitrun.shading.table_lookup import lookup_theta
@@ -74,6 +74,8 @@ class YarnLook:
     xi_from: str  # which ξ the regular fibers are shaded with (closed, the paper's), for RenderResult.facts
     warnings: list  # what the pack could not give that the features asked for (one line each)
     n_occluded: float
+    d_f: float  # DS density factors (``dual_scattering.D_F``, ``D_B``); 0 and 0: single scattering alone
+    d_b: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
     yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
     im: IMTable | None  # the I_M^{TT,D} table for ``im_lookup.im_kernel``
@@ -219,7 +221,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
-        n_cross=n_cross, n_cross_from=n_cross_from, n_occluded=n_occluded, xi_from=xi_from, warnings=warnings,
+        n_cross=n_cross, n_cross_from=n_cross_from, n_occluded=n_occluded, d_f=D_F, d_b=D_B, xi_from=xi_from,
+        warnings=warnings,
         twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
         yarn_albedo=yarn_albedo, im=im, residuals=residuals)
 
@@ -228,7 +231,7 @@ def shading_look(look: YarnLook) -> tuple:
     """What the shading kernels receive for ``look`` (``shading_inputs``): (``Look``, ``Corrections``, the flyaway
     ``MipStack``, a one-texel stand-in of its three variants for a yarn without a flyaway layer)."""
     return (Look(look.params, look.ds, float(look.period), float(look.radius), float(look.flyaway_half_width),
-                 float(look.n_occluded), float(look.n_cross)),
+                 float(look.n_occluded), float(look.n_cross), float(look.d_f), float(look.d_b)),
             Corrections(look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm, look.psi_gn, look.xi_view),
             look.flyaway if look.flyaway is not None else empty_mip_stack(4, 3))
 

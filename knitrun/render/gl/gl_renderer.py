@@ -241,6 +241,9 @@ class GLRenderer:
 
     def __init__(self, scene, packs=None, features: Features = Features(), samples_per_segment: int = 4,
                  use_cache: bool = True, progress=None, ctx=None):
+        if not features.multiple_scattering:
+            raise FormatError("the GL backend draws the full light transport; Features.multiple_scattering=False "
+                              "(single scattering alone) is drawn by the CPU renderer")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
