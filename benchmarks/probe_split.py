@@ -1,0 +1,197 @@
+"""Single and multiple scattering, reference against strips, scene by scene (issue 13, the look): which half of the
+light the strip model gets wrong, and where.
+
+The path tracer counts scattering events (``trace_reference(..., max_depth=1)`` ends every path at its first fiber:
+camera ray, hit, next-event estimate of the lights there), so its image splits into single scattering SS (one
+event) and multiple scattering MS = full − SS. The strip renderer's counterpart is ``Features(multiple_scattering=
+False)``: Zinke's density factors d_f = d_b = 0, which leaves the fiber BCSDF f of each directional light and the
+environment's I_M and drops every DS term of multiple scattering (``knitrun.render.ablations``). Per scene this
+traces the reference (seed and fiber seed of the scene) and a second fiber instance (seed + 1, fiber seed + 1),
+each at the full depth and at one event, over a black background (so that SS and MS carry no background and the
+means are the yarns' alone), and renders each model of ``--models`` both ways. Reported per model, all at the yarn
+scale d (``knitbake.compare.image_metrics``):
+
+* the mean radiance ratio to the reference of the whole image, of SS and of MS;
+* the yarn-scale rel L1 as a ratio to the instance floor (the second instance's rel L1), for the model and for two
+  oracles: the model's SS with the instance's MS (what a perfect multiple-scattering term would leave), and the
+  instance's SS with the model's MS (what a perfect single-scattering term would leave).
+
+``--tilt-bins`` adds, for scenes drawn from yarn-curve files whose curves turn (a straight yarn sits in one bin), the
+mean of the yarn-scale SS and MS at the curves' control points binned by |ω_o · t| (as ``probe_tilt.py
+--bins-from``): how each half changes as the yarn turns toward the camera. ``--out DIR`` keeps the images (``<scene>/{reference,instance}_{full,single}.exr``,
+``strip_<model>_{full,single}.exr``).
+
+    .venv/bin/python benchmarks/probe_split.py --pack out/bench/cotton1_standard.h5 [--scenes a,b] \\
+        [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--out DIR]
+
+The spp per scene is the one the ruler picked (the Monte Carlo floor at most half the instance floor at d:
+BENCHMARKS.md, "The ruler"), unless ``--spp`` is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+from data_formats.images import write_exr
+from data_formats.scene import load_scene
+from data_formats.yarn_curves import read_yarn_curves
+from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
+from knitbake.compare.report import yarn_diameter_px
+from knitbake.trace.reference import trace_reference
+from knitrun.render import pipeline
+from knitrun.render.ablations import ABLATIONS
+from knitrun.render.camera import project, scene_camera
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = {"straight_yarn_directional": 16, "straight_yarn_sky": 16, "straight_yarn_backlit": 16,
+          "knit_patch_directional": 16, "knit_patch_sky": 64, "knit_patch_grazing": 16,
+          "simulated_patch_directional": 32}  # name → the ruler's spp
+TILT_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)  # |ω_o · t|, the last bin closed
+
+
+def traced(scene, spp, seed, fiber_seed):
+    """(full, single) reference images of ``scene`` (RGB float64) and the seconds both took."""
+    t0 = time.perf_counter()
+    full, _ = trace_reference(scene, spp, seed, scene.render.max_depth, fiber_seed=fiber_seed)
+    single, _ = trace_reference(scene, spp, seed, 1, fiber_seed=fiber_seed)
+    return full.astype(np.float64), single.astype(np.float64), time.perf_counter() - t0
+
+
+def rendered(scene, pack, model):
+    """(full, single) strip images of ``scene`` for ablation ``model``."""
+    features = ABLATIONS[model]
+    full = pipeline.Renderer(scene, {"cotton1": pack}, features).render().image
+    single = pipeline.Renderer(scene, {"cotton1": pack},
+                               dataclasses.replace(features, multiple_scattering=False)).render().image
+    return np.asarray(full, np.float64)[..., :3], np.asarray(single, np.float64)[..., :3]
+
+
+def _mean_ratio(test, reference):
+    return float(test.mean() / reference.mean()) if reference.mean() > 0 else float("nan")
+
+
+def split_rows(name, d, ref, inst, strips):
+    """Markdown rows: the instance, then each model (``strips``: model → (full, single))."""
+    floor = yarn_scale_metrics(inst[0], ref[0], d)["rel_l1"]
+    rows = []
+    for label, (full, single) in [("*other fiber instance*", inst), *strips.items()]:
+        ms, ref_ms = full - single, ref[0] - ref[1]
+        err = yarn_scale_metrics(full, ref[0], d)["rel_l1"]
+        cells = [name, label, f"{_mean_ratio(full, ref[0]):.3f}", f"{_mean_ratio(single, ref[1]):.3f}",
+                 f"{_mean_ratio(ms, ref_ms):.3f}", f"{err / floor:.2f}×"]
+        if label in strips:
+            perfect_ms = yarn_scale_metrics(single + (inst[0] - inst[1]), ref[0], d)["rel_l1"]
+            perfect_ss = yarn_scale_metrics(inst[1] + ms, ref[0], d)["rel_l1"]
+            cells += [f"{perfect_ms / floor:.2f}×", f"{perfect_ss / floor:.2f}×"]
+        else:
+            cells += ["—", "—"]
+        rows.append("| " + " | ".join(cells) + " |")
+    return rows, floor
+
+
+def curve_tilts(scene):
+    """(row, col, |ω_o · t|) of every control point of the scene's curve-file yarns, at the scene's frame; None when
+    no yarn is drawn from a curve file."""
+    camera = scene_camera(scene)
+    rows, cols, tilts = [], [], []
+    for entry in scene.yarns:
+        if entry.curves is None:
+            continue
+        curves = read_yarn_curves(entry.curves)
+        points = curves.points[scene.render.frame if curves.points.shape[0] > 1 else 0]
+        x, y, _ = project(camera, points)
+        cols.append(np.clip(np.round(x).astype(int), 0, scene.camera.width - 1))
+        rows.append(np.clip(np.round(y).astype(int), 0, scene.camera.height - 1))
+        for a, b in zip(curves.offsets[:-1], curves.offsets[1:]):
+            t = np.gradient(points[a:b], axis=0)
+            t /= np.maximum(np.linalg.norm(t, axis=1), 1e-300)[:, None]
+            view = camera.position - points[a:b]
+            view /= np.maximum(np.linalg.norm(view, axis=1), 1e-300)[:, None]
+            tilts.append(np.abs(np.einsum("ij,ij->i", t, view)))
+    if not tilts:
+        return None
+    return np.concatenate(rows), np.concatenate(cols), np.concatenate(tilts)
+
+
+def tilt_rows(name, d, at, ref, strips):
+    """Markdown rows of the yarn-scale SS and MS at the control points ``at`` = (row, col, tilt), by tilt bin."""
+    row, col, tilt = at
+
+    def sampled(image):
+        return yarn_filter(image, d).mean(-1)[row, col]
+
+    out = []
+    for label, (full, single) in [("reference", ref), *strips.items()]:
+        ss, ms = sampled(single), sampled(full - single)
+        cells = []
+        for lo, hi in zip(TILT_BINS[:-1], TILT_BINS[1:]):
+            inside = (tilt >= lo) & ((tilt < hi) | (hi == TILT_BINS[-1]))
+            cells.append(f"{ss[inside].mean():.4f} / {ms[inside].mean():.4f}" if inside.any() else "—")
+        out.append(f"| {name} | {label} | " + " | ".join(cells) + " |")
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
+    parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
+    parser.add_argument("--models", default="full,no_tables,plain_ds", help="names of knitrun.render.ablations")
+    parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
+    parser.add_argument("--tilt-bins", action="store_true", help="bin SS and MS along the curves by |ω_o · t|")
+    parser.add_argument("--out", type=Path, default=None, help="keep the images here")
+    args = parser.parse_args()
+    models = args.models.split(",")
+    unknown = sorted(set(models) - set(ABLATIONS))
+    if unknown:
+        parser.error(f"--models: unknown model {unknown[0]!r} ({', '.join(ABLATIONS)})")
+    names = args.scenes.split(",")
+    missing = [n for n in names if not (ROOT / "examples" / "scenes" / f"{n}.toml").is_file()]
+    if missing:
+        parser.error(f"--scenes: no example scene {missing[0]!r}")
+    if not Path(args.pack).is_file():
+        parser.error(f"--pack: no file {args.pack}")
+    print("Over a black background; ratios of means to the reference's; rel L1 at the yarn scale over the instance "
+          "floor.\n")
+    print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
+          "| with the instance's SS |")
+    print("|---|---|---|---|---|---|---|---|")
+    tilt_tables = []
+    for name in names:
+        scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
+        scene = dataclasses.replace(scene, background=(0.0, 0.0, 0.0))
+        spp = args.spp or SCENES.get(name, 16)
+        seed, d = scene.render.seed, yarn_diameter_px(scene)
+        *ref, ref_s = traced(scene, spp, seed, seed)
+        *inst, inst_s = traced(scene, spp, seed + 1, seed + 1)
+        strips = {m: rendered(scene, args.pack, m) for m in models}
+        rows, floor = split_rows(name, d, ref, inst, strips)
+        print("\n".join(rows), flush=True)
+        print(f"<!-- {name}: {spp} spp, d = {d:.1f} px, instance floor {floor:.3f}; traced {ref_s:.0f} + "
+              f"{inst_s:.0f} s; SS is {ref[1].mean() / ref[0].mean():.2f} of the reference -->", flush=True)
+        if args.out is not None:
+            folder = args.out / name
+            folder.mkdir(parents=True, exist_ok=True)
+            for label, (full, single) in [("reference", ref), ("instance", inst),
+                                          *((f"strip_{m}", s) for m, s in strips.items())]:
+                write_exr(folder / f"{label}_full.exr", full.astype(np.float32))
+                write_exr(folder / f"{label}_single.exr", single.astype(np.float32))
+        if args.tilt_bins:
+            at = curve_tilts(scene)
+            populated = 0 if at is None else len(np.unique(np.digitize(at[2], TILT_BINS[1:-1])))
+            if populated > 1:  # a straight yarn sits in one bin
+                tilt_tables += tilt_rows(name, d, at, ref, strips)
+    if tilt_tables:
+        print("\nYarn-scale SS / MS at the control points, by |ω_o · t|:\n")
+        print("| scene | image | " + " | ".join(f"{lo:.1f}–{hi:.1f}" for lo, hi in zip(TILT_BINS[:-1], TILT_BINS[1:]))
+              + " |")
+        print("|---" * 7 + "|")
+        print("\n".join(tilt_tables))
+
+
+if __name__ == "__main__":
+    main()
