@@ -11,15 +11,16 @@ each at the full depth and at one event, over a black background (so that SS and
 means are the yarns' alone), and renders each model of ``--models`` both ways. Reported per model, all at the yarn
 scale d (``knitbake.compare.image_metrics``):
 
-* the mean radiance ratio to the reference of the whole image, of SS and of MS;
+* the ratio of the RGB means to the reference's (``knitrun compare`` weighs luminance), of the whole image, of SS
+  and of MS;
 * the yarn-scale rel L1 as a ratio to the instance floor (the second instance's rel L1), for the model and for two
   oracles: the model's SS with the instance's MS (what a perfect multiple-scattering term would leave), and the
   instance's SS with the model's MS (what a perfect single-scattering term would leave).
 
 ``--tilt-bins`` adds, for scenes drawn from yarn-curve files whose curves turn (a straight yarn sits in one bin), the
 mean of the yarn-scale SS and MS at the curves' control points binned by |ω_o · t| (as ``probe_tilt.py
---bins-from``): how each half changes as the yarn turns toward the camera. ``--out DIR`` keeps the images (``<scene>/{reference,instance}_{full,single}.exr``,
-``strip_<model>_{full,single}.exr``).
+--bins-from``): how each half changes as the yarn turns toward the camera. ``--out DIR`` keeps the images
+(``<scene>/{reference,instance}_{full,single}.exr``, ``strip_<model>_{full,single}.exr``).
 
     .venv/bin/python benchmarks/probe_split.py --pack out/bench/cotton1_standard.h5 [--scenes a,b] \\
         [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--out DIR]
@@ -155,8 +156,8 @@ def main():
         parser.error(f"--scenes: no example scene {missing[0]!r}")
     if not Path(args.pack).is_file():
         parser.error(f"--pack: no file {args.pack}")
-    print("Over a black background; ratios of means to the reference's; rel L1 at the yarn scale over the instance "
-          "floor.\n")
+    print("Over a black background; ratios of RGB means to the reference's (the compare weighs luminance); rel L1 at "
+          "the yarn scale over the instance floor.\n")
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
           "| with the instance's SS |")
     print("|---|---|---|---|---|---|---|---|")
