@@ -5,6 +5,7 @@ pack errors; plus the texture sampler, the flyaway variant hash and the resolve.
 import dataclasses
 import json
 import math
+from types import SimpleNamespace
 
 import numba
 import numpy as np
@@ -19,7 +20,7 @@ from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
-from knitrun.render.pipeline import radius_mismatch, render
+from knitrun.render.pipeline import PARALLAX_MAX_SIN, parallax_shift, radius_mismatch, render
 from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, resolve_behind, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
@@ -215,6 +216,62 @@ def test_the_single_scattering_split_is_darker_and_blind_to_what_crosses_yarns(t
     c = _render(sun, pack, features=Features(flyaways=False)).image
     d = _render(sun, pack, features=Features(interreflection=False, flyaways=False)).image
     assert np.abs(c - d).max() > 1e-4
+
+
+def _parallax_points(xyz, rest, segment, arclength, v, tangent, view, radius=0.03):
+    """``parallax_shift`` of points on one polyline (vertices ``xyz``, rest arc length ``rest``)."""
+    lines = SimpleNamespace(points=np.asarray(xyz, float), rest=np.asarray(rest, float),
+                            offsets=np.array([0, len(xyz)], np.int64))
+    n = len(arclength)
+    points = {"segment": np.asarray(segment, np.int32), "arclength": np.asarray(arclength, np.float32),
+              "v": np.asarray(v, np.float32), "tangent": np.asarray(tangent, np.float32),
+              "view_dir": np.tile(np.asarray(view, float), (n, 1)), "yarn": np.zeros(n, np.int32),
+              "curve": np.zeros(n, np.int32)}
+    return parallax_shift(points, lines, [SimpleNamespace(radius=radius)])
+
+
+def test_the_axial_parallax_reads_the_centre_line_whose_surface_is_seen():
+    """A straight yarn tilted by ψ toward the camera: the point at v is read r √(1 − v²) tan ψ further along (in rest
+    length: half as far on a yarn stretched 2×), its tangent unchanged; across the view (ψ = 0) and at the strip's
+    edges (|v| = 1) nothing moves; past the clamp the shift stops growing. On a ring seen edge-on the tangent turns
+    with the arc: the circle's tangent at the shifted arc length."""
+    r = 0.03
+    for psi in (0.0, 0.4, 1.1):
+        axis = np.array([math.cos(psi), 0.0, math.sin(psi)])
+        xyz = np.linspace(0.0, 1.0, 101)[:, None] * axis
+        rest = 0.5 * np.linspace(0.0, 1.0, 101)  # stretched 2×: rest length is half the current
+        v = np.array([0.0, 0.6, -1.0])
+        got = _parallax_points(xyz, rest, [40, 40, 40], [0.2015] * 3, v, np.tile(axis, (3, 1)), [0, 0, 1], r)
+        tan_o = min(math.tan(psi), PARALLAX_MAX_SIN / math.sqrt(1 - PARALLAX_MAX_SIN ** 2))
+        np.testing.assert_allclose(got["arclength"], 0.2015 + 0.5 * r * np.sqrt(1 - v ** 2) * tan_o, atol=1e-6)
+        np.testing.assert_allclose(got["tangent"], np.tile(axis, (3, 1)), atol=1e-6)
+        assert np.all(got["segment"] == np.floor(got["arclength"] / 0.005).astype(int))
+    rho, n = 0.2, 721  # a ring in the x–z plane, seen from +z, arc length = ρ·angle
+    angle = np.linspace(0.0, 2 * np.pi, n)
+    xyz = np.stack([rho * np.cos(angle), np.zeros(n), rho * np.sin(angle)], axis=1)
+    rest = rho * angle
+    at = np.array([0.3, 0.9, 1.4, 2.0, 4.0])  # angles of the points, v = 0
+    seg = np.floor(at / (angle[1] - angle[0])).astype(int)
+    tangent = np.stack([-np.sin(at), np.zeros_like(at), np.cos(at)], axis=1)
+    got = _parallax_points(xyz, rest, seg, rho * at, np.zeros_like(at), tangent, [0, 0, 1], r)
+    sin_o = np.clip(np.cos(at), -PARALLAX_MAX_SIN, PARALLAX_MAX_SIN)
+    moved = at + r * sin_o / np.sqrt(1 - sin_o ** 2) / rho
+    np.testing.assert_allclose(got["arclength"], rho * moved, atol=1e-6)
+    expect = np.stack([-np.sin(moved), np.zeros_like(at), np.cos(moved)], axis=1)
+    np.testing.assert_allclose(got["tangent"], expect, atol=2e-4)
+
+
+def test_the_axial_parallax_leaves_a_yarn_across_the_view_and_moves_a_tilted_bent_one(tmp_path, pack):
+    """Seen orthographically a straight yarn in the image plane has θ_o = 0 everywhere: nothing moves (a pinhole
+    camera sees its ends obliquely, which moves them). A yarn that rises toward the camera is drawn otherwise."""
+    ortho = FRONT.replace("fov_deg = 30.0", "ortho_height = 0.5")
+    across = write_scene(tmp_path, [straight()], camera=ortho, lights=SUN, name="across")
+    on = Features(parallax=True)
+    np.testing.assert_allclose(_render(across, pack, features=on).image, _render(across, pack).image, atol=1e-5)
+    t = np.linspace(0.0, np.pi, 25)
+    arc = np.stack([0.25 * np.cos(t), 0.05 * np.sin(t), 0.2 * np.sin(t)], axis=1)  # rises toward the camera
+    bent = write_scene(tmp_path, [arc], camera=FRONT, lights=SUN, name="bent")
+    assert np.abs(_render(bent, pack, features=on).image - _render(bent, pack).image).max() > 1e-3
 
 
 def test_pack_errors_are_one_line(tmp_path, pack):
@@ -428,7 +485,6 @@ def test_yarn_colour_acts_per_channel(tmp_path, pack):
 def test_texture_phase_follows_the_view_azimuth_in_the_yarn_frame():
     """A yarn along +x with yarn-frame normal N = +y: seen along N (γ = 0) the texture is read at s; seen from +z
     (γ = +90°) a counter-clockwise-plied yarn is read a quarter period earlier, a clockwise one a quarter later."""
-    from types import SimpleNamespace
 
     from knitrun.render.pipeline import view_phase_arclength
 

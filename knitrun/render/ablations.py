@@ -39,10 +39,15 @@ vanish. It is no rung of the ladder but a split: the reference traced with one s
 (``trace_reference(..., max_depth=1)``) is its counterpart, and ``benchmarks/probe_split.py`` compares the two
 halves of the light, single and multiple, scene by scene.
 
+``parallax`` moves each regular point's texture coordinate and tangent along the yarn to the centre-line point whose
+tube surface the camera sees there (``pipeline.parallax_shift``): nothing moves on a yarn across the view, a yarn
+tilted toward the camera is read further along. Not the default: the pack's ξ was closed on the renderer without it
+(BENCHMARKS.md, "Issue 13: single and multiple scattering, split").
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
 the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
-factored tables, without the detail, with the paper's ξ, and with ξ closed at every view.
+factored tables, without the detail, with the paper's ξ, with ξ closed at every view, and with the axial parallax.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -64,6 +69,7 @@ class Features:
     closed_xi: bool = True  # ξ closed on this renderer (correction/xi_closed) where the pack has it, else the paper's
     view_xi: bool = False  # ξ closed at every view (correction/xi_view) where the pack has it, before closed_xi
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
+    parallax: bool = False  # the regular points' texture coordinate and tangent where the tube's seen surface lies
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -79,6 +85,7 @@ ABLATIONS = {
     "no_detail": Features(fiber_detail=False),
     "papers_xi": Features(closed_xi=False),
     "view_xi": Features(view_xi=True),
+    "parallax": Features(parallax=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -86,7 +93,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
                    "factored": "full, the paper's rank-1 factored ξ, Ψ",
                    "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ",
-                   "view_xi": "full with ξ closed at every view"}
+                   "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax"}
 
 
 def regular_fibers(name: str) -> Features:

@@ -45,6 +45,13 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    (``data_formats.curve_eval.yarn_frame``, the frame the reference sweeps its fibers in). The ply pattern is
    then where the reference has it, and moves along the yarn as the camera circles it, as a real yarn's does.
    The second layer's points are shaded like the front's (its own shadow lookups).
+   Axial parallax (``Features.parallax``, off by default): a strip is drawn through the centre line, but where the
+   yarn tilts toward the camera by θ_o (sin θ_o = ω_o·t) the tube's surface seen at the strip point (v) belongs to
+   the centre line further along, at s + δ, δ = r √(1 − v²) tan θ_o (the front surface point c(s) + r n projects
+   r sin θ_o back along the yarn's image, which covers cos θ_o of a unit of arc length); with it the regular points
+   take their texture coordinate and tangent there (``parallax_shift``; |sin θ_o| clamped at ``PARALLAX_MAX_SIN``).
+   It moves nothing on a yarn that lies across the view, and on a bend turns the tangent that meets the mirror
+   angle to where the reference's fibers meet it. Hairs keep their own strip's attributes.
 6. ``resolve``: coverage-weighted MSAA resolve, the second layer over the background, the front over that
    (``strip_shading.resolve_behind``), the flyaway layer on top.
 
@@ -172,6 +179,93 @@ def _polylines(scene: Scene, entry_curves: list, frame: int, samples_per_segment
         return _no_polylines()
     return _Polylines(np.concatenate(pts), np.cumsum(sizes), np.concatenate(rest), np.array(entry_of, np.int64),
                       np.concatenate(normals))
+
+
+PARALLAX_MAX_SIN = 0.94  # |sin θ_o| of the axial parallax: tan θ_o ≤ 2.76 (a yarn seen nearly end-on)
+
+
+def parallax_shift(points, lines, looks):
+    """``points`` with its ``segment``, rest ``arclength`` and ``tangent`` moved by the axial parallax (module
+    docstring, step 5): a new dict (the inputs are not changed). The shift δ is walked along the curve's polyline in
+    current length, the rest arc length interpolated where it ends; the tangent moves by the change of the polyline's
+    vertex tangents (central differences) between the two places, so a zero shift keeps the rasterizer's."""
+    n = len(points["arclength"])
+    out = dict(points)
+    if n == 0:
+        return out
+    segment = np.ascontiguousarray(points["segment"], np.int64)
+    s = np.ascontiguousarray(points["arclength"], np.float64)
+    tangent = np.ascontiguousarray(points["tangent"], np.float64)
+    radius = np.array([look.radius for look in looks], np.float64)
+    new_segment, new_s, new_tangent = np.empty_like(segment), np.empty_like(s), np.empty_like(tangent)
+    _parallax(segment, np.ascontiguousarray(points["curve"], np.int64), s,
+              np.ascontiguousarray(points["v"], np.float64), tangent, np.ascontiguousarray(points["view_dir"]),
+              np.ascontiguousarray(points["yarn"], np.int64), radius, lines.points, lines.rest, lines.offsets,
+              new_segment, new_s, new_tangent)
+    out.update(segment=new_segment, arclength=new_s, tangent=new_tangent)
+    return out
+
+
+@njit(cache=True, inline='always')
+def _vertex_tangent(xyz, lo, hi, j, out):
+    """The unit central-difference tangent of polyline vertex j of the curve whose vertices are lo … hi (one-sided at
+    the ends) into ``out``."""
+    a, b = max(j - 1, lo), min(j + 1, hi)
+    norm = 0.0
+    for c in range(3):
+        out[c] = xyz[b, c] - xyz[a, c]
+        norm += out[c] * out[c]
+    norm = math.sqrt(norm)
+    for c in range(3):
+        out[c] = out[c] / norm if norm > 0.0 else 0.0
+
+
+@njit(parallel=True, cache=True)
+def _parallax(segment, curve, s, v, tangent, view_dir, yarn, radius, xyz, rest, offsets, out_segment, out_s,
+              out_tangent):
+    """``parallax_shift`` per point (each point writes its own rows)."""
+    for k in prange(s.shape[0]):
+        lo, hi = offsets[curve[k]], offsets[curve[k] + 1] - 1
+        i = segment[k]
+        t0, t1, t2 = tangent[k, 0], tangent[k, 1], tangent[k, 2]
+        sin_o = t0 * view_dir[k, 0] + t1 * view_dir[k, 1] + t2 * view_dir[k, 2]
+        sin_o = min(max(sin_o, -PARALLAX_MAX_SIN), PARALLAX_MAX_SIN)
+        shift = radius[yarn[k]] * math.sqrt(max(0.0, 1.0 - v[k] * v[k])) * sin_o / math.sqrt(1.0 - sin_o * sin_o)
+        length = math.sqrt((xyz[i + 1, 0] - xyz[i, 0]) ** 2 + (xyz[i + 1, 1] - xyz[i, 1]) ** 2
+                           + (xyz[i + 1, 2] - xyz[i, 2]) ** 2)
+        d_rest = rest[i + 1] - rest[i]
+        f0 = min(max((s[k] - rest[i]) / d_rest, 0.0), 1.0) if d_rest > 0.0 else 0.0
+        before = np.empty(3)
+        after = np.empty(3)
+        here = np.empty(3)
+        _vertex_tangent(xyz, lo, hi, i, before)
+        _vertex_tangent(xyz, lo, hi, i + 1, after)
+        for c in range(3):
+            here[c] = (1.0 - f0) * before[c] + f0 * after[c]
+        j, at = i, f0 * length + shift  # current length from vertex j
+        while at > length and j + 1 < hi:
+            at -= length
+            j += 1
+            length = math.sqrt((xyz[j + 1, 0] - xyz[j, 0]) ** 2 + (xyz[j + 1, 1] - xyz[j, 1]) ** 2
+                               + (xyz[j + 1, 2] - xyz[j, 2]) ** 2)
+        while at < 0.0 and j > lo:
+            j -= 1
+            length = math.sqrt((xyz[j + 1, 0] - xyz[j, 0]) ** 2 + (xyz[j + 1, 1] - xyz[j, 1]) ** 2
+                               + (xyz[j + 1, 2] - xyz[j, 2]) ** 2)
+            at += length
+        f = min(max(at / length, 0.0), 1.0) if length > 0.0 else 0.0
+        out_segment[k] = j
+        out_s[k] = rest[j] + f * (rest[j + 1] - rest[j])
+        _vertex_tangent(xyz, lo, hi, j, before)
+        _vertex_tangent(xyz, lo, hi, j + 1, after)
+        norm = 0.0
+        for c in range(3):
+            moved = tangent[k, c] + (1.0 - f) * before[c] + f * after[c] - here[c]
+            out_tangent[k, c] = moved
+            norm += moved * moved
+        norm = math.sqrt(norm)
+        for c in range(3):
+            out_tangent[k, c] = out_tangent[k, c] / norm if norm > 0.0 else tangent[k, c]
 
 
 def view_phase_arclength(points, lines, looks):
@@ -471,7 +565,8 @@ class Renderer:
         shaded = []  # (rgb, alpha) of each layer of regular fibers
         for m, layer in enumerate(layers):
             rgb, alpha = np.zeros((len(layer["weight"]), 3)), np.zeros(len(layer["weight"]))
-            regular = _kernel_points(layer, lines, looks)
+            regular = _kernel_points(parallax_shift(layer, lines, looks) if self.features.parallax else layer, lines,
+                                     looks)
             for k, look in enumerate(looks):
                 idx = np.flatnonzero(layer["yarn"] == k)
                 kernel_look, corrections, _ = self.kernel_looks[k]

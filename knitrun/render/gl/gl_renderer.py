@@ -244,6 +244,9 @@ class GLRenderer:
         if not features.multiple_scattering:
             raise FormatError("the GL backend draws the full light transport; Features.multiple_scattering=False "
                               "(single scattering alone) is drawn by the CPU renderer")
+        if features.parallax:
+            raise FormatError("the GL backend does not draw the axial parallax (Features.parallax); the CPU renderer "
+                              "does")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
