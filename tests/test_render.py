@@ -236,7 +236,7 @@ def test_the_axial_parallax_reads_the_centre_line_whose_surface_is_seen():
     edges (|v| = 1) nothing moves; past the clamp the shift stops growing. On a ring seen edge-on the tangent turns
     with the arc: the circle's tangent at the shifted arc length."""
     r = 0.03
-    for psi in (0.0, 0.4, 1.1):
+    for psi in (0.0, 0.4, 1.3):  # 1.3: beyond the clamp (sin ψ = 0.96)
         axis = np.array([math.cos(psi), 0.0, math.sin(psi)])
         xyz = np.linspace(0.0, 1.0, 101)[:, None] * axis
         rest = 0.5 * np.linspace(0.0, 1.0, 101)  # stretched 2×: rest length is half the current

@@ -41,8 +41,9 @@ halves of the light, single and multiple, scene by scene.
 
 ``parallax`` moves each regular point's texture coordinate and tangent along the yarn to the centre-line point whose
 tube surface the camera sees there (``pipeline.parallax_shift``): nothing moves on a yarn across the view, a yarn
-tilted toward the camera is read further along. Not the default: the GL backend does not draw it yet, and it lowers the error on three patches of four but darkens
-the grazing-light patch (BENCHMARKS.md, "Issue 13: single and multiple scattering, split").
+tilted toward the camera is read further along. Not the default: the GL backend does not draw it yet, and it lowers
+the error on three patches of four but darkens the grazing-light patch (BENCHMARKS.md, "Issue 13: single and
+multiple scattering, split").
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
