@@ -81,7 +81,7 @@ from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
-from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility
+from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, resolve, resolve_behind, same_surface,
                                           shade_flyaway, shade_regular, shading_points)
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
@@ -187,8 +187,9 @@ PARALLAX_MAX_SIN = 0.94  # |sin θ_o| of the axial parallax: tan θ_o ≤ 2.76 (
 def parallax_shift(points, lines, looks):
     """``points`` with its ``segment``, rest ``arclength`` and ``tangent`` moved by the axial parallax (module
     docstring, step 5): a new dict (the inputs are not changed). The shift δ is walked along the curve's polyline in
-    current length, the rest arc length interpolated where it ends; the tangent moves by the change of the polyline's
-    vertex tangents (central differences) between the two places, so a zero shift keeps the rasterizer's."""
+    current length (stopping at the curve's ends), the rest arc length interpolated where it ends; the tangent moves
+    by the change of the polyline's vertex tangents (the rasterizer's, ``strip_raster.vertex_tangent``) between the
+    two places, so a zero shift keeps the rasterizer's."""
     n = len(points["arclength"])
     out = dict(points)
     if n == 0:
@@ -207,65 +208,59 @@ def parallax_shift(points, lines, looks):
 
 
 @njit(cache=True, inline='always')
-def _vertex_tangent(xyz, lo, hi, j, out):
-    """The unit central-difference tangent of polyline vertex j of the curve whose vertices are lo … hi (one-sided at
-    the ends) into ``out``."""
-    a, b = max(j - 1, lo), min(j + 1, hi)
-    norm = 0.0
-    for c in range(3):
-        out[c] = xyz[b, c] - xyz[a, c]
-        norm += out[c] * out[c]
-    norm = math.sqrt(norm)
-    for c in range(3):
-        out[c] = out[c] / norm if norm > 0.0 else 0.0
+def _open_tangent(xyz, lo, hi, j):
+    """``strip_raster.vertex_tangent`` of vertex j of the open curve whose vertices are lo … hi."""
+    return vertex_tangent(xyz, j, j - 1 if j > lo else -1, j + 1 if j < hi else -1)
+
+
+@njit(cache=True, inline='always')
+def _segment_length(xyz, j):
+    return math.sqrt((xyz[j + 1, 0] - xyz[j, 0]) ** 2 + (xyz[j + 1, 1] - xyz[j, 1]) ** 2
+                     + (xyz[j + 1, 2] - xyz[j, 2]) ** 2)
 
 
 @njit(parallel=True, cache=True)
 def _parallax(segment, curve, s, v, tangent, view_dir, yarn, radius, xyz, rest, offsets, out_segment, out_s,
               out_tangent):
-    """``parallax_shift`` per point (each point writes its own rows)."""
+    """``parallax_shift`` per point (each point writes its own rows). A point on a closed curve's closing segment
+    (which joins its last vertex to its first) keeps its attributes."""
     for k in prange(s.shape[0]):
         lo, hi = offsets[curve[k]], offsets[curve[k] + 1] - 1
         i = segment[k]
-        t0, t1, t2 = tangent[k, 0], tangent[k, 1], tangent[k, 2]
-        sin_o = t0 * view_dir[k, 0] + t1 * view_dir[k, 1] + t2 * view_dir[k, 2]
+        out_segment[k], out_s[k] = i, s[k]
+        for c in range(3):
+            out_tangent[k, c] = tangent[k, c]
+        if i >= hi:
+            continue
+        sin_o = tangent[k, 0] * view_dir[k, 0] + tangent[k, 1] * view_dir[k, 1] + tangent[k, 2] * view_dir[k, 2]
         sin_o = min(max(sin_o, -PARALLAX_MAX_SIN), PARALLAX_MAX_SIN)
         shift = radius[yarn[k]] * math.sqrt(max(0.0, 1.0 - v[k] * v[k])) * sin_o / math.sqrt(1.0 - sin_o * sin_o)
-        length = math.sqrt((xyz[i + 1, 0] - xyz[i, 0]) ** 2 + (xyz[i + 1, 1] - xyz[i, 1]) ** 2
-                           + (xyz[i + 1, 2] - xyz[i, 2]) ** 2)
         d_rest = rest[i + 1] - rest[i]
         f0 = min(max((s[k] - rest[i]) / d_rest, 0.0), 1.0) if d_rest > 0.0 else 0.0
-        before = np.empty(3)
-        after = np.empty(3)
-        here = np.empty(3)
-        _vertex_tangent(xyz, lo, hi, i, before)
-        _vertex_tangent(xyz, lo, hi, i + 1, after)
-        for c in range(3):
-            here[c] = (1.0 - f0) * before[c] + f0 * after[c]
-        j, at = i, f0 * length + shift  # current length from vertex j
+        a0, a1, a2 = _open_tangent(xyz, lo, hi, i)
+        b0, b1, b2 = _open_tangent(xyz, lo, hi, i + 1)
+        h0, h1, h2 = (1.0 - f0) * a0 + f0 * b0, (1.0 - f0) * a1 + f0 * b1, (1.0 - f0) * a2 + f0 * b2
+        j, length = i, _segment_length(xyz, i)
+        at = f0 * length + shift  # current length from vertex j
         while at > length and j + 1 < hi:
             at -= length
             j += 1
-            length = math.sqrt((xyz[j + 1, 0] - xyz[j, 0]) ** 2 + (xyz[j + 1, 1] - xyz[j, 1]) ** 2
-                               + (xyz[j + 1, 2] - xyz[j, 2]) ** 2)
+            length = _segment_length(xyz, j)
         while at < 0.0 and j > lo:
             j -= 1
-            length = math.sqrt((xyz[j + 1, 0] - xyz[j, 0]) ** 2 + (xyz[j + 1, 1] - xyz[j, 1]) ** 2
-                               + (xyz[j + 1, 2] - xyz[j, 2]) ** 2)
+            length = _segment_length(xyz, j)
             at += length
         f = min(max(at / length, 0.0), 1.0) if length > 0.0 else 0.0
+        a0, a1, a2 = _open_tangent(xyz, lo, hi, j)
+        b0, b1, b2 = _open_tangent(xyz, lo, hi, j + 1)
+        m0 = tangent[k, 0] + (1.0 - f) * a0 + f * b0 - h0
+        m1 = tangent[k, 1] + (1.0 - f) * a1 + f * b1 - h1
+        m2 = tangent[k, 2] + (1.0 - f) * a2 + f * b2 - h2
+        norm = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+        if norm > 0.0:
+            out_tangent[k, 0], out_tangent[k, 1], out_tangent[k, 2] = m0 / norm, m1 / norm, m2 / norm
         out_segment[k] = j
         out_s[k] = rest[j] + f * (rest[j + 1] - rest[j])
-        _vertex_tangent(xyz, lo, hi, j, before)
-        _vertex_tangent(xyz, lo, hi, j + 1, after)
-        norm = 0.0
-        for c in range(3):
-            moved = tangent[k, c] + (1.0 - f) * before[c] + f * after[c] - here[c]
-            out_tangent[k, c] = moved
-            norm += moved * moved
-        norm = math.sqrt(norm)
-        for c in range(3):
-            out_tangent[k, c] = out_tangent[k, c] / norm if norm > 0.0 else tangent[k, c]
 
 
 def view_phase_arclength(points, lines, looks):

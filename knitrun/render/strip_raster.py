@@ -308,15 +308,7 @@ def _vertex_frames(points, prev, nxt, cam_pos, fwd, ortho):
     ok = np.zeros(n, np.bool_)
     for i in range(n):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        ix = iy = iz = ox = oy = oz = 0.0
-        if prev[i] >= 0:
-            ix, iy, iz = _unit(px - points[prev[i], 0], py - points[prev[i], 1], pz - points[prev[i], 2])
-        if nxt[i] >= 0:
-            ox, oy, oz = _unit(points[nxt[i], 0] - px, points[nxt[i], 1] - py, points[nxt[i], 2] - pz)
-        tx, ty, tz = ix + ox, iy + oy, iz + oz
-        if tx * tx + ty * ty + tz * tz < 1e-18:  # an end of a zero-length run, or an exact hairpin: one side
-            tx, ty, tz = (ox, oy, oz) if ox != 0.0 or oy != 0.0 or oz != 0.0 else (ix, iy, iz)
-        tx, ty, tz = _unit(tx, ty, tz)
+        tx, ty, tz = vertex_tangent(points, i, prev[i], nxt[i])
         if ortho:
             wx, wy, wz = -fwd[0], -fwd[1], -fwd[2]
         else:
@@ -329,6 +321,23 @@ def _vertex_frames(points, prev, nxt, cam_pos, fwd, ortho):
         bvec[i, 0], bvec[i, 1], bvec[i, 2] = cx / sin, cy / sin, cz / sin
         ok[i] = True
     return tangent, bvec, ok
+
+
+@njit(cache=True, inline='always')
+def vertex_tangent(points, i, before, after):
+    """The unit tangent of polyline vertex i whose neighbours are the vertices ``before`` and ``after`` (−1: none): the
+    sum of the unit directions of its two segments; where that vanishes (an end of a zero-length run, an exact
+    hairpin) the one side that exists; (0, 0, 0) when neither does."""
+    px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+    ix = iy = iz = ox = oy = oz = 0.0
+    if before >= 0:
+        ix, iy, iz = _unit(px - points[before, 0], py - points[before, 1], pz - points[before, 2])
+    if after >= 0:
+        ox, oy, oz = _unit(points[after, 0] - px, points[after, 1] - py, points[after, 2] - pz)
+    tx, ty, tz = ix + ox, iy + oy, iz + oz
+    if tx * tx + ty * ty + tz * tz < 1e-18:
+        tx, ty, tz = (ox, oy, oz) if ox != 0.0 or oy != 0.0 or oz != 0.0 else (ix, iy, iz)
+    return _unit(tx, ty, tz)
 
 
 @njit(cache=True, error_model="numpy")
