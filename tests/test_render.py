@@ -259,6 +259,10 @@ def test_the_axial_parallax_reads_the_centre_line_whose_surface_is_seen():
     np.testing.assert_allclose(got["arclength"], rho * moved, atol=1e-6)
     expect = np.stack([-np.sin(moved), np.zeros_like(at), np.cos(moved)], axis=1)
     np.testing.assert_allclose(got["tangent"], expect, atol=2e-4)
+    # a closed curve's closing segment (from its last vertex back to its first) keeps its attributes
+    closing = _parallax_points(xyz, rest, [n - 1], [rest[-1] + 1e-4], [0.0], [[0.0, 0.0, 1.0]], [0, 0, 1], r)
+    assert closing["segment"][0] == n - 1 and closing["arclength"][0] == np.float32(rest[-1] + 1e-4)
+    np.testing.assert_array_equal(closing["tangent"], [[0.0, 0.0, 1.0]])
 
 
 def test_the_axial_parallax_leaves_a_yarn_across_the_view_and_moves_a_tilted_bent_one(tmp_path, pack):
