@@ -7,8 +7,8 @@ so this error matters where ξ is not applied: the no-tables ablation and the en
     .venv/bin/python benchmarks/check_n_occluded.py [cotton1 rayon1 ...]
 """
 
+import argparse
 import math
-import sys
 
 import numpy as np
 
@@ -50,6 +50,18 @@ def check(name):
     print(f"{name} (n_cross {n_cross:.2f}) mean |error| / exact DS — {cells}")
 
 
-if __name__ == "__main__":
-    for name in sys.argv[1:] or ["cotton1", "rayon1"]:
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("presets", nargs="*", default=["cotton1", "rayon1"],
+                        help="yarn presets (data_formats.yarn_spec.load_preset; default: cotton1 rayon1)")
+    args = parser.parse_args()
+    for name in args.presets:
+        try:
+            load_preset(name)
+        except (KeyError, ValueError, FileNotFoundError) as e:
+            parser.error(f"preset {name!r}: {e}")
         check(name)
+
+
+if __name__ == "__main__":
+    main()
