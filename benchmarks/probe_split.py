@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 from pathlib import Path
 
@@ -40,19 +41,19 @@ import numpy as np
 
 from data_formats.images import write_exr
 from data_formats.scene import load_scene
-from data_formats.yarn_curves import read_yarn_curves
 from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
 from knitrun.render import pipeline
 from knitrun.render.ablations import ABLATIONS
-from knitrun.render.camera import project, scene_camera
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from probe_tilt import TILT_BINS, curve_tilts  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = {"straight_yarn_directional": 16, "straight_yarn_sky": 16, "straight_yarn_backlit": 16,
           "knit_patch_directional": 16, "knit_patch_sky": 64, "knit_patch_grazing": 16,
           "simulated_patch_directional": 32}  # name → the ruler's spp
-TILT_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)  # |ω_o · t|, the last bin closed
 
 
 def traced(scene, spp, seed, fiber_seed):
@@ -93,30 +94,6 @@ def split_rows(name, d, ref, inst, strips):
             cells += ["—", "—"]
         rows.append("| " + " | ".join(cells) + " |")
     return rows, floor
-
-
-def curve_tilts(scene):
-    """(row, col, |ω_o · t|) of every control point of the scene's curve-file yarns, at the scene's frame; None when
-    no yarn is drawn from a curve file."""
-    camera = scene_camera(scene)
-    rows, cols, tilts = [], [], []
-    for entry in scene.yarns:
-        if entry.curves is None:
-            continue
-        curves = read_yarn_curves(entry.curves)
-        points = curves.points[scene.render.frame if curves.points.shape[0] > 1 else 0]
-        x, y, _ = project(camera, points)
-        cols.append(np.clip(np.round(x).astype(int), 0, scene.camera.width - 1))
-        rows.append(np.clip(np.round(y).astype(int), 0, scene.camera.height - 1))
-        for a, b in zip(curves.offsets[:-1], curves.offsets[1:]):
-            t = np.gradient(points[a:b], axis=0)
-            t /= np.maximum(np.linalg.norm(t, axis=1), 1e-300)[:, None]
-            view = camera.position - points[a:b]
-            view /= np.maximum(np.linalg.norm(view, axis=1), 1e-300)[:, None]
-            tilts.append(np.abs(np.einsum("ij,ij->i", t, view)))
-    if not tilts:
-        return None
-    return np.concatenate(rows), np.concatenate(cols), np.concatenate(tilts)
 
 
 def tilt_rows(name, d, at, ref, strips):

@@ -49,7 +49,7 @@ from knitrun.render.camera import project, scene_camera
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 SCENE = EXAMPLES / "straight_yarn_directional.toml"
 PATCH = EXAMPLES / "simulated_patch_directional.toml"
-TILT_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)  # |ω_o · t|
+TILT_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)  # |ω_o · t|, the last bin closed
 HALF_LENGTH = 3.0  # cm: 2 · 3 · cos 70° = 2.05 cm, wider than the frame (1.2 cm)
 
 
@@ -86,23 +86,36 @@ def probe(pack, psi_deg, spp, models, folder, turn_light):
     return "| " + " | ".join(cells + [f"{trace_s:.0f}"]) + " |"
 
 
+def curve_tilts(scene):
+    """(row, col, |ω_o · t|) of every control point of the scene's curve-file yarns, at the scene's frame; None when
+    no yarn is drawn from a curve file."""
+    camera = scene_camera(scene)
+    rows, cols, tilts = [], [], []
+    for entry in scene.yarns:
+        if entry.curves is None:
+            continue
+        curves = read_yarn_curves(entry.curves)
+        points = curves.points[scene.render.frame if curves.points.shape[0] > 1 else 0]
+        x, y, _ = project(camera, points)
+        cols.append(np.clip(np.round(x).astype(int), 0, scene.camera.width - 1))
+        rows.append(np.clip(np.round(y).astype(int), 0, scene.camera.height - 1))
+        for a, b in zip(curves.offsets[:-1], curves.offsets[1:]):
+            t = np.gradient(points[a:b], axis=0)
+            t /= np.maximum(np.linalg.norm(t, axis=1), 1e-300)[:, None]
+            view = camera.position - points[a:b]
+            view /= np.maximum(np.linalg.norm(view, axis=1), 1e-300)[:, None]
+            tilts.append(np.abs(np.einsum("ij,ij->i", t, view)))
+    if not tilts:
+        return None
+    return np.concatenate(rows), np.concatenate(cols), np.concatenate(tilts)
+
+
 def patch_bins(folder: Path, models) -> str:
     """Mean of the yarn-scale filtered reference and strip images at the simulated patch's control points, by
     |ω_o · t| (the last bin closed)."""
     scene = load_scene(PATCH)
-    camera = scene_camera(scene)
-    curves = read_yarn_curves(scene.yarns[0].curves)
-    points = curves.points[scene.render.frame if curves.points.shape[0] > 1 else 0]
     d = yarn_diameter_px(scene)
-    x, y, _ = project(camera, points)
-    col = np.clip(np.round(x).astype(int), 0, scene.camera.width - 1)
-    row = np.clip(np.round(y).astype(int), 0, scene.camera.height - 1)
-    tilt = np.empty(len(points))
-    for a, b in zip(curves.offsets[:-1], curves.offsets[1:]):
-        t = np.gradient(points[a:b], axis=0)
-        t /= np.linalg.norm(t, axis=1)[:, None]
-        view = camera.position - points[a:b]
-        tilt[a:b] = np.abs(np.einsum("ij,ij->i", t, view / np.linalg.norm(view, axis=1)[:, None]))
+    row, col, tilt = curve_tilts(scene)
     sampled = {name: yarn_filter(read_exr(folder / f"{name}.exr")[..., :3], d).mean(-1)[row, col]
                for name in ("reference", *(f"strip_{m}" for m in models))}
     lines = ["| |ω_o · t| | points | reference | " + " | ".join(f"{m}: mean / ratio" for m in models) + " |",
