@@ -10,11 +10,16 @@ import h5py
 import numpy as np
 import pytest
 
+from data_formats.asset_pack import read_pack
+from data_formats.conventions import LUMINANCE
+from data_formats.scene import load_scene
 from data_formats.yarn_spec import load_preset
 from knitbake.stages.yarn_hull import TABLE, TRANSMITTANCE_TABLE, bake_yarn_hull, hemisphere_env, hull_radiance
 from knitrun.render.ablations import Features
 from knitrun.render.interreflection import interreflected_visibility
+from knitrun.render.yarn_look import gap_transmittance, load_look
 from knitrun.shading.dual_scattering import transmittance_count
+from knitrun.shading.table_lookup import lookup_theta
 from tests.helpers import FRONT, SKY, SUN, straight, write_scene
 from tests.test_render import _render
 
@@ -85,6 +90,43 @@ def test_transmittance_count_limits():
     geometric = pytest.approx(7.7, rel=1e-12)
     assert transmittance_count(a ** 20, a, 7.7) == geometric  # darker than evenly spread fibers: clipped
     assert transmittance_count([0.5, 0.5, 0.5], [1.0, 1.0, 1.0], 7.7) == geometric  # no count passes 0.5
+
+
+def test_transmittance_count_with_gaps_passes_the_scattered_rest():
+    """With a gap transmittance τ the count is that of the scattered rest, τ + (1 − τ) ā_f^{n_T} = T_Y; τ = 0 is the
+    plain count; a yarn whose gaps pass all of T_Y or more (nothing left to scatter) gets the geometric count; τ
+    outside [0, 1) is refused."""
+    a = np.array([0.7, 0.69, 0.67])
+    for gap in (0.1, 0.16, 0.3):
+        for n in (0.5, 2.0, 5.0):
+            transmittance = gap + (1.0 - gap) * a ** n
+            assert transmittance_count(transmittance, a, 7.7, gap) == pytest.approx(n, rel=1e-12)
+    assert transmittance_count(a ** 2, a, 7.7, 0.0) == transmittance_count(a ** 2, a, 7.7)
+    assert transmittance_count([0.2, 0.2, 0.2], a, 7.7, 0.25) == pytest.approx(7.7, rel=1e-12)
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="gap transmittance"):
+            transmittance_count(a, a, 7.7, bad)
+
+
+def test_gap_transmittance_is_what_the_coverage_texture_leaves_uncovered(tmp_path, pack):
+    """τ_Y = 1 − the coverage texture's mean; the session's pack has gaps (0 < τ_Y < T_Y), and its look carries both
+    counts: n_cross passes all of T_Y (the environment's cells), n_cross_rest the rest once τ_Y is split out,
+    τ_Y + (1 − τ_Y) ā_f^{n_cross_rest} = T_Y (directional lights and hairs; luminance-weighted counts)."""
+    assert gap_transmittance([np.array([[1.0, 0.5], [0.0, 0.5]])]) == pytest.approx(0.5)
+    assert gap_transmittance([np.ones((2, 2))]) == 0.0
+    assert gap_transmittance([np.zeros((2, 2))]) < 1.0
+    entry = load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)).yarns[0]
+    look = load_look(pack, entry, "cm")
+    data = read_pack(pack)
+    coverage_mean = float(np.mean(data.mip_chain("textures/coverage")[0]))
+    assert look.gap == pytest.approx(1.0 - coverage_mean, rel=1e-12) and 0.0 < look.gap
+    t_y = np.asarray(data.tables[TRANSMITTANCE_TABLE], np.float64)
+    assert look.gap < float(t_y @ LUMINANCE)
+    a_f0 = lookup_theta(data.tables["dual_scattering/a_f"], 0.0)
+    assert look.n_cross_rest == pytest.approx(transmittance_count(t_y, a_f0, 1e9, look.gap), rel=1e-9)
+    assert look.n_cross == pytest.approx(transmittance_count(t_y, a_f0, 1e9), rel=1e-9)
+    assert look.n_cross_rest > look.n_cross  # less left to pass once the gaps are split out
+    assert "between the fibers" in look.n_cross_from
 
 
 def test_a_yarn_in_another_yarns_shadow_gets_the_light_the_yarn_lets_through(tmp_path, pack):

@@ -22,7 +22,7 @@ from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import PARALLAX_MAX_SIN, parallax_shift, radius_mismatch, render
 from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, resolve_behind, shade_regular, variant_of
-from knitrun.render.shading_inputs import Corrections, Lobes, Look, Points, no_lights
+from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor
 from knitrun.shading import fiber_bcsdf as fb
@@ -119,6 +119,39 @@ def test_extremes_give_finite_images(tmp_path, pack, case):
         assert np.allclose(img, [0.1, 0.2, 0.3])
 
 
+def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
+    """A directional light's direct fraction at yarn level is V + (1 − V) τ_Y (``past_blockers``): with no fiber
+    counted toward the light (n_occluded = n_cross = 0, so only the direct fraction differs), a point fully in
+    another yarn's shadow (V = 0) with gap transmittance τ_Y = 0.25 shades as an unblocked point lit at V = 0.25; a
+    lit point (V = 1) does not move; a partly shadowed point (V = 0.4) takes 0.4 + 0.6·0.25 = 0.55."""
+    rng = np.random.default_rng(11)
+    n = 16
+    tangent = rng.normal(size=(n, 3))
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    view = rng.normal(size=(n, 3))
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    flat = mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]])
+    full = mip_stack([[np.ones((2, 4))]])
+    off = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor(),
+                      no_view_table())
+    ds = np.stack([np.full((4, 3), x) for x in (0.7, 0.2, 0.3, 0.1, 0.3)])
+    points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
+    sun = np.array([[0.3, 0.6, 1.0]]) / np.linalg.norm([0.3, 0.6, 1.0])
+
+    def shaded(visibility, gap):
+        look = Look(ROUGH, ds, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, gap, D_F, D_B)
+        rgb, alpha = np.zeros((n, 3)), np.zeros(n)
+        lights = Lights(sun, np.full((1, 3), 2.0), np.full((1, n), visibility))
+        shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), lights, None, None, None, rgb, alpha)
+        return rgb
+
+    assert np.any(shaded(0.25, 0.0) > 0.0)
+    np.testing.assert_allclose(shaded(0.0, 0.25), shaded(0.25, 0.0), rtol=1e-12)
+    np.testing.assert_allclose(shaded(1.0, 0.25), shaded(1.0, 0.0), rtol=1e-12)
+    np.testing.assert_allclose(shaded(0.4, 0.25), shaded(0.55, 0.0), rtol=1e-12)
+    assert np.all(shaded(0.0, 0.25) >= shaded(0.0, 0.0))
+
+
 def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     """Eq. 17 in the shading kernel (I_M table lookups summed over J lobes, ξ = Ψ = 1, unshadowed, no
     multiple-scattering lights) against direct
@@ -145,7 +178,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         fit = fit_srbf(sky, n_lobes=j, seed=0)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
         points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
-        look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0, D_F, D_B)
+        look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, D_F, D_B)
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
                       Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n),
                       im_slices(i_m, fit.sharpness), rgb, alpha)
@@ -349,10 +382,10 @@ def test_flyaway_variant_hash_is_the_fixed_hash_and_uses_all_three():
     assert counts.min() > 0.25 * picks.size  # each variant about a third
 
 
-def _through_yarn(v, w_b, w_n, reach, a_f, n_cross):
+def _through_yarn(v, w_b, w_n, reach, a_f, n_cross, gap=0.0):
     """The fraction of light reaching a hair beside a yarn (unit radius) from direction (w_b, w_n) in the yarn's
-    cross-section, by ray–circle intersection at each of the kernel's depths: a_f to the power n_cross times the
-    chord inside the circle over its diameter."""
+    cross-section, by ray–circle intersection at each of the kernel's depths: the gap transmittance plus the rest
+    times a_f to the power n_cross times the chord inside the circle over its diameter."""
     d = np.array([w_b, w_n]) / math.hypot(w_b, w_n)
     depth = math.sqrt(max(reach * reach - v * v, 0.0))
     out = np.zeros(3)
@@ -360,7 +393,7 @@ def _through_yarn(v, w_b, w_n, reach, a_f, n_cross):
         p = np.array([v, depth * ((2 * k + 1) / HAIR_DEPTHS - 1)])
         disc = (p @ d) ** 2 - (p @ p - 1.0)  # |p + s d| = 1: s = −p·d ± √disc
         crossed = disc > 0 and -(p @ d) - math.sqrt(disc) > 0
-        out += a_f ** (n_cross * math.sqrt(disc)) if crossed else 1.0
+        out += gap + (1.0 - gap) * a_f ** (n_cross * math.sqrt(disc)) if crossed else 1.0
     return out / HAIR_DEPTHS
 
 
@@ -378,9 +411,9 @@ def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_cros
     out, scratch = np.empty(3), np.empty(3)
     reach, n_cross = 2.5, 6.0
 
-    def light(v, w, on_body=False, count=n_cross):
-        _hair_light(on_body, tables, ds, count, reach, v, t, n, b, np.asarray(w, float) / np.linalg.norm(w), out,
-                    scratch)
+    def light(v, w, on_body=False, count=n_cross, gap=0.0):
+        _hair_light(on_body, tables, ds, count, gap, reach, v, t, n, b, np.asarray(w, float) / np.linalg.norm(w),
+                    out, scratch)
         return out.copy()
 
     up = [0.0, 1.0, 0.3]  # from above (+b), a little in front
@@ -394,6 +427,12 @@ def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_cros
     back = [0.4, 0.5, -1.0]  # from behind and above: the hair below and in front is shadowed at some depths
     np.testing.assert_allclose(light(-1.3, back), _through_yarn(-1.3, 0.5, -1.0, reach, a_f, n_cross), rtol=1e-12)
     np.testing.assert_allclose(light(0.5, up, on_body=True), 0.25)  # over the body: Ψ^Fiber_G
+    # a yarn with gaps between its fibers: τ_Y of the crossing light passes unscattered, the rest as before
+    gappy = light(-1.5, up, gap=0.3)
+    np.testing.assert_allclose(gappy, _through_yarn(-1.5, 1.0, 0.3, reach, a_f, n_cross, gap=0.3), rtol=1e-12)
+    assert np.all(gappy > below) and np.all(gappy >= 0.3)
+    np.testing.assert_allclose(light(1.5, up, gap=0.3), 1.0)  # nothing to cross: unchanged
+    np.testing.assert_allclose(light(0.5, up, on_body=True, gap=0.3), 0.25)  # the body's Ψ^Fiber_G: unchanged
 
 
 def test_resolve_weights_coverage_over_the_background():

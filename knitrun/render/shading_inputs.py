@@ -16,7 +16,10 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
                    has cells it replaces the other ξ tables
 ``Look``           one yarn entry: ``params`` fiber BCSDF vector, ``ds`` dual-scattering tables (5, N_θ, 3),
                    ``period`` texture period, ``radius`` regular strip half-width, ``flyaway_half_width``,
-                   fiber counts ``n_occluded``, ``n_cross``
+                   fiber counts ``n_occluded``, ``n_cross`` (a beam crossing another yarn: all of its
+                   transmittance T_Y) and ``n_cross_rest`` (the part not passing between the fibers), ``gap``
+                   τ_Y (the part that does, ``yarn_look.gap_transmittance``), Zinke's density factors ``d_f``,
+                   ``d_b``
 ``MipStack``       a texture (``knitrun.render.texture_sampling``): tangent, coverage, flyaway (3 variants)
 ``Lights``         distant lights: ``direction`` (L, 3) unit toward the light, ``irradiance`` (L, 3),
                    ``visibility`` (L, N) yarn-level, per point (also the multiple-scattering clusters of the
@@ -61,6 +64,8 @@ class Look(NamedTuple):
     flyaway_half_width: float
     n_occluded: float
     n_cross: float
+    n_cross_rest: float  # n_cross with τ_Y split out: τ_Y + (1 − τ_Y) ā_f^{n_cross_rest} = T_Y
+    gap: float  # τ_Y: light past a blocking yarn unscattered, between its fibers (``yarn_look.gap_transmittance``)
     d_f: float  # Zinke's forward-scattering density factor (``dual_scattering.D_F``; 0: single scattering alone)
     d_b: float  # his back-scattering density factor (``dual_scattering.D_B``; 0: single scattering alone)
 

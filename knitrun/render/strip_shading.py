@@ -21,12 +21,17 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
     yarn angles   θ_i, θ_o against t;  θ_d = (θ_o − θ_i)/2;  φ = φ_o − φ_i = −atan2(ω_i·b, ω_i·n)
     ξ           = ξ(v, θ_d, φ) (the pack's full table), or ξ_M(v, θ_d) ξ_N(v, φ) (its factors)
     Ψ^Fiber_G   = mean_RGB Ψ(v, θ_i, φ), or Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ); clamped to [0, 1]
-    D           = V · Ψ^Fiber_G                                           fraction lit directly
-    n           = n_occluded + (1 − V) n_cross                            fibers toward the light when not lit
-                  (n_cross: the count that lets the pack's yarn transmittance T_Y through, ``yarn_look``)
+    V_d         = V + (1 − V) τ_Y                                         light past the other yarns unscattered:
+                  around them or between their fibers (τ_Y, ``yarn_look.gap_transmittance``; ``past_blockers``)
+    D           = V_d · Ψ^Fiber_G                                         fraction lit directly
+    n           = n_occluded + (1 − V) n_rest                             fibers toward the light when not lit
+                  (n_rest: the count of the scattered rest, τ_Y + (1 − τ_Y) ā_f^{n_rest} = T_Y, the pack's yarn
+                  transmittance; ``Look.n_cross_rest``, ``yarn_look``)
     L_o        += E · ξ · DS(θ_i^f, θ_o^f, φ^f; n, D)                    ``dual_scattering.ds_kernel``, fiber frame
 
-with θ^f, φ^f against t_f. Tangent spread: a texel averages fibers whose tangents scatter; the length of its
+with θ^f, φ^f against t_f. V_d (beyond Huang et al. 2025): the shadow map draws yarns as opaque tubes, but a sixth
+of a beam crossing cotton1 meets no fiber, and the path-traced fibers in another yarn's shadow show 2–3× the strips'
+single scattering without it (BENCHMARKS.md, "Issue 13: light between a blocking yarn's fibers"). Tangent spread: a texel averages fibers whose tangents scatter; the length of its
 premultiplied tangent gives their variance (``tangent_spread``, Toksvig 2005; ASSET_PACK.md §8), and every BCSDF
 evaluation of the point (DS, I_M's R lobe, the multiple-scattering lights) uses the lobes widened by it for that
 light's φ^f (``fiber_bcsdf.spread_params``). An empty (0, 1, 1, 3) full table selects the factors. An ablation
@@ -46,20 +51,21 @@ plus, beyond the paper, the environment's multiple scattering: eq. 17 has single
 f), which leaves a bright, highly scattering yarn (cotton: albedo 0.95) far too dark under an environment. Lobe j
 carries irradiance E_j = W_j ∫G_j dω = W_j (2π/λ_j)(1 − e^{−2λ_j}), which ``knitrun.render.ms_lights`` spreads over
 a dozen fixed cells of the sphere (each cell's light: E summed, direction and visibility T̃ averaged with luminance
-weights), and each cell c acts as a distant light for the smooth DS terms, with D = T̃_c Ψ^Fiber_G and n as for a
-directional light:
+weights), and each cell c acts as a distant light for the smooth DS terms, with D = T̃_c Ψ^Fiber_G and
+n = n_occluded + (1 − T̃_c) n_cross, the count that passes all of T_Y (T̃ takes no τ_Y: the hull albedo ρ_Y of its
+inter-reflection already holds what a blocker lets through, T_Y ≤ ρ_Y, so none of it is split out as direct):
 
     L_o += E_c · ξ · (D d_b f_back^direct + F_scatter) cos θ_c^f        (``ds_kernel`` terms; f itself is in I_M)
 
 Flyaways (``shade_flyaway``): the variant of period ⌊s/period⌋ of curve c is ``variant_of(c, period)`` (a fixed
 integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the wider flyaway strip; the hair
-tangent from its RGB; single scattering, L_o = Σ E V S f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j S_j I_M (thin hairs: no
+tangent from its RGB; single scattering, L_o = Σ E V_d S f(ω_i, ω_o) cos θ_i + Σ_j W_j T̃_j S_j I_M (thin hairs: no
 multiple-scattering terms), S = Ψ^Fiber_G(v_strip, ω_i) (mean RGB) where the hair lies over the yarn body
 (|v_strip| ≤ 1, v_strip = v·h_fly/r) — a hair on the surface is shadowed like the surface fibers — and beyond it
-the transmittance of the hair's own yarn toward ω_i, ā_f(θ_i)^{n_cross·ℓ} where the ray crosses the tube on a chord ℓ
-diameters long, averaged over the depths the hair may have (``_hair_light``): without it a hair below a yarn lit
-from above shone as if in the open (the straight yarn under the sky: the hairs below the body at 2.0× the
-reference's, BENCHMARKS.md "Issue 13: hairs in their own yarn's shadow").
+the transmittance of the hair's own yarn toward ω_i, τ_Y + (1 − τ_Y) ā_f(θ_i)^{n_rest·ℓ} where the ray crosses the
+tube on a chord ℓ diameters long, averaged over the depths the hair may have (``_hair_light``): without it a hair
+below a yarn lit from above shone as if in the open (the straight yarn under the sky: the hairs below the body at
+2.0× the reference's, BENCHMARKS.md "Issue 13: hairs in their own yarn's shadow").
 A hair is not an opaque film: of the radiance behind it (the yarn body, or the background) it passes on its forward
 fraction τ = ā_f(θ_o^f) (``dual_scattering.forward_fraction``; cotton ≈ 0.7), which a broad bright backdrop such as
 the body sends on toward the camera as it receives it. Without τ a hair over the body replaces the body's multiply
@@ -326,6 +332,14 @@ def _corrections(tables, v, t, n, b, theta_o, w, xi, psi, scratch):
 
 
 @njit(cache=True)
+def past_blockers(visibility, gap):
+    """The fraction of a directional light that reaches a point unscattered at yarn level: past the other yarns
+    (``visibility`` V, the shadow map's, which treats them as opaque tubes) or between their fibers (the blocked rest
+    times the gap transmittance τ_Y, ``yarn_look.gap_transmittance``): V + (1 − V) τ_Y."""
+    return visibility + (1.0 - visibility) * gap
+
+
+@njit(cache=True)
 def _fiber_lit(psi):
     """The fraction of a point's fibers lit directly at fiber level: mean RGB Ψ^Fiber_G clamped to [0, 1]."""
     return min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
@@ -384,6 +398,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
     multiple-scattering terms are ~40 % of this kernel's compile time)."""
     params, ds, period = look.params, look.ds, look.period
     n_occluded, n_cross, d_f, d_b = look.n_occluded, look.n_cross, look.d_f, look.d_b
+    n_cross_rest, gap = look.n_cross_rest, look.gap
     texel_u = period / tangent.cols[0, 0]
     texel_v = 2.0 * look.radius / tangent.rows[0, 0]
     for block in prange((idx.shape[0] + POINT_BLOCK - 1) // POINT_BLOCK):
@@ -416,11 +431,12 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
                     fiber_lit = _fiber_lit(psi)
                     vis = lights.visibility[light, q]
-                    n_front = n_occluded + (1.0 - vis) * n_cross
+                    n_front = n_occluded + (1.0 - vis) * n_cross_rest
+                    direct = past_blockers(vis, gap)
                     phi_f = azimuth_difference(tf, wo, w)
                     spread_params(params, spread2, phi_f, wide)
-                    ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, d_f, d_b, vis * fiber_lit,
-                              comp, ds_work)
+                    ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, d_f, d_b,
+                              direct * fiber_lit, comp, ds_work)
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
             if lobes is not None:
@@ -516,7 +532,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
     lights, ``lobes`` and ``im`` None without an environment: as in ``shade_regular``, a kind of light a scene lacks
     is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: about half this kernel's compile)."""
     params, ds, period = look.params, look.ds, look.period
-    half_width, radius, n_cross = look.flyaway_half_width, look.radius, look.n_cross
+    half_width, radius, n_rest, gap = look.flyaway_half_width, look.radius, look.n_cross_rest, look.gap
     reach = half_width / radius  # the hair layer's half-width in yarn radii
     texel_u = period / flyaway.cols[0, 0]
     texel_v = 2.0 * half_width / flyaway.rows[0, 0]
@@ -555,8 +571,8 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                     context_into(wide, wo_l, ctx, False)
                     evaluate(wide, ctx, wl, f)
                     cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
-                    _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
-                    lit = lights.visibility[light, q] * cos_i
+                    _hair_light(on_body, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
+                    lit = past_blockers(lights.visibility[light, q], gap) * cos_i
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
             if lobes is not None:
@@ -569,13 +585,13 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                     r_lobe_context_into(wide, wo_l[0], ctx)
                     im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f,
                                     lobes.sharpness[j], f)
-                    _hair_light(on_body, corrections, ds, n_cross, reach, v_strip, t, n, b, w, psi, scratch)
+                    _hair_light(on_body, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
                     for ch in range(3):
                         rgb[q, ch] += lobes.weight[j, ch] * lobes.visibility[j, q] * psi[ch] * f[ch]
 
 
 @njit(cache=True, inline='always')
-def _hair_light(on_body, tables, ds, n_cross, reach, v, t, n, b, wi, out, scratch):
+def _hair_light(on_body, tables, ds, n_rest, gap, reach, v, t, n, b, wi, out, scratch):
     """out[:3] = the fraction of the light from ω_i that reaches a hair at strip coordinate v (yarn radii from the
     axis, along b) of a yarn with axis tangent t (strip frame n, b). Over the body (``on_body``, |v| ≤ 1): Ψ^Fiber_G
     (mean RGB, clamped to [0, 1]) of the regular strip there. Beyond it the hair sticks out of its own yarn, which
@@ -583,8 +599,9 @@ def _hair_light(on_body, tables, ds, n_cross, reach, v, t, n, b, wi, out, scratc
     the axis the hair lies, so the fraction is the mean over ``HAIR_DEPTHS`` depths z spread evenly over the hair
     layer's reach (|(v, z)| ≤ ``reach`` radii). In the cross-section (b, n), with ŵ the unit part of ω_i normal to
     t, a ray from p = (v, z) heading toward the axis (p·ŵ < 0) passes it at distance √(|p|² − (p·ŵ)²); where that is
-    below 1 it meets n_cross·ℓ fibers, ℓ = √(1 − distance²) its chord over the diameter, and keeps ā_f(θ_i)^{n_cross·ℓ}
-    per channel (the count and ā_f of light crossing another yarn, module docstring)."""
+    below 1 the fraction τ_Y = ``gap`` passes between the fibers and the rest meets n_rest·ℓ fibers
+    (``Look.n_cross_rest``), ℓ = √(1 − distance²) its chord over the diameter: it keeps
+    τ_Y + (1 − τ_Y) ā_f(θ_i)^{n_rest·ℓ} per channel (module docstring; at ℓ = 1 the yarn's transmittance T_Y)."""
     out[0] = out[1] = out[2] = 1.0
     if on_body:
         theta_i, phi = _strip_angles(wi, t, n, b)
@@ -607,9 +624,9 @@ def _hair_light(on_body, tables, ds, n_cross, reach, v, t, n, b, wi, out, scratc
             for ch in range(3):
                 out[ch] += 1.0 / HAIR_DEPTHS
             continue
-        count = n_cross * math.sqrt(1.0 - miss)
+        count = n_rest * math.sqrt(1.0 - miss)
         for ch in range(3):
-            out[ch] += scratch[ch] ** count / HAIR_DEPTHS
+            out[ch] += (gap + (1.0 - gap) * scratch[ch] ** count) / HAIR_DEPTHS
 
 
 # --- resolve ---------------------------------------------------------------------------------------------------------

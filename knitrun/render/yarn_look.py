@@ -18,6 +18,12 @@ flyaways, environment) and converts everything to the scene:
   transmittance T_Y (``/interreflection/transmittance``, schema 2.2), n_cross, the count for light crossing another
   yarn, becomes ``dual_scattering.transmittance_count`` (the count that lets T_Y through; n_occluded stays, ξ was
   baked with it); ``YarnLook.n_cross_from`` says which.
+* Gap transmittance τ_Y (``gap_transmittance``, with ``transmission``): the fraction of a beam crossing a yarn that
+  passes between its fibers without meeting one, 1 − the mean of the pack's coverage texture (the bake's fraction of
+  rays across the tube that hit a fiber). The renderer counts it as direct light past a blocking yarn under a
+  directional light (``strip_shading``, SHADING.md §3), with ``n_cross_rest`` the count of the scattered rest,
+  τ_Y + (1 − τ_Y) ā_f^{n_cross_rest} = T_Y; the environment's cells, whose inter-reflection holds T_Y whole, keep
+  n_cross. 0 (and n_cross_rest = n_cross) without ``transmission`` or without T_Y in the pack.
 """
 
 from __future__ import annotations
@@ -70,6 +76,8 @@ class YarnLook:
     period: float  # texture period along the rest arc length
     flyaway_half_width: float
     n_cross: float  # fibers a beam crossing another yarn meets (``transmittance_count`` or geometric)
+    n_cross_rest: float  # the count of what a crossing beam does not pass between the fibers (τ_Y split out)
+    gap: float  # τ_Y: fraction of a beam crossing a yarn that passes between its fibers (``gap_transmittance``)
     n_cross_from: str  # where n_cross came from, for RenderResult.facts
     xi_from: str  # which ξ the regular fibers are shaded with (closed, the paper's), for RenderResult.facts
     warnings: list  # what the pack could not give that the features asked for (one line each)
@@ -111,6 +119,14 @@ def _tinted_ds(tables, colour):
     return pack_tables({"dual_scattering/a_f": a_f, "dual_scattering/beta_f": t["beta_f"],
                         "dual_scattering/A_b": big_a_b, "dual_scattering/Delta_b": delta_b,
                         "dual_scattering/sigma_b": sigma_b})
+
+
+def gap_transmittance(coverage_levels) -> float:
+    """τ_Y = 1 − the mean coverage of the pack's coverage texture (any level: the mip chain keeps the mean; level 0
+    is read), the fraction of the bake's rays across the yarn tube, over v ∈ [−1, 1] and one period, that met no
+    fiber: what a beam crossing the yarn keeps unscattered, averaged over where it crosses. Clipped to [0, 1)."""
+    mean = float(np.asarray(coverage_levels[0], np.float64).mean())
+    return min(max(1.0 - mean, 0.0), 1.0 - 1e-9)
 
 
 def fiber_detail_chain(ao_levels, coverage_levels) -> list:
@@ -186,12 +202,16 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     n_cross, n_occluded = fiber_counts(geometry, spec.radius)
     n_cross_from = (f"geometry ({'switched off' if not transmission else 'no transmittance in the pack, schema < 2.2'}"
                     f"): {n_cross:.2f}")
+    gap, n_cross_rest = 0.0, n_cross
     if TRANSMITTANCE_TABLE in names:
         transmittance = np.asarray(pack.tables[TRANSMITTANCE_TABLE], np.float64)
-        geometric, n_cross = n_cross, transmittance_count(
-            transmittance, lookup_theta(pack.tables["dual_scattering/a_f"], 0.0), n_cross)
-        n_cross_from = (f"transmittance T_Y = {float(transmittance @ LUMINANCE):.3f}: {n_cross:.2f} "
-                        f"(geometric {geometric:.2f})")
+        gap = gap_transmittance(pack.mip_chain("textures/coverage"))
+        a_f0 = lookup_theta(pack.tables["dual_scattering/a_f"], 0.0)
+        geometric = n_cross
+        n_cross = transmittance_count(transmittance, a_f0, geometric)
+        n_cross_rest = transmittance_count(transmittance, a_f0, geometric, gap)
+        n_cross_from = (f"transmittance T_Y = {float(transmittance @ LUMINANCE):.3f}: {n_cross:.2f}; of it τ_Y = "
+                        f"{gap:.3f} between the fibers, the rest {n_cross_rest:.2f} (geometric {geometric:.2f})")
     tables = {n: np.asarray(pack.tables[n], np.float64) for n in names
               if n in CORRECTION_TABLES + FULL_TABLES + (CLOSED_XI, VIEW_XI)}
     if CLOSED_XI in tables:
@@ -221,7 +241,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
-        n_cross=n_cross, n_cross_from=n_cross_from, n_occluded=n_occluded, d_f=D_F, d_b=D_B, xi_from=xi_from,
+        n_cross=n_cross, n_cross_rest=n_cross_rest, gap=gap, n_cross_from=n_cross_from, n_occluded=n_occluded, d_f=D_F, d_b=D_B, xi_from=xi_from,
         warnings=warnings,
         twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
         yarn_albedo=yarn_albedo, im=im, residuals=residuals)
@@ -231,7 +251,8 @@ def shading_look(look: YarnLook) -> tuple:
     """What the shading kernels receive for ``look`` (``shading_inputs``): (``Look``, ``Corrections``, the flyaway
     ``MipStack``, a one-texel stand-in of its three variants for a yarn without a flyaway layer)."""
     return (Look(look.params, look.ds, float(look.period), float(look.radius), float(look.flyaway_half_width),
-                 float(look.n_occluded), float(look.n_cross), float(look.d_f), float(look.d_b)),
+                 float(look.n_occluded), float(look.n_cross), float(look.n_cross_rest),
+                 float(look.gap), float(look.d_f), float(look.d_b)),
             Corrections(look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm, look.psi_gn, look.xi_view),
             look.flyaway if look.flyaway is not None else empty_mip_stack(4, 3))
 

@@ -256,22 +256,27 @@ def fiber_counts(geometry, radius: float) -> tuple:
     return n_cross, max(1.0, 0.5 * n_cross)
 
 
-def transmittance_count(transmittance, a_f0, n_cross: float) -> float:
+def transmittance_count(transmittance, a_f0, n_cross: float, gap: float = 0.0) -> float:
     """The fiber count n_T for light crossing a yarn that gives the yarn's measured transmittance T_Y (ASSET_PACK.md
-    §10): ā_f^{n_T} = T_Y, n_T = ln T_Y / ln ā_f(θ = 0) per channel (RGB arrays ``transmittance`` and ``a_f0``, the
+    §10) together with its gap transmittance τ (the part that passes between the fibers unscattered, which the
+    renderer counts as direct light, ``yarn_look.gap_transmittance``): τ + (1 − τ) ā_f^{n_T} = T_Y,
+    n_T = ln((T_Y − τ)/(1 − τ)) / ln ā_f(θ = 0) per channel (RGB arrays ``transmittance`` and ``a_f0``, the
     untinted pack's), luminance-weighted over the channels and clipped to [0, ``n_cross``] (a yarn lets through at
-    least what evenly spread fibers would). A channel with T_Y ≥ 1 counts 0 fibers; one whose ā_f is 0 or 1 (no
-    count reproduces T_Y) counts ``n_cross``.
+    least what evenly spread fibers would). τ = 0 gives ā_f^{n_T} = T_Y. A channel with T_Y ≥ 1 counts 0 fibers; one
+    whose ā_f is 0 or 1, or whose T_Y is at most τ (no count reproduces T_Y), counts ``n_cross``.
 
     Why: ``fiber_counts``' n_cross assumes fibers that fill the tube evenly, so a beam through a yarn meets ~8 of them
     (cotton1) and keeps ā_f^8 ≈ 6 % of its light; the path-traced yarn lets ~44 % through, mostly between fibers and
     plies (``knitbake.stages.yarn_hull``), and a yarn in another's shadow was drawn near black."""
+    if not 0.0 <= gap < 1.0:
+        raise ValueError(f"gap transmittance {gap} is outside [0, 1)")
     t = np.asarray(transmittance, np.float64).reshape(3)
     a = np.asarray(a_f0, np.float64).reshape(3)
+    scattered = (t - gap) / (1.0 - gap)  # what the scattered part must let through: ā_f^{n_T}
     count = np.full(3, float(n_cross))
     count[t >= 1.0] = 0.0
-    solvable = (t > 0.0) & (t < 1.0) & (a > 0.0) & (a < 1.0)
-    count[solvable] = np.log(t[solvable]) / np.log(a[solvable])
+    solvable = (scattered > 0.0) & (t < 1.0) & (a > 0.0) & (a < 1.0)
+    count[solvable] = np.log(np.minimum(scattered[solvable], 1.0)) / np.log(a[solvable])
     return float(np.clip(count @ LUMINANCE, 0.0, n_cross))
 
 

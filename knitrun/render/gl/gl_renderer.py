@@ -312,6 +312,7 @@ class GLRenderer:
             "period": float(kernel_look.period), "radius": float(kernel_look.radius),
             "strip_half_width": float(kernel_look.radius),
             "n_occluded": float(kernel_look.n_occluded), "n_cross": float(kernel_look.n_cross),
+            "n_cross_rest": float(kernel_look.n_cross_rest), "gap": float(kernel_look.gap),
             "twist_sign": float(look.twist_sign), "yarn_albedo": float(albedo),
             "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
             "detail_levels": int(detail_levels),

@@ -51,7 +51,7 @@ vec4 fly_sample(int layer, float level, float u, float v) {
 
 // strip_shading._hair_light: the fraction of the light from w reaching a hair at v_strip: over the body Ψ^Fiber_G
 // (mean RGB) of the regular strip there; beyond it the hair's own yarn's transmittance where the ray toward the light
-// crosses the tube, a_f(θ_i)^(n_cross·chord), averaged over HAIR_DEPTHS depths within the hair layer's reach
+// crosses the tube, τ_Y + (1 − τ_Y) a_f(θ_i)^(n_cross_rest·chord), averaged over HAIR_DEPTHS depths within the hair layer's reach
 vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
     if (on_body) {
         vec3 xi, psi;
@@ -74,7 +74,7 @@ vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b
         float toward = v_strip * wb + z * wn;
         float miss = v_strip * v_strip + z * z - toward * toward;
         through += (toward >= 0.0 || miss >= 1.0) ? vec3(1.0)
-                 : pow(max(a_f, vec3(1e-30)), vec3(n_cross * sqrt(1.0 - miss)));
+                 : gap + (1.0 - gap) * pow(max(a_f, vec3(1e-30)), vec3(n_cross_rest * sqrt(1.0 - miss)));
     }
     return through / float(HAIR_DEPTHS);
 }
@@ -118,7 +118,7 @@ void main() {
         float phi_f = azimuth_difference(tf, sp.wo, w);
         float theta_i_f = clamped_asin(dot(tf, w));
         vec3 f = bcsdf_single(spread_params(p, spread2, phi_f), theta_i_f, theta_o_f, phi_f);
-        float lit = pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS);
+        float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS));
         rgb += light_irradiance[l] * lit * hair_light(on_body, reach, v_strip, sp.t, sp.n, sp.b, w) * f
              * cos(theta_i_f);
     }

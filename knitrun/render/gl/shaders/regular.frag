@@ -37,7 +37,8 @@ void main() {
         float vis = pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS);
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), clamped_asin(dot(tf, w)), theta_o_f, phi_f,
-                  n_occluded + (1.0 - vis) * n_cross, vis * fiber_lit(psi), true, total, back_direct, f_scatter);
+                  n_occluded + (1.0 - vis) * n_cross_rest, past_blockers(vis) * fiber_lit(psi), true, total, back_direct,
+                  f_scatter);
         rgb += light_irradiance[l] * xi * total;
     }
     float lobe_vis[MAX_LOBES];

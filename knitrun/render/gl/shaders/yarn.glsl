@@ -13,6 +13,8 @@ uniform float p_alpha_tt;
 uniform float radius;
 uniform float n_occluded;
 uniform float n_cross;
+uniform float n_cross_rest;    // n_cross with τ_Y split out (directional lights, hairs; SHADING.md §3)
+uniform float gap;             // τ_Y: light past a blocking yarn between its fibers (yarn_look.gap_transmittance)
 uniform float yarn_albedo;     // ρ_Y of the yarn-level inter-reflection, 0 without it
 uniform float shadow_bias;     // SHADOW_BIAS_RADII · radius
 
@@ -38,6 +40,11 @@ uniform sampler2D cluster_weights;
 Params yarn_params() {
     return Params(vec3(p_a_r[0], p_a_r[1], p_a_r[2]), vec3(p_a_tt[0], p_a_tt[1], p_a_tt[2]),
                   vec3(p_a_d[0], p_a_d[1], p_a_d[2]), p_beta_r, p_beta_tt, p_gamma_tt, p_alpha_r, p_alpha_tt);
+}
+
+// strip_shading.past_blockers: a directional light's light past the other yarns unscattered, V + (1 − V) τ_Y
+float past_blockers(float vis) {
+    return vis + (1.0 - vis) * gap;
 }
 
 // T̃_j: lobe j's PCSS visibility raised by the yarn-level inter-reflection (interreflection.interreflected_visibility)
