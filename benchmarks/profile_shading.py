@@ -81,19 +81,20 @@ def main():
     for light in [args.light] if args.light else sorted(bench_render.LIGHTS):
         cases += zip([light] * 2, ("front", "behind"), captured_calls(args.pack, light, args.layers))
     for light, layer, call in cases:
-        idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, rgb, alpha = call
+        idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, bounce, rgb, alpha = call
         n = len(points.view_dir)
         off = Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
         no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)))
         print(f"## {light}, {layer} layer: shade_regular on {len(idx)} shading points ({_count(lights)} directional, "
               f"{_count(lobes)} SRBF lobes, {_count(ms)} multiple-scattering clusters)")
         base = call[:7]
-        rows = [("all lights", call), ("no light (frames, textures)", base + [None, None, None, None] + call[11:])]
+        rest = [None] + call[12:]  # no yarn-level bounce but in "all lights"
+        rows = [("all lights", call), ("no light (frames, textures)", base + [None, None, None, None] + rest)]
         if lights is not None and lobes is not None:
-            rows.append(("directional only", base + [lights, None, None, None] + call[11:]))
+            rows.append(("directional only", base + [lights, None, None, None] + rest))
         if lobes is not None:
-            rows.append(("SRBF lobes only (I_M)", base + [None, lobes, off, im] + call[11:]))
-            rows.append(("multiple-scattering clusters only", base + [None, no_lobes, ms, im] + call[11:]))
+            rows.append(("SRBF lobes only (I_M)", base + [None, lobes, off, im] + rest))
+            rows.append(("multiple-scattering clusters only", base + [None, no_lobes, ms, im] + rest))
         for label, variant in rows:
             print(f"  {label}: {best_ms(variant):.0f} ms", flush=True)
     rng = np.random.default_rng(0)

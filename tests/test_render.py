@@ -142,7 +142,8 @@ def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
         look = Look(ROUGH, ds, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, gap, D_F, D_B)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
         lights = Lights(sun, np.full((1, 3), 2.0), np.full((1, n), visibility))
-        shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), lights, None, None, None, rgb, alpha)
+        shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), lights, None, None, None, None, rgb,
+                      alpha)
         return rgb
 
     assert np.any(shaded(0.25, 0.0) > 0.0)
@@ -181,7 +182,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, D_F, D_B)
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
                       Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n),
-                      im_slices(i_m, fit.sharpness), rgb, alpha)
+                      im_slices(i_m, fit.sharpness), None, rgb, alpha)
         theta_o = np.arcsin(np.sum(view * tangent, axis=1))
         direct = np.zeros((n, 3))
         for wj, lam, w in zip(fit.directions, fit.sharpness, fit.weights):

@@ -45,10 +45,18 @@ tilted toward the camera is read further along. Not the default: the GL backend 
 the error on three patches of four but darkens the grazing-light patch (BENCHMARKS.md, "Issue 13: single and
 multiple scattering, split").
 
+``yarn_bounce`` adds, under directional lights, the light the neighbouring yarns scatter onto a yarn
+(``knitrun.render.yarn_bounce``: from the pack's hull albedo and transmittance, no fitted constant; it needs
+``interreflection`` and ``multiple_scattering``). Not the default: it brings a white knit patch from 0.80 to 1.00 of
+the path-traced brightness, but the example scenes' red yarns overshoot (1.13 on the knit patch), because the ξ closed
+on a lone yarn already scales its single scattering up to make up for the dual-scattering estimate's missing
+multiple scattering (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter").
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
 the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
-factored tables, without the detail, with the paper's ξ, with ξ closed at every view, and with the axial parallax.
+factored tables, without the detail, with the paper's ξ, with ξ closed at every view, with the axial parallax and
+with the yarn-level bounce.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -71,6 +79,7 @@ class Features:
     view_xi: bool = False  # ξ closed at every view (correction/xi_view) where the pack has it, before closed_xi
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
     parallax: bool = False  # the regular points' texture coordinate and tangent where the tube's seen surface lies
+    yarn_bounce: bool = False  # light the neighbouring yarns scatter onto a yarn under directional lights
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -87,6 +96,7 @@ ABLATIONS = {
     "papers_xi": Features(closed_xi=False),
     "view_xi": Features(view_xi=True),
     "parallax": Features(parallax=True),
+    "yarn_bounce": Features(yarn_bounce=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -94,7 +104,8 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
                    "factored": "full, the paper's rank-1 factored ξ, Ψ",
                    "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ",
-                   "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax"}
+                   "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax",
+                   "yarn_bounce": "full with the yarn-level bounce"}
 
 
 def regular_fibers(name: str) -> Features:

@@ -84,6 +84,7 @@ from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, resolve, resolve_behind, same_surface,
                                           shade_flyaway, shade_regular, shading_points)
+from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, vertex_bounce, vertex_tangents
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table
@@ -522,10 +523,20 @@ class Renderer:
         light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
         size = scene.render.shadow_map_size
         light_vis = [np.ones((len(light_dir), len(s["weight"]))) for s in sets]
+        # the yarn-level bounce under the directional lights (``yarn_bounce``) looks the lights up at the polyline
+        # vertices too
+        bounce_on = features.yarn_bounce and features.interreflection and features.multiple_scattering and \
+            len(light_dir) > 0 and all(
+            look.hull_albedo is not None and look.hull_transmittance is not None for look in looks)
+        vertex_receivers = [(lines.points, np.repeat(bias_radius[lines.entry], np.diff(lines.offsets)))] \
+            if bounce_on else []
+        vertex_vis = np.ones((len(light_dir), len(lines.points)))
         for i, d in enumerate(light_dir):
-            for out, at, vis in zip(light_vis, where, _visibility(lines, radius, d, size, 0.0, receivers,
-                                                                   self.shadow_depth)):
+            found = _visibility(lines, radius, d, size, 0.0, receivers + vertex_receivers, self.shadow_depth)
+            for out, at, vis in zip(light_vis, where, found):
                 out[i, at] = vis
+            if bounce_on:
+                vertex_vis[i] = found[-1]
         lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
         lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
         lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
@@ -549,6 +560,9 @@ class Renderer:
                 for look, a in zip(looks, albedo)}
         ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
         facts["ms_lights"] = int(len(ms_dir))
+        bounce = [None] * len(layers)
+        if bounce_on:
+            bounce = _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, layers, facts)
         lap("shadow")
 
         if self._compile_helper is not None:  # its kernels are in the cache by now, or soon: load them, not compile
@@ -569,7 +583,7 @@ class Renderer:
                                self.im_slices[k]) if len(lobe_dir) else (None, None, None)
                 shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
                               Lights(light_dir, light_e, light_vis[m]) if len(light_dir) else None, *environment,
-                              rgb, alpha)
+                              bounce[m], rgb, alpha)
             shaded.append((rgb, alpha))
         if fly_points is not None:
             n_fly = len(fly_points["weight"])
@@ -635,6 +649,37 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
                for name in ("load", "srbf_fit") if name in renderer.setup_timings or name in result.timings}
     result.timings = {**timings, **{k: v for k, v in result.timings.items() if k not in timings}}
     return result
+
+
+def _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, layers, facts) -> list:
+    """The yarn-level bounce radiance (N, 3) of each layer's points under the directional lights
+    (``knitrun.render.yarn_bounce``), from the lights' visibility ``vertex_vis`` (L, P) at the polyline vertices;
+    ``facts["yarn_bounce"]`` gets the vertices' mean covered fraction of the sphere and mean bounce radiance."""
+    entry = np.repeat(lines.entry, np.diff(lines.offsets))
+    albedo = np.array([look.hull_albedo for look in looks], np.float64).reshape(-1, 3)[entry]
+    transmit = np.array([look.hull_transmittance for look in looks], np.float64).reshape(-1, 3)[entry]
+    gap = np.array([look.gap for look in looks])[entry]
+    if camera.ortho_height > 0:
+        view = np.broadcast_to(-camera.basis()[0], lines.points.shape)
+    else:
+        view = np.asarray(camera.position, np.float64) - lines.points
+        view = view / np.maximum(np.linalg.norm(view, axis=1, keepdims=True), 1e-300)
+    yarns = BounceYarns(lines.points, vertex_tangents(lines.points, lines.offsets),
+                        np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets)), lines.offsets, lines.rest,
+                        np.array([looks[k].radius for k in lines.entry], np.float64),
+                        np.clip(albedo - transmit, 0.0, 1.0), transmit, np.ascontiguousarray(view, np.float64))
+    direct = vertex_vis + (1.0 - vertex_vis) * gap[None, :]  # strip_shading.past_blockers, per vertex
+    vertex, covered = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
+    if len(covered):
+        facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),
+                                "radiance": [round(float(x), 6) for x in vertex.mean(axis=0)]}
+    out = []
+    for layer in layers:
+        at = np.empty((len(layer["weight"]), 3))
+        bounce_at_points(np.ascontiguousarray(layer["segment"], np.int64),
+                         np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, at)
+        out.append(at)
+    return out
 
 
 def _kernel_points(points, lines, looks) -> Points:

@@ -388,7 +388,7 @@ def _begin_point(q, points, period, t, wo, n, b, rgb, alpha):
 # --- regular fibers --------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
-def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, rgb, alpha):
+def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, bounce, rgb, alpha):
     """Shade the points ``idx`` (indices into ``points``) of one yarn; writes rgb[idx], alpha[idx]. ``points``,
     ``look``, ``corrections`` (ξ, Ψ^Fiber), the textures ``tangent``, ``coverage`` and ``detail``, ``lights``
     (directional), ``lobes`` (SRBF), ``ms`` (the environment's multiple-scattering lights, module docstring) and
@@ -468,6 +468,9 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     for ch in range(3):
                         multiple = (lit * d_b * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
                         rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
+            if bounce is not None:  # light the neighbouring yarns scatter onto this one (``yarn_bounce``)
+                for ch in range(3):
+                    rgb[q, ch] += bounce[q, ch]
             for ch in range(3):
                 rgb[q, ch] *= fiber_detail[0]
 

@@ -10,9 +10,11 @@ flyaways, environment) and converts everything to the scene:
   f is linear in those colours, so I_M and the dual-scattering averages ā_f, ā_b scale with the colour while the
   shifts and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
   correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked.
-* Hull albedo ρ_Y (``/interreflection/albedo``, read with an environment light): tinted by the colour and reduced
-  to its luminance, the ρ of ``knitrun.render.interreflection``; 0 (no inter-reflection) for a pack baked before
-  schema 2.1, which ``RenderResult.facts["interreflection"]`` then reports.
+* Hull albedo ρ_Y (``/interreflection/albedo``, read with an environment light or with ``transmission``): tinted by
+  the colour (``hull_albedo``, RGB: the ρ_Y of the directional lights' yarn-level bounce, ``yarn_bounce``) and
+  reduced to its luminance (``yarn_albedo``, the ρ of the environment's inter-reflection,
+  ``knitrun.render.interreflection``); None (neither term) for a pack baked before schema 2.1, which
+  ``RenderResult.facts["interreflection"]`` then reports.
 * Fiber counts for the dual-scattering estimate at run time: ``dual_scattering.fiber_counts`` (n_cross, n_occluded)
   from the yarn spec stored in the pack's provenance. With ``transmission`` and a pack that has the yarn's
   transmittance T_Y (``/interreflection/transmittance``, schema 2.2), n_cross, the count for light crossing another
@@ -85,6 +87,8 @@ class YarnLook:
     d_f: float  # DS density factors (``dual_scattering.D_F``, ``D_B``); 0 and 0: single scattering alone
     d_b: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
+    hull_albedo: np.ndarray | None  # (3,) ρ_Y·colour (``yarn_bounce``); None: the pack has no ρ_Y or it is not read
+    hull_transmittance: np.ndarray | None  # (3,) T_Y·colour (``yarn_bounce``); None: no T_Y, or not read
     yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
     im: IMTable | None  # the I_M^{TT,D} table for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
@@ -150,8 +154,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
     ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors; ``detail``: the
-    fiber-level detail from the pack's AO texture (``fiber_detail_chain``); ``transmission``: n_cross from the
-    pack's transmittance T_Y when it has one (module docstring); ``closed_xi``: ξ from the pack's
+    fiber-level detail from the pack's AO texture (``fiber_detail_chain``); ``transmission``: yarn-level transport,
+    n_cross and the gap transmittance from the pack's transmittance T_Y and the hull albedo ρ_Y for the directional
+    lights' bounce, where it has them (module docstring); ``closed_xi``: ξ from the pack's
     ``correction/xi_closed`` (closed on the diagonal θ_o = −θ_i, schema ≥ 2.3; ASSET_PACK.md §6) instead of the
     paper's, where the pack has it and ``full_tables`` (the closed ξ is a full table); ``view_xi``: from its
     ``correction/xi_view`` (closed at every view, schema ≥ 2.4) before either; ``YarnLook.xi_from`` says which ξ
@@ -182,7 +187,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         names.append("textures/ao")
     if environment:
         names.append("environment/I_M_TT_D")
-    if environment and ALBEDO_TABLE in stored:
+    if (environment or transmission) and ALBEDO_TABLE in stored:
         names.append(ALBEDO_TABLE)
     if transmission and TRANSMITTANCE_TABLE in stored:
         names.append(TRANSMITTANCE_TABLE)
@@ -202,7 +207,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     n_cross, n_occluded = fiber_counts(geometry, spec.radius)
     n_cross_from = (f"geometry ({'switched off' if not transmission else 'no transmittance in the pack, schema < 2.2'}"
                     f"): {n_cross:.2f}")
-    gap, n_cross_rest = 0.0, n_cross
+    gap, n_cross_rest, transmittance = 0.0, n_cross, None
     if TRANSMITTANCE_TABLE in names:
         transmittance = np.asarray(pack.tables[TRANSMITTANCE_TABLE], np.float64)
         gap = gap_transmittance(pack.mip_chain("textures/coverage"))
@@ -224,8 +229,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     im = None
     if environment:
         im = im_table_from(pack.tables["environment/I_M_TT_D"] * colour, pack.info["environment/I_M_TT_D"].axes)
-    yarn_albedo = float(np.asarray(pack.tables[ALBEDO_TABLE], np.float64) * colour @ LUMINANCE) \
-        if ALBEDO_TABLE in names else None
+    hull_albedo = np.asarray(pack.tables[ALBEDO_TABLE], np.float64) * colour if ALBEDO_TABLE in names else None
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
                  if corrections}
     return YarnLook(
@@ -244,7 +248,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         n_cross=n_cross, n_cross_rest=n_cross_rest, gap=gap, n_cross_from=n_cross_from, n_occluded=n_occluded, d_f=D_F, d_b=D_B, xi_from=xi_from,
         warnings=warnings,
         twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
-        yarn_albedo=yarn_albedo, im=im, residuals=residuals)
+        hull_albedo=hull_albedo, hull_transmittance=None if transmittance is None else transmittance * colour,
+        yarn_albedo=None if hull_albedo is None else float(hull_albedo @ LUMINANCE), im=im,
+        residuals=residuals)
 
 
 def shading_look(look: YarnLook) -> tuple:

@@ -247,6 +247,9 @@ class GLRenderer:
         if features.parallax:
             raise FormatError("the GL backend does not draw the axial parallax (Features.parallax); the CPU renderer "
                               "does")
+        if features.yarn_bounce:
+            raise FormatError("the GL backend does not draw the yarn-level bounce (Features.yarn_bounce); the CPU "
+                              "renderer does")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
