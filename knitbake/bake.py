@@ -12,7 +12,7 @@ also takes its input stages' results, ``run_stage``):
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
 | interreflection | ``interreflection/albedo``, ``interreflection/transmittance`` (the yarn tube's ρ_Y, T_Y) | always |
-| closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer) | its inputs are baked |
+| closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer), ``*_ss``, ``*_ms`` | its inputs are baked |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
 stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
@@ -95,9 +95,9 @@ QUALITY = {
 # quadrature error; correction 5, shadowing 3, interreflection 2, textures 2, flyaway 2: the fibers traced as Embree
 # curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn;
 # interreflection 4: the yarn's transmittance T_Y as well; correction 7: Ψ_* kept (correction/radiance);
-# closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view
+# closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view; 3: and apart on single and multiple scattering
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
-                 "interreflection": 4, "textures": 2, "flyaway": 2, "closure": 2}
+                 "interreflection": 4, "textures": 2, "flyaway": 2, "closure": 3}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64
@@ -275,15 +275,20 @@ def write_baked_pack(spec: YarnSpec, output, quality: str, settings: dict, stage
 
 
 def _input_pack_writer(spec: YarnSpec, seed: int, inputs: dict):
-    """``write(path, xi_view)``: the pack of the closure's input stages with ``correction/xi_view`` = ``xi_view`` (a
-    closure iterate; its error estimate in this temporary pack: the paper's ξ's at the views)."""
+    """``write(path, xi_view, split=None)``: the pack of the closure's input stages with ``correction/xi_view`` =
+    ``xi_view`` and, with ``split`` = (ss, ms), ``correction/xi_view_ss`` and ``_ms`` (closure iterates; their error
+    estimate in this temporary pack: the paper's ξ's at the views)."""
     corr = inputs["correction"]
     error = papers_xi_at_views(corr.errors["correction/xi"])
 
-    def write(path, xi_view):
+    def write(path, xi_view, split=None):
         results = {s: (r, {"seconds": 0.0}) for s, r in inputs.items()}
-        results["correction"] = (StageResult({**corr.tables, "correction/xi_view": xi_view},
-                                             {**corr.errors, "correction/xi_view": error}, corr.attrs, corr.counts),
+        tables = {"correction/xi_view": xi_view}
+        if split is not None:
+            tables.update({"correction/xi_view_ss": split[0], "correction/xi_view_ms": split[1]})
+        results["correction"] = (StageResult({**corr.tables, **tables},
+                                             {**corr.errors, **{name: error for name in tables}}, corr.attrs,
+                                             corr.counts),
                                  {"seconds": 0.0})
         write_baked_pack(spec, path, "closure input", {}, list(inputs), None, seed, results)
     return write

@@ -116,3 +116,69 @@ def test_the_renderer_reads_the_closed_xi_where_the_pack_has_it(closed_pack, tmp
     renderer = Renderer(closure._scene(tmp_path, SPEC, old))
     assert np.array_equal(renderer.looks[0].xi_full, paper)
     assert renderer.setup_facts["xi"] == {SPEC.name: "the paper's (the pack has no correction/xi_closed)"}
+
+
+def _miss_parts(pack, split, folder):
+    """RMS of S/Ψ − 1 of single scattering and of multiple scattering over the bins where each part is measured, the
+    renderer drawing with ``split`` = (ξ_ss, ξ_ms) as the pack's split ξ."""
+    copy = folder / f"split_{abs(hash(split[0].tobytes() + split[1].tobytes()))}.h5"
+    shutil.copy(pack, copy)
+    with h5py.File(copy, "r+") as f:
+        f["correction/xi_view_ss"][...] = split[0].astype(np.float32)
+        f["correction/xi_view_ms"][...] = split[1].astype(np.float32)
+        total, total_err = f["correction/radiance_view"][()], f["correction/radiance_view_stderr"][()]
+        single, single_err = f["correction/radiance_view_ss"][()], f["correction/radiance_view_ss_stderr"][()]
+    shape = total.shape[:4]
+    drawn = closure.render_bins(copy, SPEC, shape, ROWS, split=True)
+    drawn_single = closure.render_bins(copy, SPEC, shape, ROWS, split=True, single=True)
+    out = []
+    for want, err, got in ((single, single_err, drawn_single),
+                           (total - single, np.hypot(total_err, single_err), drawn - drawn_single)):
+        measured = np.all((want > closure.SIGNAL * total.max()) & (err <= closure.MAX_RELATIVE_ERROR * want), axis=-1)
+        assert measured.sum() >= 4, "too few measured bins for the test to mean anything"
+        out.append(float(np.sqrt(np.mean((got[measured] / want[measured] - 1.0) ** 2))))
+    return out
+
+
+def test_the_split_xi_reproduces_single_and_multiple_scattering_apart(closed_pack, tmp_path):
+    """ξ closed apart (``correction/xi_view_ss``, ``_ms``): the renderer's single scattering and its multiple
+    scattering each come closer to the path tracer's, per bin, than with the one closed ξ on both; the split tables are
+    finite with finite errors, their diagonals stored, the traced single scattering below the whole."""
+    with h5py.File(closed_pack) as f:
+        closed = f["correction/xi_view"][()]
+        ss, ms = f["correction/xi_view_ss"][()], f["correction/xi_view_ms"][()]
+        for name in ("ss", "ms"):
+            assert np.array_equal(f[f"correction/xi_closed_{name}"][()],
+                                  closure.diagonal_of(f[f"correction/xi_view_{name}"][()]))
+            assert np.all(np.isfinite(f[f"correction/xi_view_{name}_stderr"][()]))
+            assert 0.0 <= f[f"correction/xi_view_{name}"].attrs["closure_residual_rms"]
+        single, total = f["correction/radiance_view_ss"][()], f["correction/radiance_view"][()]
+    assert np.all(np.isfinite(ss)) and np.all(np.isfinite(ms))
+    assert single.mean() < total.mean()
+    one = _miss_parts(closed_pack, (closed, closed), tmp_path)
+    apart = _miss_parts(closed_pack, (ss, ms), tmp_path)
+    assert apart[0] < 0.7 * one[0] and apart[1] < 0.7 * one[1], (one, apart)
+
+
+def test_the_renderer_reads_the_split_xi_when_asked(closed_pack, tmp_path):
+    """``Features.split_xi``: multiple scattering's ξ where the one ξ was read, single scattering's beside it, on the
+    diagonal and at every view; not asked, or a pack without them (schema < 2.5), the one closed ξ (facts say so)."""
+    scene = closure._scene(tmp_path, SPEC, closed_pack)
+    with h5py.File(closed_pack) as f:
+        ss, ms = f["correction/xi_view_ss"][()], f["correction/xi_view_ms"][()]
+    split = Renderer(scene, features=Features(split_xi=True))
+    look = split.looks[0]
+    assert np.array_equal(look.xi_full, closure.diagonal_of(ms)) and np.array_equal(look.xi_single,
+                                                                                   closure.diagonal_of(ss))
+    assert split.setup_facts["xi"] == {SPEC.name: "closed on the renderer, apart on single and multiple scattering"}
+    view = Renderer(scene, features=Features(split_xi=True, view_xi=True)).looks[0]
+    assert np.array_equal(view.xi_view, ms) and np.array_equal(view.xi_single_view, ss)
+    assert Renderer(scene).looks[0].xi_single.shape[0] == 0  # the default: one ξ
+    old = tmp_path / "schema24.h5"
+    shutil.copy(closed_pack, old)
+    with h5py.File(old, "r+") as f:
+        for name in ("xi_view_ss", "xi_view_ms", "xi_closed_ss", "xi_closed_ms", "radiance_view_ss"):
+            del f[f"correction/{name}"], f[f"correction/{name}_stderr"]
+    renderer = Renderer(closure._scene(tmp_path, SPEC, old), features=Features(split_xi=True))
+    assert renderer.looks[0].xi_single.shape[0] == 0
+    assert "the pack has no ξ closed apart" in renderer.setup_facts["xi"][SPEC.name]

@@ -13,7 +13,7 @@ import numpy as np
 from ..conventions import HALF_PI, LENGTH_UNITS, PHI_RANGE, THETA_RANGE
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "2.4"
+SCHEMA_VERSION = "2.5"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
@@ -137,6 +137,24 @@ TABLES = (
               ("v", "theta_i", "theta_o", "phi", "channel"), "1",
               "ξ closed on the strip renderer of SHADING.md at every view: the factor with which it reproduces "
               "correction/radiance_view at the bin centres (since schema 2.4, §6)", value_range=(0.0, None)),
+    TableSpec("correction/radiance_view_ss", "correction", ("N_v", "N_theta", "N_theta", "N_phi", 3),
+              ("v", "theta_i", "theta_o", "phi", "channel"), "1",
+              "the single scattering of correction/radiance_view: paths of one scattering event (since schema 2.5, "
+              "§6)", value_range=(0.0, None)),
+    TableSpec("correction/xi_view_ss", "correction", ("N_v", "N_theta", "N_theta", "N_phi", 3),
+              ("v", "theta_i", "theta_o", "phi", "channel"), "1",
+              "ξ of single scattering, closed apart: the renderer's single scattering reproduces "
+              "correction/radiance_view_ss at the bin centres (since schema 2.5, §6)", value_range=(0.0, None)),
+    TableSpec("correction/xi_view_ms", "correction", ("N_v", "N_theta", "N_theta", "N_phi", 3),
+              ("v", "theta_i", "theta_o", "phi", "channel"), "1",
+              "ξ of multiple scattering, closed apart: the rest reproduces correction/radiance_view − "
+              "correction/radiance_view_ss (since schema 2.5, §6)", value_range=(0.0, None)),
+    TableSpec("correction/xi_closed_ss", "correction", ("N_v", "N_theta", "N_phi", 3),
+              ("v", "theta_d", "phi", "channel"), "1",
+              "the diagonal θ_o = −θ_i of correction/xi_view_ss (since schema 2.5, §6)", value_range=(0.0, None)),
+    TableSpec("correction/xi_closed_ms", "correction", ("N_v", "N_theta", "N_phi", 3),
+              ("v", "theta_d", "phi", "channel"), "1",
+              "the diagonal θ_o = −θ_i of correction/xi_view_ms (since schema 2.5, §6)", value_range=(0.0, None)),
     TableSpec("correction/xi_residual", "correction", (), (), "1",
               "relative RMS residual of ξ ≈ ξ_M ξ_N over the whole baked grid", value_range=(0.0, None)),
     TableSpec("correction/xi_residual_by_v", "correction", ("N_v",), ("v",), "1",

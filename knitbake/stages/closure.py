@@ -40,9 +40,24 @@ at a diagonal bin centre the two lookups read the same grid value and no other, 
 the one that stage ran, on the same Ψ_* (the diagonal bins of ``correction/radiance_view`` are the correction
 stage's ``correction/radiance``, not traced again).
 
+Apart on single and multiple scattering (closure version 3, schema 2.5). One ξ scales the renderer's single
+scattering and its multiple scattering alike, and closed on their sum it makes up for what one lacks with the
+other: on cotton1 the renderer's multiple scattering is about half the path tracer's and its single scattering about
+right (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter"), so the closed ξ leaves single scattering
+1.4–1.7× too bright wherever the mix differs from the bake's yarn. The stage therefore also traces each bin with
+paths of one event, Ψ_SS (``radiance_view_ss``; multiple scattering Ψ_MS = Ψ_* − Ψ_SS), and runs the fixed point on
+each part from the closed ξ: the renderer draws every bin with ξ_ss on single scattering and ξ_ms on the rest
+(``Features.split_xi``), once whole (S) and once with single scattering alone (S_SS, the density factors at 0), and
+
+    ξ_ss ← ξ_ss · Ψ_SS / S_SS,        ξ_ms ← ξ_ms · Ψ_MS / (S − S_SS)
+
+in the bins where that part is measured (``SIGNAL``, ``MAX_RELATIVE_ERROR``), within ``CLAMP`` of the paper's ξ;
+elsewhere the closed ξ. Stored: ``correction/xi_view_ss``, ``_ms`` and their diagonals ``xi_closed_ss``, ``_ms``.
+
 Errors. The closed ξ is Ψ_* over the renderer's estimate per unit ξ, so its relative standard error is Ψ_*'s (over
 the batches); where a bin kept the starting ξ, the paper's error interpolated at its θ_d. It does not include the
-closure residual, which is reported beside it.
+closure residual, which is reported beside it. The split ξ's relative error is its part's (Ψ_MS's: Ψ_*'s and
+Ψ_SS's in quadrature).
 """
 
 from __future__ import annotations
@@ -106,19 +121,21 @@ def _views(n_theta: int, n_phi: int):
 
 
 def trace_view_radiance(spec: YarnSpec, diagonal: tuple, rows: int, spp: int, batches: int, seed: int,
-                        max_depth: int = 16, progress=None):
+                        max_depth: int = 16, progress=None, shape=None):
     """Ψ_* (N_v, N_θ, N_θ, N_φ, 3) on axes (v, θ_i, θ_o, φ) and its standard error over ``batches``: the path-traced
-    mean radiance per v bin of the correction stage's yarn, camera and light (module docstring). ``diagonal``: the
-    correction stage's (``correction/radiance``, its error) (N_v, N_θ, N_φ, 3), Ψ_* on θ_o = −θ_i = θ_d measured
-    the same way, which fills those bins instead of tracing them again."""
-    radiance, error = diagonal
-    n_v, n_theta, n_phi = radiance.shape[:3]
+    mean radiance per v bin of the correction stage's yarn, camera and light (module docstring), paths of at most
+    ``max_depth`` scattering events (1: single scattering). ``diagonal``: the correction stage's
+    (``correction/radiance``, its error) (N_v, N_θ, N_φ, 3), Ψ_* on θ_o = −θ_i = θ_d measured the same way, which
+    fills those bins instead of tracing them again; or None to trace them too, on the grid ``shape`` (N_v, N_θ,
+    N_φ)."""
+    radiance, error = diagonal if diagonal is not None else (None, None)
+    n_v, n_theta, n_phi = radiance.shape[:3] if diagonal is not None else shape
     samples = np.zeros((batches, n_v, n_theta, n_theta, n_phi, 3))
     per_batch = n_theta * n_theta * n_phi
     for b in range(batches):
         geometry = yarn_tracer(spec, seed + b)
         for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
-            if k + ell == n_theta - 1:
+            if k + ell == n_theta - 1 and diagonal is not None:
                 continue
             cam = strip_camera(spec, theta_o, rows)
             lit = geometry.with_lights(yarn_direction(theta_i, -phi)[None], np.ones((1, 3)))
@@ -128,7 +145,7 @@ def trace_view_radiance(spec: YarnSpec, diagonal: tuple, rows: int, spp: int, ba
             if progress:
                 progress(b * per_batch + (k * n_theta + ell) * n_phi + m + 1, batches * per_batch)
     mean, stderr = samples.mean(axis=0), samples.std(axis=0, ddof=1) / np.sqrt(batches)
-    for ell in range(n_theta):
+    for ell in range(n_theta if diagonal is not None else 0):
         mean[:, n_theta - 1 - ell, ell], stderr[:, n_theta - 1 - ell, ell] = radiance[:, ell], error[:, ell]
     return mean, stderr
 
@@ -140,10 +157,12 @@ def diagonal_of(view: np.ndarray) -> np.ndarray:
     return np.stack([view[:, n_theta - 1 - ell, ell] for ell in range(n_theta)], axis=1)
 
 
-def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=None) -> np.ndarray:
+def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=None, split=False,
+                single=False) -> np.ndarray:
     """S (N_v, N_θ, N_θ, N_φ, 3): the strip renderer's mean radiance per v bin of the correction stage's camera,
     for each bin centre (θ_i, θ_o, φ), of the yarn drawn from ``pack`` (full model without flyaways, ξ from the
-    pack's ``correction/xi_view``)."""
+    pack's ``correction/xi_view``; ``split``: from its ``correction/xi_view_ss`` and ``_ms``; ``single``: single
+    scattering alone, ``Features.multiple_scattering`` False)."""
     from knitrun.render.ablations import Features
     from knitrun.render.pipeline import Renderer
 
@@ -151,7 +170,8 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
     out = np.zeros(tuple(shape) + (3,))
     with tempfile.TemporaryDirectory(prefix="knit-closure-") as tmp:
         scene = _scene(Path(tmp), spec, pack)
-        renderer = Renderer(scene, features=Features(flyaways=False, view_xi=True))
+        renderer = Renderer(scene, features=Features(flyaways=False, view_xi=True, split_xi=split,
+                                                     multiple_scattering=not single))
         done = 0
         for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
             renderer.scene = _view(scene, spec, theta_i, theta_o, phi, rows)
@@ -180,44 +200,85 @@ def papers_xi_at_views(xi: np.ndarray) -> np.ndarray:
 def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, iterations: int, spp: int,
                      batches: int, seed: int, progress=None) -> tuple[dict, dict, dict, dict]:
     """(tables, errors, counts, closure residuals: table → {max, rms}) of the view-closed ξ, its diagonal and the Ψ_*
-    it closes on (module docstring). ``inputs``: stage → StageResult of ``CLOSURE_INPUTS``; ``write_pack_to(path,
-    xi_view)`` writes them as a pack with ``correction/xi_view`` = ``xi_view``; ``spp``, ``batches``: the
-    correction stage's."""
+    it closes on, and of the ξ closed apart on single and multiple scattering (module docstring). ``inputs``: stage
+    → StageResult of ``CLOSURE_INPUTS``; ``write_pack_to(path, xi_view, split)`` writes them as a pack with
+    ``correction/xi_view`` = ``xi_view`` and, with ``split`` = (ss, ms), ``correction/xi_view_ss``, ``_ms``; ``spp``,
+    ``batches``: the correction stage's."""
     paper_tab = inputs["correction"].tables["correction/xi"]
     n_v, n_theta, n_phi = paper_tab.shape[:3]
     shape = (n_v, n_theta, n_theta, n_phi)
     per_view = n_theta * n_theta * n_phi
-    total = (batches + iterations + 1) * per_view
-    trace_step = None if progress is None else (lambda done, _: progress(done, total))
+    total = (2 * batches + 3 * (iterations + 1)) * per_view
     diagonal = inputs["correction"].tables["correction/radiance"], inputs["correction"].errors["correction/radiance"]
-    target, target_err = trace_view_radiance(spec, diagonal, rows, spp, batches, seed, progress=trace_step)
+    target, target_err = trace_view_radiance(
+        spec, diagonal, rows, spp, batches, seed, progress=None if progress is None else (lambda d, _: progress(d, total)))
+    single, single_err = trace_view_radiance(
+        spec, None, rows, spp, batches, seed, max_depth=1, shape=(n_v, n_theta, n_phi),
+        progress=None if progress is None else (lambda d, _: progress(batches * per_view + d, total)))
     paper = papers_xi_at_views(paper_tab)
     paper_err = papers_xi_at_views(inputs["correction"].errors["correction/xi"])
-    xi = paper.copy()
-    measured = np.all((target > SIGNAL * target.max()) & (target_err <= MAX_RELATIVE_ERROR * target), axis=-1,
+
+    def measured(radiance, error):
+        return np.all((radiance > SIGNAL * target.max()) & (error <= MAX_RELATIVE_ERROR * radiance), axis=-1,
                       keepdims=True)
+
+    def passes(start):
+        """progress of the render passes from pass ``start`` on (each pass draws every view bin once)."""
+        if progress is None:
+            return lambda p: None
+        return lambda p: (lambda done, _: progress((2 * batches + start + p) * per_view + done, total))
+
+    xi = paper.copy()
+    used_total = measured(target, target_err)
     with tempfile.TemporaryDirectory(prefix="knit-closure-pack-") as tmp:
         pack = Path(tmp) / "inputs.h5"
-        for it in range(iterations + 1):
+        step = passes(0)
+        for it in range(iterations + 1):  # ξ closed on the totals
             write_pack_to(pack, xi)
-            step = None if progress is None else \
-                (lambda done, _, it=it: progress((batches + it) * per_view + done, total))
-            rendered = render_bins(pack, spec, shape, rows, step)
-            used = measured & (rendered > SIGNAL * rendered.max())
+            rendered = render_bins(pack, spec, shape, rows, step(it))
+            used = used_total & (rendered > SIGNAL * rendered.max())
             if it == iterations:
                 break
             ratio = np.where(used, target / np.where(used, rendered, 1.0), 1.0)
             xi = np.clip(xi * ratio, paper / CLAMP, paper * CLAMP)
+        closed = np.where(used, xi, paper)
+        # ξ closed apart: single scattering on the one-event radiance, multiple on the rest, from the closed ξ
+        parts = {"ss": (single, single_err), "ms": (target - single, np.hypot(target_err, single_err))}
+        split = {name: closed.copy() for name in parts}
+        measured_parts = {name: measured(*value) for name, value in parts.items()}
+        step = passes(iterations + 1)
+        for it in range(iterations + 1):
+            write_pack_to(pack, closed, (split["ss"], split["ms"]))
+            drawn = render_bins(pack, spec, shape, rows, step(2 * it), split=True)
+            drawn_single = render_bins(pack, spec, shape, rows, step(2 * it + 1), split=True, single=True)
+            drawn_parts = {"ss": drawn_single, "ms": drawn - drawn_single}
+            used_parts = {name: measured_parts[name] & (drawn_parts[name] > SIGNAL * drawn.max()) for name in parts}
+            if it == iterations:
+                break
+            for name, (want, _) in parts.items():
+                ok = used_parts[name]
+                ratio = np.where(ok, want / np.where(ok, drawn_parts[name], 1.0), 1.0)
+                split[name] = np.clip(split[name] * ratio, paper / CLAMP, paper * CLAMP)
     counts = {"iterations": iterations, "bins_closed": int(used.all(axis=-1).sum()), "bins": int(np.prod(shape)),
-              "batches": batches, "paths_per_pixel": spp}
-    closed = np.where(used, xi, paper)
+              "batches": batches, "paths_per_pixel": spp,
+              **{f"bins_closed_{name}": int(used_parts[name].all(axis=-1).sum()) for name in parts}}
     relative = np.where(used, target_err / np.where(used, target, 1.0), paper_err / np.maximum(paper, 1e-300))
     left = {"correction/xi_view": _residual(rendered, target, used),
             "correction/xi_closed": _residual(diagonal_of(rendered), diagonal_of(target), diagonal_of(used))}
     tables = {"correction/xi_view": closed, "correction/radiance_view": target,
-              "correction/xi_closed": diagonal_of(closed)}
+              "correction/xi_closed": diagonal_of(closed), "correction/radiance_view_ss": single}
     errors = {"correction/xi_view": closed * relative, "correction/radiance_view": target_err,
-              "correction/xi_closed": diagonal_of(closed * relative)}
+              "correction/xi_closed": diagonal_of(closed * relative), "correction/radiance_view_ss": single_err}
+    for name, (want, want_err) in parts.items():
+        ok = used_parts[name]
+        value = np.where(ok, split[name], closed)
+        error = value * np.where(ok, want_err / np.where(ok, np.abs(want), 1.0), relative)
+        tables[f"correction/xi_view_{name}"], errors[f"correction/xi_view_{name}"] = value, error
+        tables[f"correction/xi_closed_{name}"] = diagonal_of(value)
+        errors[f"correction/xi_closed_{name}"] = diagonal_of(error)
+        left[f"correction/xi_view_{name}"] = _residual(drawn_parts[name], want, ok)
+        left[f"correction/xi_closed_{name}"] = _residual(diagonal_of(drawn_parts[name]), diagonal_of(want),
+                                                         diagonal_of(ok))
     return tables, errors, counts, left
 
 

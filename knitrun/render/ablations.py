@@ -52,11 +52,18 @@ the path-traced brightness, but the example scenes' red yarns overshoot (1.13 on
 on a lone yarn already scales its single scattering up to make up for the dual-scattering estimate's missing
 multiple scattering (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter").
 
+``split_xi`` shades with ξ closed apart on single and multiple scattering (the pack's ``correction/xi_closed_ss`` and
+``_ms``, schema 2.5; ASSET_PACK.md §6 "Closure apart"): single scattering (the BCSDF f of the lit fibers, and the
+environment's I_M) takes the first, the dual-scattering terms of multiple scattering the second. Not the default:
+it corrects a dark colour channel (the lone red yarn's green 1.41 → 1.11 of the reference) and the lone yarn under
+a directional light, but the sky scenes and the grazing patch get worse (BENCHMARKS.md, "Issue 13: ξ closed apart
+on single and multiple scattering").
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
 the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
-factored tables, without the detail, with the paper's ξ, with ξ closed at every view, with the axial parallax and
-with the yarn-level bounce.
+factored tables, without the detail, with the paper's ξ, with ξ closed at every view, with the axial parallax, with
+the yarn-level bounce and with ξ closed apart on single and multiple scattering.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -80,6 +87,7 @@ class Features:
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
     parallax: bool = False  # the regular points' texture coordinate and tangent where the tube's seen surface lies
     yarn_bounce: bool = False  # light the neighbouring yarns scatter onto a yarn under directional lights
+    split_xi: bool = False  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -97,6 +105,7 @@ ABLATIONS = {
     "view_xi": Features(view_xi=True),
     "parallax": Features(parallax=True),
     "yarn_bounce": Features(yarn_bounce=True),
+    "split_xi": Features(split_xi=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -105,7 +114,8 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "factored": "full, the paper's rank-1 factored ξ, Ψ",
                    "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ",
                    "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax",
-                   "yarn_bounce": "full with the yarn-level bounce"}
+                   "yarn_bounce": "full with the yarn-level bounce",
+                   "split_xi": "full with ξ closed apart on single and multiple scattering"}
 
 
 def regular_fibers(name: str) -> Features:

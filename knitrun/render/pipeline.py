@@ -380,12 +380,12 @@ class Renderer:
                            corrections=features.xi or features.fiber_shadowing, full_tables=features.full_tables,
                            flyaways=features.flyaways, environment=environment, detail=features.fiber_detail,
                            transmission=features.interreflection, closed_xi=features.closed_xi,
-                           view_xi=features.view_xi)
+                           view_xi=features.view_xi, split_xi=features.split_xi)
                  for k, e in enumerate(scene.yarns)]
         for look in looks:
             if not features.xi:
                 look.xi_full, look.xi_m, look.xi_n = no_full_table(), ones_factor(), ones_factor()
-                look.xi_view = no_view_table()
+                look.xi_view, look.xi_single, look.xi_single_view = no_view_table(), no_full_table(), no_view_table()
             if not features.fiber_shadowing:
                 look.psi_full, look.psi_gm, look.psi_gn = no_full_table(), ones_factor(), ones_factor()
                 look.n_occluded = 0.0

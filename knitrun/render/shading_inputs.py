@@ -13,7 +13,9 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
 ``Corrections``    ``xi_full``, ``psi_full`` (N_v, N_θ, N_φ, 3) or (0, 1, 1, 3) for "use the factors";
                    ``xi_m``, ``xi_n``, ``psi_gm``, ``psi_gn`` (N_v, N, 3) factors (ASSET_PACK.md §6–7);
                    ``xi_view`` (N_v, N_θi, N_θo, N_φ, 3), ξ closed at every view, or (0, 1, 1, 1, 3): when it
-                   has cells it replaces the other ξ tables
+                   has cells it replaces the other ξ tables; ``xi_single`` (v, θ_d, φ) and ``xi_single_view``
+                   (v, θ_i, θ_o, φ), the ξ of single scattering where ξ is closed apart on single and multiple
+                   scattering (the tables above then hold multiple scattering's), or empty: one ξ for both
 ``Look``           one yarn entry: ``params`` fiber BCSDF vector, ``ds`` dual-scattering tables (5, N_θ, 3),
                    ``period`` texture period, ``radius`` regular strip half-width, ``flyaway_half_width``,
                    fiber counts ``n_occluded``, ``n_cross`` (a beam crossing another yarn: all of its
@@ -54,6 +56,8 @@ class Corrections(NamedTuple):
     psi_gm: np.ndarray
     psi_gn: np.ndarray
     xi_view: np.ndarray
+    xi_single: np.ndarray  # ξ of single scattering (N_v, N_θ, N_φ, 3), or (0, 1, 1, 3): the one ξ for both
+    xi_single_view: np.ndarray  # the same closed at every view (N_v, N_θ, N_θ, N_φ, 3), or (0, 1, 1, 1, 3)
 
 
 class Look(NamedTuple):

@@ -27,7 +27,8 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
     n           = n_occluded + (1 − V) n_rest                             fibers toward the light when not lit
                   (n_rest: the count of the scattered rest, τ_Y + (1 − τ_Y) ā_f^{n_rest} = T_Y, the pack's yarn
                   transmittance; ``Look.n_cross_rest``, ``yarn_look``)
-    L_o        += E · ξ · DS(θ_i^f, θ_o^f, φ^f; n, D)                    ``dual_scattering.ds_kernel``, fiber frame
+    L_o        += E · (ξ_s S + ξ (DS − S)),  DS = DS(θ_i^f, θ_o^f, φ^f; n, D)   ``dual_scattering.ds_kernel``, fiber frame;
+                  S = D f cos θ_i^f its single scattering; ξ_s = ξ but for ξ closed apart (``_corrections``)
 
 with θ^f, φ^f against t_f. V_d (beyond Huang et al. 2025): the shadow map draws yarns as opaque tubes, but a sixth
 of a beam crossing cotton1 meets no fiber, and the path-traced fibers in another yarn's shadow show 2–3× the strips'
@@ -42,7 +43,7 @@ yarn-level shadow map in place of the other yarns' fibers: Huang et al. 2025 eq.
 sharpness λ_j, weight W_j, visibility T̃_j from the lobe's shadow map, raised by the yarn-level inter-reflection of
 ``knitrun.render.interreflection`` when the pack has a hull albedo), eq. 17:
 
-    L_o += W_j · T̃_j · ξ(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
+    L_o += W_j · T̃_j · ξ_s(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 
 (I_M = the pack's I_M^{TT,D} table + the R lobe integrated per lookup, ``im_lookup.im_kernel``; the kernels read
 the table as ``im_lookup.IMSlices``, interpolated at each lobe's λ once, ``im_slice_kernel``)
@@ -99,8 +100,8 @@ from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
 from knitrun.render.strip_raster import sample_attributes
 from knitrun.render.texture_sampling import mip_level, sample_mip
-from knitrun.shading.dual_scattering import (K_F_BACK_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel, ds_scratch,
-                                             forward_fraction)
+from knitrun.shading.dual_scattering import (K_F_BACK_DIRECT, K_F_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel,
+                                             ds_scratch, forward_fraction)
 from knitrun.shading.fiber_bcsdf import N_CONTEXT, context_into, evaluate, r_lobe_context_into, spread_params
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
 from knitrun.shading.im_lookup import im_slice_kernel
@@ -110,8 +111,8 @@ DEGENERATE = 1e-6  # |ω_o × t| below this: the strip is edge-on (ASSET_PACK.md
 HAIR_DEPTHS = 4  # depths averaged over by a hair's own-yarn shadow (``_hair_light``)
 POINT_BLOCK = 256  # shading points per prange iteration: they share one set of scratch arrays
 # rows of a block's (_N_VEC, 3) scratch in ``shade_regular``
-_T, _WO, _N, _B, _TF, _TEX, _XI, _PSI, _SCRATCH, _IM, _W, _WO_L = range(12)
-_N_VEC = 12
+_T, _WO, _N, _B, _TF, _TEX, _XI, _PSI, _SCRATCH, _IM, _W, _WO_L, _XI_S = range(13)
+_N_VEC = 13
 MAX_TANGENT_SPREAD = 0.5  # rad: cap on the tangent spread of a texel (a texel of opposed tangents, r → 0)
 
 
@@ -319,15 +320,24 @@ def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
 
 
 @njit(cache=True, inline='always')
-def _corrections(tables, v, t, n, b, theta_o, w, xi, psi, scratch):
-    """ξ into ``xi`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` (``tables``: ``shading_inputs.Corrections``) for light
-    direction ω = ``w`` seen from θ_o (θ_i and φ by ``_strip_angles``): ξ(v, θ_i, θ_o, φ) from the view-closed table
-    when it has cells, else ξ(v, θ_d, φ) with θ_d = (θ_o − θ_i)/2."""
+def _corrections(tables, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch):
+    """ξ into ``xi``, the ξ of single scattering into ``xi_s`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` (``tables``:
+    ``shading_inputs.Corrections``) for light direction ω = ``w`` seen from θ_o (θ_i and φ by ``_strip_angles``):
+    ξ(v, θ_i, θ_o, φ) from the view-closed table when it has cells, else ξ(v, θ_d, φ) with θ_d = (θ_o − θ_i)/2; the
+    same from the single-scattering tables where they have cells (ξ closed apart on single and multiple scattering,
+    ``xi`` then being multiple scattering's), else ``xi_s`` = ``xi``."""
     theta_i, phi = _strip_angles(w, t, n, b)
+    theta_d = 0.5 * (theta_o - theta_i)
     if tables.xi_view.shape[0] > 0:
         _table_v4(tables.xi_view, v, theta_i, theta_o, phi, xi)
     else:
-        _factored_or_full(tables.xi_full, tables.xi_m, tables.xi_n, v, 0.5 * (theta_o - theta_i), phi, xi, scratch)
+        _factored_or_full(tables.xi_full, tables.xi_m, tables.xi_n, v, theta_d, phi, xi, scratch)
+    if tables.xi_single_view.shape[0] > 0:
+        _table_v4(tables.xi_single_view, v, theta_i, theta_o, phi, xi_s)
+    elif tables.xi_single.shape[0] > 0:
+        _table_v3(tables.xi_single, v, theta_d, phi, xi_s)
+    else:
+        xi_s[0], xi_s[1], xi_s[2] = xi[0], xi[1], xi[2]
     _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, psi, scratch)
 
 
@@ -405,7 +415,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
         # scratch owned by this block of points (module docstring, "Threads")
         vec = np.empty((_N_VEC, 3))
         t, wo, n, b, tf, tex = vec[_T], vec[_WO], vec[_N], vec[_B], vec[_TF], vec[_TEX]
-        xi, psi, scratch, i_m, w = vec[_XI], vec[_PSI], vec[_SCRATCH], vec[_IM], vec[_W]
+        xi, psi, scratch, i_m, w, xi_s = vec[_XI], vec[_PSI], vec[_SCRATCH], vec[_IM], vec[_W], vec[_XI_S]
         cov, fiber_detail = np.empty(1), np.empty(1)
         comp, ds_work = ds_scratch()
         wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
@@ -428,24 +438,28 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
             if lights is not None:
                 for light in range(lights.direction.shape[0]):
                     _copy_row(lights.direction, light, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
                     fiber_lit = _fiber_lit(psi)
                     vis = lights.visibility[light, q]
                     n_front = n_occluded + (1.0 - vis) * n_cross_rest
-                    direct = past_blockers(vis, gap)
+                    lit = past_blockers(vis, gap) * fiber_lit
                     phi_f = azimuth_difference(tf, wo, w)
                     spread_params(params, spread2, phi_f, wide)
-                    ds_kernel(wide, ds, longitudinal_angle(tf, w), theta_o_f, phi_f, n_front, d_f, d_b,
-                              direct * fiber_lit, comp, ds_work)
+                    theta_i_f = longitudinal_angle(tf, w)
+                    ds_kernel(wide, ds, theta_i_f, theta_o_f, phi_f, n_front, d_f, d_b, lit, comp, ds_work)
+                    cos_i = math.cos(theta_i_f)
                     for ch in range(3):
-                        rgb[q, ch] += lights.irradiance[light, ch] * xi[ch] * comp[K_TOTAL, ch]
+                        # D f cos θ_i, single scattering (``dual_scattering``: F_direct = D (f + d_b f_back^direct))
+                        single = (comp[K_F_DIRECT, ch] - lit * d_b * comp[K_F_BACK_DIRECT, ch]) * cos_i
+                        rgb[q, ch] += lights.irradiance[light, ch] * (
+                            xi_s[ch] * single + xi[ch] * (comp[K_TOTAL, ch] - single))
             if lobes is not None:
                 for j in range(lobes.direction.shape[0]):
                     vis = lobes.visibility[j, q]
                     if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
                         continue
                     _copy_row(lobes.direction, j, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
                     theta_j_f = longitudinal_angle(tf, w)
                     phi_f = azimuth_difference(tf, wo, w)
                     spread_params(params, spread2, phi_f, wide)
@@ -453,10 +467,10 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
                     im_slice_kernel(im, j, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
                     for ch in range(3):
-                        rgb[q, ch] += lobes.weight[j, ch] * vis * xi[ch] * psi[ch] * i_m[ch]
+                        rgb[q, ch] += lobes.weight[j, ch] * vis * xi_s[ch] * psi[ch] * i_m[ch]  # single scattering
                 for c in range(ms.direction.shape[0]):  # multiple scattering: cells of the sky as distant lights
                     _copy_row(ms.direction, c, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, psi, scratch)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
                     vis = ms.visibility[c, q]
                     lit = vis * _fiber_lit(psi)
                     theta_c_f = longitudinal_angle(tf, w)

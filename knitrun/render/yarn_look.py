@@ -50,6 +50,9 @@ CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
 CLOSED_XI = "correction/xi_closed"  # optional (schema ≥ 2.3): the paper's ξ where a pack lacks it
 VIEW_XI = "correction/xi_view"  # optional (schema ≥ 2.4): ξ closed at every (θ_i, θ_o), read when asked
+# optional (schema ≥ 2.5): ξ closed apart on single (ss) and multiple (ms) scattering, on the diagonal and at every view
+SPLIT_XI = {"ss": "correction/xi_closed_ss", "ms": "correction/xi_closed_ms"}
+SPLIT_VIEW_XI = {"ss": "correction/xi_view_ss", "ms": "correction/xi_view_ms"}
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
 
@@ -65,6 +68,8 @@ class YarnLook:
     ds: np.ndarray  # (5, N_theta, 3) dual-scattering tables (pack_tables order)
     xi_full: np.ndarray  # (N_v, N_theta, N_phi, 3), or (0, 1, 1, 3) to use the factors
     xi_view: np.ndarray  # (N_v, N_theta_i, N_theta_o, N_phi, 3), or (0, 1, 1, 1, 3): ξ by xi_full / the factors
+    xi_single: np.ndarray  # (N_v, N_theta, N_phi, 3) ξ of single scattering, or (0, 1, 1, 3): xi_full's for both
+    xi_single_view: np.ndarray  # (N_v, N_theta_i, N_theta_o, N_phi, 3), or (0, 1, 1, 1, 3)
     xi_m: np.ndarray  # (N_v, N_theta, 3) or a (1, 1, 3) table of ones when corrections are not used
     xi_n: np.ndarray
     psi_full: np.ndarray
@@ -149,7 +154,8 @@ def fiber_detail_chain(ao_levels, coverage_levels) -> list:
 
 
 def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
-              environment=False, detail=True, transmission=True, closed_xi=True, view_xi=False) -> YarnLook:
+              environment=False, detail=True, transmission=True, closed_xi=True, view_xi=False,
+              split_xi=False) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
@@ -159,7 +165,10 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     lights' bounce, where it has them (module docstring); ``closed_xi``: ξ from the pack's
     ``correction/xi_closed`` (closed on the diagonal θ_o = −θ_i, schema ≥ 2.3; ASSET_PACK.md §6) instead of the
     paper's, where the pack has it and ``full_tables`` (the closed ξ is a full table); ``view_xi``: from its
-    ``correction/xi_view`` (closed at every view, schema ≥ 2.4) before either; ``YarnLook.xi_from`` says which ξ
+    ``correction/xi_view`` (closed at every view, schema ≥ 2.4) before either; ``split_xi``: those closed apart on
+    single and multiple scattering (``correction/xi_{closed,view}_{ss,ms}``, schema ≥ 2.5) instead, where the pack has
+    them (multiple scattering's in ``xi_full``/``xi_view``, single's in ``xi_single``/``xi_single_view``);
+    ``YarnLook.xi_from`` says which ξ
     was read."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
@@ -177,9 +186,13 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
     view_xi = corrections and view_xi and full_tables and VIEW_XI in stored
     closed_xi = corrections and closed_xi and full_tables and CLOSED_XI in stored and not view_xi
-    if view_xi:
+    split = (SPLIT_VIEW_XI if view_xi else SPLIT_XI) if corrections and split_xi and (view_xi or closed_xi) else {}
+    split = split if all(n in stored for n in split.values()) else {}
+    if split:
+        names += list(split.values())
+    elif view_xi:
         names.append(VIEW_XI)
-    if closed_xi:
+    elif closed_xi:
         names.append(CLOSED_XI)
     if flyaways:
         names.append("textures/flyaway")
@@ -218,13 +231,20 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         n_cross_from = (f"transmittance T_Y = {float(transmittance @ LUMINANCE):.3f}: {n_cross:.2f}; of it τ_Y = "
                         f"{gap:.3f} between the fibers, the rest {n_cross_rest:.2f} (geometric {geometric:.2f})")
     tables = {n: np.asarray(pack.tables[n], np.float64) for n in names
-              if n in CORRECTION_TABLES + FULL_TABLES + (CLOSED_XI, VIEW_XI)}
+              if n in CORRECTION_TABLES + FULL_TABLES + (CLOSED_XI, VIEW_XI) + tuple(split.values())}
     if CLOSED_XI in tables:
         tables["correction/xi"] = tables[CLOSED_XI]
-    xi_from = ("none (switched off)" if not corrections else "closed on the renderer at every view" if view_xi
-               else "closed on the renderer" if closed_xi
-               else "the paper's" + ("" if full_tables else " factors") +
-               ("" if CLOSED_XI in stored or not full_tables else f" (the pack has no {CLOSED_XI})"))
+    single, single_view = no_full_table(), no_view_table()
+    if split and view_xi:
+        tables[VIEW_XI], single_view = tables[split["ms"]], tables[split["ss"]]
+    elif split:
+        tables["correction/xi"], single = tables[split["ms"]], tables[split["ss"]]
+    xi_from = ("none (switched off)" if not corrections else
+               ("closed on the renderer at every view" if view_xi else "closed on the renderer" if closed_xi
+                else "the paper's" + ("" if full_tables else " factors") +
+                ("" if CLOSED_XI in stored or not full_tables else f" (the pack has no {CLOSED_XI})"))
+               + (", apart on single and multiple scattering" if split else
+                  " (the pack has no ξ closed apart on single and multiple scattering)" if split_xi else ""))
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:
@@ -235,6 +255,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     return YarnLook(
         name=spec.name, params=params, ds=_tinted_ds(pack.tables, colour),
         xi_full=tables.get("correction/xi", no_full_table()), xi_view=tables.get(VIEW_XI, no_view_table()),
+        xi_single=single, xi_single_view=single_view,
         xi_m=tables.get("correction/xi_M", ones_factor()),
         xi_n=tables.get("correction/xi_N", ones_factor()), psi_full=tables.get("shadowing/psi", no_full_table()),
         psi_gm=tables.get("shadowing/psi_GM", ones_factor()), psi_gn=tables.get("shadowing/psi_GN", ones_factor()),
@@ -245,7 +266,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
-        n_cross=n_cross, n_cross_rest=n_cross_rest, gap=gap, n_cross_from=n_cross_from, n_occluded=n_occluded, d_f=D_F, d_b=D_B, xi_from=xi_from,
+        n_cross=n_cross, n_cross_rest=n_cross_rest, gap=gap, n_cross_from=n_cross_from, n_occluded=n_occluded,
+        d_f=D_F, d_b=D_B, xi_from=xi_from,
         warnings=warnings,
         twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
         hull_albedo=hull_albedo, hull_transmittance=None if transmittance is None else transmittance * colour,
@@ -259,7 +281,8 @@ def shading_look(look: YarnLook) -> tuple:
     return (Look(look.params, look.ds, float(look.period), float(look.radius), float(look.flyaway_half_width),
                  float(look.n_occluded), float(look.n_cross), float(look.n_cross_rest),
                  float(look.gap), float(look.d_f), float(look.d_b)),
-            Corrections(look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm, look.psi_gn, look.xi_view),
+            Corrections(look.xi_full, look.xi_m, look.xi_n, look.psi_full, look.psi_gm, look.psi_gn, look.xi_view,
+                        look.xi_single, look.xi_single_view),
             look.flyaway if look.flyaway is not None else empty_mip_stack(4, 3))
 
 

@@ -247,6 +247,9 @@ class GLRenderer:
         if features.parallax:
             raise FormatError("the GL backend does not draw the axial parallax (Features.parallax); the CPU renderer "
                               "does")
+        if features.split_xi:
+            raise FormatError("the GL backend does not draw ξ closed apart on single and multiple scattering "
+                              "(Features.split_xi); the CPU renderer does")
         if features.yarn_bounce:
             raise FormatError("the GL backend does not draw the yarn-level bounce (Features.yarn_bounce); the CPU "
                               "renderer does")
