@@ -36,7 +36,11 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    shadow lookups"); with a reach of a yarn radius 64 % would share, but a hair on a hard shadow's edge then took
    the light of a sample up to a pixel away (15 % of the peak at one pixel of the grazing-light patch).
    With ``Features.interreflection`` each T̃_j becomes T̃_j / (1 − ρ (1 − T̃_j)), ρ the receiver's yarn hull albedo
-   (``knitrun.render.interreflection``): the light the neighbours block and send on.
+   (``knitrun.render.interreflection``): the light the neighbours block and send on; and a directional light's V
+   lets through the gap transmittance τ_Y of the blocker (``strip_shading.past_blockers``, in the kernels). With
+   ``Features.yarn_bounce`` (an ablation) the directional lights are looked up at the polyline vertices as well, and
+   the light the neighbouring yarns scatter onto each vertex (``knitrun.render.yarn_bounce``) is interpolated to the
+   regular points.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
    (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
    frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
@@ -82,8 +86,8 @@ from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent
-from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, resolve, resolve_behind, same_surface,
-                                          shade_flyaway, shade_regular, shading_points)
+from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
+                                          same_surface, shade_flyaway, shade_regular, shading_points)
 from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, vertex_bounce, vertex_tangents
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
@@ -668,7 +672,7 @@ def _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, layers, f
                         np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets)), lines.offsets, lines.rest,
                         np.array([looks[k].radius for k in lines.entry], np.float64),
                         np.clip(albedo - transmit, 0.0, 1.0), transmit, np.ascontiguousarray(view, np.float64))
-    direct = vertex_vis + (1.0 - vertex_vis) * gap[None, :]  # strip_shading.past_blockers, per vertex
+    direct = past_blockers(vertex_vis, gap[None, :])
     vertex, covered = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
     if len(covered):
         facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),

@@ -27,12 +27,16 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
     n           = n_occluded + (1 − V) n_rest                             fibers toward the light when not lit
                   (n_rest: the count of the scattered rest, τ_Y + (1 − τ_Y) ā_f^{n_rest} = T_Y, the pack's yarn
                   transmittance; ``Look.n_cross_rest``, ``yarn_look``)
-    L_o        += E · (ξ_s S + ξ (DS − S)),  DS = DS(θ_i^f, θ_o^f, φ^f; n, D)   ``dual_scattering.ds_kernel``, fiber frame;
-                  S = D f cos θ_i^f its single scattering; ξ_s = ξ but for ξ closed apart (``_corrections``)
+    DS          = DS(θ_i^f, θ_o^f, φ^f; n, D)                             ``dual_scattering.ds_kernel``, fiber frame
+    L_o        += E · (ξ_s S + ξ (DS − S))                                S = D f cos θ_i^f, DS's single scattering;
+                  ξ_s = ξ but for ξ closed apart on single and multiple scattering (``_corrections``)
 
 with θ^f, φ^f against t_f. V_d (beyond Huang et al. 2025): the shadow map draws yarns as opaque tubes, but a sixth
-of a beam crossing cotton1 meets no fiber, and the path-traced fibers in another yarn's shadow show 2–3× the strips'
-single scattering without it (BENCHMARKS.md, "Issue 13: light between a blocking yarn's fibers"). Tangent spread: a texel averages fibers whose tangents scatter; the length of its
+of a beam crossing cotton1 meets no fiber, and without it the path-traced fibers in another yarn's shadow showed 2–3×
+the strips' single scattering (BENCHMARKS.md, "Issue 13: light between a blocking yarn's fibers, and light that
+neighbouring yarns scatter"). With ``bounce`` (the ablation ``yarn_bounce``, ``knitrun.render.yarn_bounce``) each
+point adds the yarn-level light its neighbours scatter onto it, before the fiber-level detail.
+Tangent spread: a texel averages fibers whose tangents scatter; the length of its
 premultiplied tangent gives their variance (``tangent_spread``, Toksvig 2005; ASSET_PACK.md §8), and every BCSDF
 evaluation of the point (DS, I_M's R lobe, the multiple-scattering lights) uses the lobes widened by it for that
 light's φ^f (``fiber_bcsdf.spread_params``). An empty (0, 1, 1, 3) full table selects the factors. An ablation
@@ -398,14 +402,16 @@ def _begin_point(q, points, period, t, wo, n, b, rgb, alpha):
 # --- regular fibers --------------------------------------------------------------------------------------------------
 
 @njit(parallel=True, cache=True)
-def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, bounce, rgb, alpha):
+def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, bounce, rgb,
+                  alpha):
     """Shade the points ``idx`` (indices into ``points``) of one yarn; writes rgb[idx], alpha[idx]. ``points``,
     ``look``, ``corrections`` (ξ, Ψ^Fiber), the textures ``tangent``, ``coverage`` and ``detail``, ``lights``
     (directional), ``lobes`` (SRBF), ``ms`` (the environment's multiple-scattering lights, module docstring) and
     ``im``: the named tuples of ``knitrun.render.shading_inputs``. ``lights`` is None for a scene without
     directional lights, and ``lobes``, ``ms``, ``im`` are None without an environment: Numba prunes the branch of a
     None argument before it compiles, so a scene never compiles the terms of a kind of light it lacks (the I_M and
-    multiple-scattering terms are ~40 % of this kernel's compile time)."""
+    multiple-scattering terms are ~40 % of this kernel's compile time). ``bounce`` (N, 3): the yarn-level radiance the
+    neighbouring yarns scatter onto each point (``knitrun.render.yarn_bounce``), or None: none."""
     params, ds, period = look.params, look.ds, look.period
     n_occluded, n_cross, d_f, d_b = look.n_occluded, look.n_cross, look.d_f, look.d_b
     n_cross_rest, gap = look.n_cross_rest, look.gap
