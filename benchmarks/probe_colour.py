@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,35 +27,29 @@ from knitbake.trace.reference import trace_reference
 from knitrun.render import pipeline
 from knitrun.render.ablations import ABLATIONS
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from probe_split import SCENES, checked_models_and_scenes  # noqa: E402  (SCENES: name → the ruler's spp)
+
 ROOT = Path(__file__).resolve().parent.parent
-SCENES = {"straight_yarn_directional": 16, "knit_patch_directional": 16, "knit_patch_grazing": 16,
-          "simulated_patch_directional": 32}  # name → the ruler's spp (BENCHMARKS.md, "The ruler")
+DEFAULT_SCENES = ("straight_yarn_directional", "knit_patch_directional", "knit_patch_grazing",
+                  "simulated_patch_directional")
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
-    parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
+    parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES), help="comma-separated example scene names")
     parser.add_argument("--colors", default="1,1,1:0.9,0.25,0.2", help="colours R,G,B separated by ':'")
     parser.add_argument("--models", default="full,yarn_bounce", help="names of knitrun.render.ablations")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     args = parser.parse_args()
-    models = args.models.split(",")
-    unknown = sorted(set(models) - set(ABLATIONS))
-    if unknown:
-        parser.error(f"--models: unknown model {unknown[0]!r} ({', '.join(ABLATIONS)})")
+    models, names = checked_models_and_scenes(parser, args)
     try:
         colours = [tuple(float(x) for x in c.split(",")) for c in args.colors.split(":")]
     except ValueError:
         parser.error(f"--colors: expected R,G,B[:R,G,B...], got {args.colors!r}")
     if any(len(c) != 3 or not all(0.0 <= x <= 1.0 for x in c) for c in colours):
         parser.error(f"--colors: each colour is three numbers in [0, 1], got {args.colors!r}")
-    names = args.scenes.split(",")
-    missing = [n for n in names if not (ROOT / "examples" / "scenes" / f"{n}.toml").is_file()]
-    if missing:
-        parser.error(f"--scenes: no example scene {missing[0]!r}")
-    if not Path(args.pack).is_file():
-        parser.error(f"--pack: no file {args.pack}")
     print("| scene | colour | model | mean ratio | RGB means' ratios | rel L1 (d) / instance floor |")
     print("|---|---|---|---|---|---|")
     for name in names:

@@ -114,15 +114,9 @@ def tilt_rows(name, d, at, ref, strips):
     return out
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
-    parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
-    parser.add_argument("--models", default="full,no_tables,plain_ds", help="names of knitrun.render.ablations")
-    parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
-    parser.add_argument("--tilt-bins", action="store_true", help="bin SS and MS along the curves by |ω_o · t|")
-    parser.add_argument("--out", type=Path, default=None, help="keep the images here")
-    args = parser.parse_args()
+def checked_models_and_scenes(parser, args):
+    """(models, scene names) of ``--models`` and ``--scenes``, each checked, and ``--pack`` a file; a one-line
+    ``parser.error`` for the first that is not."""
     models = args.models.split(",")
     unknown = sorted(set(models) - set(ABLATIONS))
     if unknown:
@@ -133,6 +127,19 @@ def main():
         parser.error(f"--scenes: no example scene {missing[0]!r}")
     if not Path(args.pack).is_file():
         parser.error(f"--pack: no file {args.pack}")
+    return models, names
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
+    parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
+    parser.add_argument("--models", default="full,no_tables,plain_ds", help="names of knitrun.render.ablations")
+    parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
+    parser.add_argument("--tilt-bins", action="store_true", help="bin SS and MS along the curves by |ω_o · t|")
+    parser.add_argument("--out", type=Path, default=None, help="keep the images here")
+    args = parser.parse_args()
+    models, names = checked_models_and_scenes(parser, args)
     print("Over a black background; ratios of RGB means to the reference's (the compare weighs luminance); rel L1 at "
           "the yarn scale over the instance floor.\n")
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "

@@ -119,21 +119,26 @@ def test_extremes_give_finite_images(tmp_path, pack, case):
         assert np.allclose(img, [0.1, 0.2, 0.3])
 
 
+def _kernel_frames(n, seed):
+    """What ``shade_regular`` needs of n points besides the lights: random unit tangents and view directions, a flat
+    tangent texture along the yarn, full coverage, and every correction switched off."""
+    rng = np.random.default_rng(seed)
+    tangent = rng.normal(size=(n, 3))
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    view = rng.normal(size=(n, 3))
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    off = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor(),
+                      no_view_table(), no_full_table(), no_view_table())
+    return (tangent, view, mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]]), mip_stack([[np.ones((2, 4))]]), off)
+
+
 def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
     """A directional light's direct fraction at yarn level is V + (1 − V) τ_Y (``past_blockers``): with no fiber
     counted toward the light (n_occluded = n_cross = 0, so only the direct fraction differs), a point fully in
     another yarn's shadow (V = 0) with gap transmittance τ_Y = 0.25 shades as an unblocked point lit at V = 0.25; a
     lit point (V = 1) does not move; a partly shadowed point (V = 0.4) takes 0.4 + 0.6·0.25 = 0.55."""
-    rng = np.random.default_rng(11)
     n = 16
-    tangent = rng.normal(size=(n, 3))
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    view = rng.normal(size=(n, 3))
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
-    flat = mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]])
-    full = mip_stack([[np.ones((2, 4))]])
-    off = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor(),
-                      no_view_table(), no_full_table(), no_view_table())
+    tangent, view, flat, full, off = _kernel_frames(n, seed=11)
     ds = np.stack([np.full((4, 3), x) for x in (0.7, 0.2, 0.3, 0.1, 0.3)])
     points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
     sun = np.array([[0.3, 0.6, 1.0]]) / np.linalg.norm([0.3, 0.6, 1.0])
@@ -161,16 +166,8 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     table = im.bake_im_table(ROUGH, TEST_SHAPE, nodes=4)[0]
     axes = im.im_axes(TEST_SHAPE)
     i_m = im_table_from(table, axes)
-    rng = np.random.default_rng(5)
     n = 12
-    tangent = rng.normal(size=(n, 3))
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    view = rng.normal(size=(n, 3))
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
-    flat = mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]])
-    full = mip_stack([[np.ones((2, 4))]])
-    off = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor(),
-                      no_view_table(), no_full_table(), no_view_table())
+    tangent, view, flat, full, off = _kernel_frames(n, seed=5)
     sky = sky_image(64, 128)
     dirs = texel_directions(64, 128).reshape(-1, 3)
     texel_sr = (np.pi / 64) * (2 * np.pi / 128) * np.cos(np.arcsin(np.clip(dirs[:, 1], -1, 1)))
