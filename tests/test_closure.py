@@ -174,6 +174,8 @@ def test_the_renderer_reads_the_split_xi_when_asked(closed_pack, tmp_path):
     view = Renderer(scene, features=Features(split_xi=True, view_xi=True)).looks[0]
     assert np.array_equal(view.xi_view, ms) and np.array_equal(view.xi_single_view, ss)
     assert Renderer(scene).looks[0].xi_single.shape[0] == 0  # the default: one ξ
+    papers = Renderer(scene, features=Features(split_xi=True, closed_xi=False))  # the split needs the closed ξ
+    assert papers.looks[0].xi_single.shape[0] == 0 and "needs the closed ξ" in papers.setup_facts["xi"][SPEC.name]
     old = tmp_path / "schema24.h5"
     shutil.copy(closed_pack, old)
     with h5py.File(old, "r+") as f:
