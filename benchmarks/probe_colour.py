@@ -35,6 +35,17 @@ DEFAULT_SCENES = ("straight_yarn_directional", "knit_patch_directional", "knit_p
                   "simulated_patch_directional")
 
 
+def parse_colours(parser, text):
+    """The colours of ``--colors`` ("R,G,B[:R,G,B...]", each in [0, 1]); a one-line ``parser.error`` otherwise."""
+    try:
+        colours = [tuple(float(x) for x in c.split(",")) for c in text.split(":")]
+    except ValueError:
+        parser.error(f"--colors: expected R,G,B[:R,G,B...], got {text!r}")
+    if any(len(c) != 3 or not all(0.0 <= x <= 1.0 for x in c) for c in colours):
+        parser.error(f"--colors: each colour is three numbers in [0, 1], got {text!r}")
+    return colours
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
@@ -44,12 +55,7 @@ def main():
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)
-    try:
-        colours = [tuple(float(x) for x in c.split(",")) for c in args.colors.split(":")]
-    except ValueError:
-        parser.error(f"--colors: expected R,G,B[:R,G,B...], got {args.colors!r}")
-    if any(len(c) != 3 or not all(0.0 <= x <= 1.0 for x in c) for c in colours):
-        parser.error(f"--colors: each colour is three numbers in [0, 1], got {args.colors!r}")
+    colours = parse_colours(parser, args.colors)
     print("| scene | colour | model | mean ratio | RGB means' ratios | rel L1 (d) / instance floor |")
     print("|---|---|---|---|---|---|")
     for name in names:

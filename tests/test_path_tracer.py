@@ -14,7 +14,7 @@ from knitbake.fibers.procedural_yarn import generate_fibers
 from knitbake.fibers.tessellate import tessellate_fibers
 from knitbake.trace.env_light import env_from_image, env_pdf, env_sample, uniform_env
 from knitbake.trace.embree_curves import CurveScene
-from knitbake.trace.path_tracer import Camera, TracerScene, render
+from knitbake.trace.path_tracer import Camera, TracerScene, render, render_samples
 from knitrun.shading import equirect
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
@@ -215,6 +215,56 @@ def test_yarn_only_mode_drops_scattering_off_other_yarns():
     c, _ = render(pair, cam, spp=16, seed=9)
     assert np.array_equal(a, b)
     assert c.sum() > a.sum() * 1.01
+
+
+def test_without_light_between_yarns_a_path_ends_at_another_yarn():
+    """``own_yarn`` (the reference's ``inter_yarn=False``): two parallel fibers, two yarns, lit and seen from above.
+    Ending the paths that scatter off the other yarn only removes light: per pixel never brighter than the full
+    image with the same seeds, darker in all, and the same image bit for bit when both fibers are one yarn (no path
+    changes yarn); the tubes' tracer refuses it."""
+    def fiber(x):
+        return FiberSet(np.array([[x, -2.0, 0.0], [x, 2.0, 0.0]]), np.array([0, 2]), np.array([0.1]),
+                        np.zeros(1, np.int8), np.zeros(1, np.int16))
+
+    two = FiberSet(np.r_[fiber(0.0).points, fiber(0.25).points], np.array([0, 2, 4]), np.array([0.1, 0.1]),
+                   np.zeros(2, np.int8), np.zeros(2, np.int16))
+    light = dict(light_dirs=np.array([[0.3, 0.0, 1.0]]), light_irradiance=np.array([[1.0, 1.0, 1.0]]))
+    scene = traced(two, "curves", LOSSLESS, **light)
+    cam = top_camera(32, 32, ortho=0.8)
+    full, _ = render(scene, cam, spp=16, seed=4)
+    sigma = np.array([0.0, 4.0, 0.0, 4.0])  # rest arc length of the fiber points along their yarn
+
+    def own(yarns, sigma=sigma, reach=10.0):
+        return render_samples(scene, cam, 0, 16, seed=4, own_yarn=(np.array(yarns), sigma, reach))[0] / 16
+
+    apart, together = own([0, 1]), own([0, 0])
+    assert np.all(apart <= full + 1e-12) and apart.sum() < 0.98 * full.sum()
+    assert np.array_equal(together, full)
+    # one yarn that loops back: its other leg is more than the reach of arc length away, so it counts as another
+    assert np.array_equal(own([0, 0], sigma=np.array([0.0, 4.0, 20.0, 24.0])), apart)
+    with pytest.raises(ValueError, match="curves"):
+        render_samples(traced(two, "tubes", LOSSLESS, **light), cam, 0, 1, own_yarn=(np.array([0, 1]), sigma, 1.0))
+
+
+def test_a_reference_without_light_between_yarns(tmp_path):
+    """``trace_reference(inter_yarn=False)`` on two crossing yarns of a scene: each fiber carries its curve's yarn,
+    the image is nowhere brighter than the full reference with the same seeds and darker in all, the facts say so."""
+    from data_formats.scene import load_scene
+    from knitbake.trace.reference import build_reference, trace_reference
+    from tests.helpers import FRONT, SUN, straight, write_scene
+
+    crossing = [straight(z=0.0), straight(z=0.07)[:, [1, 0, 2]]]
+    scene = load_scene(write_scene(tmp_path, crossing, camera=FRONT, lights=SUN))
+    built = build_reference(scene, own_yarn=True)
+    yarn, sigma, reach = built.own_yarn
+    assert build_reference(scene).own_yarn is None
+    assert sorted(np.unique(yarn)) == [0, 1] and len(yarn) == built.facts["fibers"]
+    assert len(sigma) == built.facts["segments"] + built.facts["fibers"]  # a σ per fiber point
+    assert 0.0 <= sigma.min() and sigma.max() <= 0.6 + 1e-9 and reach > 0.0  # the 0.6 long straight yarns
+    full, facts = trace_reference(scene, 4, seed=2)
+    alone, alone_facts = trace_reference(scene, 4, seed=2, inter_yarn=False)
+    assert "inter_yarn" not in facts and alone_facts["inter_yarn"] is False
+    assert np.all(alone <= full + 1e-6) and alone.sum() < full.sum()
 
 
 def test_curves_are_deterministic_across_threads_and_batching():

@@ -22,7 +22,13 @@ Design
 * ``max_depth`` counts scattering events; Russian roulette from ``rr_depth`` on, survival probability
   min(0.95, max throughput). ``yarn_only_radius`` > 0 is the bake's "no global scattering" mode for a yarn along
   the z axis: a path that reaches geometry outside that cylinder ends there without scattering (no light it would
-  bring back is counted; escaping to the environment is still counted).
+  bring back is counted; escaping to the environment is still counted). ``own_yarn`` is the reference's "no light
+  between yarns" diagnostic: with the yarn (curve) of each fiber and the rest arc length σ of each fiber point along
+  it, a path ends where it would scatter off another yarn than the one its camera ray hit, or off the same yarn more
+  than ``reach`` of σ away (another part of a yarn that loops back: the strip renderer's yarn-level bounce counts
+  those as neighbours, ``knitrun.render.yarn_bounce``). The light the yarns send each other is left out; they still
+  block every shadow ray. The full image less this one is the light that reached the seen yarn through scattering
+  by other yarns.
 * Threads: ``_trace_curves`` runs ``prange`` over blocks of ``PATH_BLOCK`` paths, each block with its own scratch
   arrays (``scatter_scratch``; per-path arrays made the allocator 8 % of the render). Hot loops copy rows of the
   shared inputs (the BCSDF parameters, a light's direction) instead of taking views of them: a view bumps the
@@ -411,10 +417,11 @@ def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput
 def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, params, light_dirs, light_irr, has_env,
                   env_rad, env_row, env_col, env_prob, background, camera_background, pos, fwd, right, up, width,
                   height, tan_half, ortho_h, seed, first_sample, n_samples, max_depth, rr_depth, yarn_only_r2,
-                  radiance, rays):
+                  own_yarn, own_sigma, own_reach, radiance, rays):
     """Whole paths over the fibers as Embree curves (``embree_curves``), one path per iteration, shadow rays traced
     as they are made: no Python between rays. Path n = sample·pixels + pixel writes ``radiance[n]`` and
-    ``rays[n]`` (rays it traced). The same events and random numbers as the tube tracer's waves."""
+    ``rays[n]`` (rays it traced). The same events and random numbers as the tube tracer's waves. ``own_yarn``: the
+    yarn of each fiber, or empty; ``own_sigma`` the σ of each vertex, ``own_reach`` (module docstring)."""
     n_pix = width * height
     n_paths = n_samples * n_pix
     n_shadow = light_dirs.shape[0] + (1 if has_env else 0)
@@ -438,6 +445,7 @@ def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, par
                 out[k] = 0.0
             prev_pdf = 0.0
             traced = 0
+            first_yarn, first_sigma = -1, 0.0
             for depth in range(max_depth + 1):
                 prim = intersect(scene, buf, org[0], org[1], org[2], d[0], d[1], d[2], 0.0, np.inf)
                 traced += 1
@@ -451,6 +459,12 @@ def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, par
                     hit[k] = org[k] + buf[TFAR] * d[k]
                 if yarn_only_r2 > 0.0 and hit[0] ** 2 + hit[1] ** 2 > yarn_only_r2:
                     break
+                if own_yarn.shape[0] > 0:  # light from other yarns left out (module docstring)
+                    yarn, sigma = own_yarn[segment_fiber[prim]], own_sigma[segment_start[prim]]
+                    if depth == 0:
+                        first_yarn, first_sigma = yarn, sigma
+                    elif yarn != first_yarn or abs(sigma - first_sigma) > own_reach:
+                        break
                 v = segment_start[prim]
                 for k in range(3):
                     a[k] = np.float64(vertices[v, k])
@@ -495,13 +509,19 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
 
 def render_samples(scene: TracerScene, camera: Camera, first_sample: int, spp: int, seed: int = 0,
                    max_depth: int = 16, rr_depth: int = 3, yarn_only_radius: float = 0.0,
-                   samples_per_pass: int | None = None, progress=None):
+                   samples_per_pass: int | None = None, progress=None, own_yarn=None):
     """The sum (H, W, 3) float64 of samples ``first_sample`` … ``first_sample + spp − 1`` of every pixel, added in
     sample order, and RenderStats: ``render`` is this over samples 0 … spp − 1, divided by spp. A sample's random
     numbers depend only on (seed, its index, pixel), so batches of samples can run anywhere (``knitbake.scale_out``).
-    ``progress(done, spp)`` after every pass."""
+    ``progress(done, spp)`` after every pass. ``own_yarn`` = (yarn of each fiber (F,), σ of each fiber point (P,),
+    reach): no light between yarns (module docstring; fibers as curves only)."""
     if spp < 1 or max_depth < 1 or first_sample < 0:
         raise ValueError(f"spp = {spp}, max_depth = {max_depth} must be ≥ 1, first_sample = {first_sample} ≥ 0")
+    if own_yarn is not None and scene.curves is None:
+        raise ValueError("own_yarn (no light between yarns) needs the fibers as curves, not tubes")
+    own = (np.zeros(0, np.int32), np.zeros(0), 0.0) if own_yarn is None else \
+        (np.ascontiguousarray(own_yarn[0], np.int32), np.ascontiguousarray(own_yarn[1], np.float64),
+         float(own_yarn[2]))
     w, h = int(camera.width), int(camera.height)
     n_pix = w * h
     if samples_per_pass is None:
@@ -529,7 +549,7 @@ def render_samples(scene: TracerScene, camera: Camera, first_sample: int, spp: i
                           scene.light_irradiance, has_env, *env_arrays, background, camera_background,
                           np.asarray(camera.position, float), fwd, right, up, w, h, tan_half,
                           float(camera.ortho_height), seed, done, n_s, max_depth, rr_depth,
-                          float(yarn_only_radius) ** 2, radiance, rays)
+                          float(yarn_only_radius) ** 2, *own, radiance, rays)
             stats.rays += int(rays.sum())
             for sample_image in radiance.reshape(n_s, n_pix, 3):  # in sample order, as below
                 accum += sample_image

@@ -21,9 +21,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from data_formats.atomic import atomic_path
 from data_formats.cache_folders import cache_root
+from data_formats.curve_eval import dense_curve
 from data_formats.errors import FormatError
 from data_formats.images import write_exr, write_png
 from data_formats.numba_setup import sources_hash
@@ -35,6 +37,7 @@ from knitbake.trace.embree_curves import CurveScene
 from knitbake.trace.env_light import env_from_image
 from knitbake.trace.path_tracer import TracerScene, render_samples
 from knitrun.render.camera import Camera, scene_camera
+from knitrun.render.yarn_bounce import REACH_RADII
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.fiber_bcsdf import params_from_optics, tinted
 
@@ -47,15 +50,19 @@ class ReferenceScene:
     tracer: TracerScene
     camera: Camera
     facts: dict  # fibers, segments, triangles, build timings
+    own_yarn: tuple | None  # (yarn of each fiber, σ of each fiber point, reach): ``build_reference``'s ``own_yarn``
 
 
-def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves") -> ReferenceScene:
+def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_yarn: bool = False) -> ReferenceScene:
     """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``; ``seed`` draws the fibers;
-    ``geometry``: ``GEOMETRIES``."""
+    ``geometry``: ``GEOMETRIES``. ``own_yarn``: also what the tracer's "no light between yarns" diagnostic reads
+    (``path_tracer`` module docstring): the yarn (the scene's curves, numbered over its entries) of each fiber, the
+    rest arc length σ of each fiber point (that of the nearest point of its curve's dense polyline) and the reach,
+    the strip renderer's (``yarn_bounce.REACH_RADII`` yarn radii, the largest entry's)."""
     if geometry not in GEOMETRIES:
         raise FormatError(f"geometry {geometry!r}: expected one of {', '.join(GEOMETRIES)}")
     t0 = time.perf_counter()
-    parts, types = [], []
+    parts, types, yarns, sigmas, next_yarn = [], [], [], [], 0
     for k, entry in enumerate(scene.yarns):
         if entry.curves is None:
             raise FormatError(f"yarns[{k}] gives a stitch mesh: simulate it to yarn curves first (knitrun simulate)")
@@ -66,6 +73,11 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves") -> Re
         fibers = sweep_fibers(_only_curves(curves, keep), scene.render.frame, specs, radii, seed=seed + 7919 * k)
         parts.append(fibers)
         types.append(np.full(fibers.n_fibers, k, np.int32))
+        if own_yarn:
+            yarn, sigma = _yarn_and_sigma(_only_curves(curves, keep), scene.render.frame, fibers, next_yarn)
+            yarns.append(yarn)
+            sigmas.append(sigma)
+            next_yarn += len(fibers.info["curves"])
     fibers = _concat(parts)
     t_sweep = time.perf_counter() - t0
     mesh = tessellate_fibers(fibers, sides=TUBE_SIDES) if geometry == "tubes" else None
@@ -92,7 +104,23 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves") -> Re
     facts = {"geometry": geometry, "fibers": n_fibers, "segments": n_segments,
              "triangles": 0 if mesh is None else int(mesh.triangles.shape[0]),
              "sweep_s": t_sweep, "tessellate_s": t_tess, "embree_build_s": time.perf_counter() - t0 - t_sweep - t_tess}
-    return ReferenceScene(tracer, camera, facts)
+    reach = REACH_RADII * max(entry.radius for entry in scene.yarns)
+    return ReferenceScene(tracer, camera, facts, (np.concatenate(yarns), np.concatenate(sigmas), reach)
+                          if own_yarn else None)
+
+
+def _yarn_and_sigma(curves, frame, fibers, first_yarn):
+    """(yarn of each fiber: first_yarn + its curve, σ of each fiber point: the rest arc length of the nearest point
+    of its curve's dense polyline, ``curve_eval.dense_curve``)."""
+    yarn = np.zeros(fibers.n_fibers, np.int32)
+    sigma = np.zeros(len(fibers.points))
+    for c, facts in enumerate(fibers.info["curves"]):
+        first, stop = facts["fibers"]
+        yarn[first:stop] = first_yarn + c
+        xyz, arc = dense_curve(curves, c, frame)
+        lo, hi = fibers.offsets[first], fibers.offsets[stop]
+        sigma[lo:hi] = arc[cKDTree(xyz).query(fibers.points[lo:hi])[1]]
+    return yarn, sigma
 
 
 def sample_batches(spp: int, batch_spp: int | None) -> list[tuple[int, int]]:
@@ -103,7 +131,8 @@ def sample_batches(spp: int, batch_spp: int | None) -> list[tuple[int, int]]:
 
 
 def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None,
-                    fiber_seed: int | None = None, geometry: str = "curves", batch_spp: int | None = None):
+                    fiber_seed: int | None = None, geometry: str = "curves", batch_spp: int | None = None,
+                    inter_yarn: bool = True):
     """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``seed`` drives the
     path sampling and, unless ``fiber_seed`` is given, the fibers too: another fiber seed draws another instance of
     the same yarns (the fiber-instance floor of a comparison), another sampling seed another estimate of the same
@@ -112,16 +141,19 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
     ``on_built(facts)`` is called once the tracer scene exists (before rendering), ``progress(done, total)`` per
     pass of samples. facts: width, height, frame, spp, batch_spp, seed, fiber_seed, max_depth, render_s, rays,
     rays_per_s, the build facts of ``build_reference`` (geometry, fibers, segments, triangles, sweep_s,
-    tessellate_s, embree_build_s) and mean_rgb."""
+    tessellate_s, embree_build_s) and mean_rgb. ``inter_yarn`` False: no light between yarns, a diagnostic
+    (``path_tracer`` module docstring: paths end where they would scatter off another yarn than the one seen; the
+    full image less this one is the light the yarns send each other); facts then say ``inter_yarn: false``."""
     fiber_seed = seed if fiber_seed is None else fiber_seed
-    built = build_reference(scene, seed=fiber_seed, geometry=geometry)
+    built = build_reference(scene, seed=fiber_seed, geometry=geometry, own_yarn=not inter_yarn)
     if on_built is not None:
         on_built(built.facts)
     total, seconds, rays = None, 0.0, 0
     for first, count in sample_batches(spp, batch_spp):
         part, stats = render_samples(built.tracer, built.camera, first, count, seed=seed, max_depth=max_depth,
                                      progress=None if progress is None else
-                                     (lambda done, _, first=first: progress(first + done, spp)))
+                                     (lambda done, _, first=first: progress(first + done, spp)),
+                                     own_yarn=built.own_yarn)
         total = part if total is None else total + part
         seconds, rays = seconds + stats.seconds, rays + stats.rays
     image = total / spp
@@ -129,6 +161,7 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
              "batch_spp": batch_spp, "seed": seed, "fiber_seed": fiber_seed, "max_depth": max_depth,
              "render_s": seconds, "rays": rays,
              "rays_per_s": rays / seconds if seconds > 0 else 0.0, **built.facts,
+             **({} if inter_yarn else {"inter_yarn": False}),
              "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
     return image, facts
 
