@@ -70,11 +70,12 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_y
         keep = np.isin(curves.yarn_type, entry.yarn_type_indices)
         specs = {i: entry.spec for i in entry.yarn_type_indices}
         radii = {i: entry.radius for i in entry.yarn_type_indices}
-        fibers = sweep_fibers(_only_curves(curves, keep), scene.render.frame, specs, radii, seed=seed + 7919 * k)
+        drawn = _only_curves(curves, keep)
+        fibers = sweep_fibers(drawn, scene.render.frame, specs, radii, seed=seed + 7919 * k)
         parts.append(fibers)
         types.append(np.full(fibers.n_fibers, k, np.int32))
         if own_yarn:
-            yarn, sigma = _yarn_and_sigma(_only_curves(curves, keep), scene.render.frame, fibers, next_yarn)
+            yarn, sigma = _yarn_and_sigma(drawn, scene.render.frame, fibers, next_yarn)
             yarns.append(yarn)
             sigmas.append(sigma)
             next_yarn += len(fibers.info["curves"])
@@ -104,9 +105,10 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_y
     facts = {"geometry": geometry, "fibers": n_fibers, "segments": n_segments,
              "triangles": 0 if mesh is None else int(mesh.triangles.shape[0]),
              "sweep_s": t_sweep, "tessellate_s": t_tess, "embree_build_s": time.perf_counter() - t0 - t_sweep - t_tess}
-    reach = REACH_RADII * max(entry.radius for entry in scene.yarns)
-    return ReferenceScene(tracer, camera, facts, (np.concatenate(yarns), np.concatenate(sigmas), reach)
-                          if own_yarn else None)
+    own = None
+    if own_yarn:
+        own = (np.concatenate(yarns), np.concatenate(sigmas), REACH_RADII * max(e.radius for e in scene.yarns))
+    return ReferenceScene(tracer, camera, facts, own)
 
 
 def _yarn_and_sigma(curves, frame, fibers, first_yarn):
