@@ -46,6 +46,16 @@ def parse_colours(parser, text):
     return colours
 
 
+def scenes_in_colours(names, colours, spp=None):
+    """(name, colour, scene, spp) for each example scene of ``names`` with every yarn entry in each colour of
+    ``colours``, at ``spp`` or the ruler's spp of the scene."""
+    for name in names:
+        base = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
+        for colour in colours:
+            yield (name, colour, dataclasses.replace(base, yarns=[dataclasses.replace(y, color=colour)
+                                                                  for y in base.yarns]), spp or SCENES.get(name, 16))
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
@@ -58,25 +68,21 @@ def main():
     colours = parse_colours(parser, args.colors)
     print("| scene | colour | model | mean ratio | RGB means' ratios | rel L1 (d) / instance floor |")
     print("|---|---|---|---|---|---|")
-    for name in names:
-        base = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
-        spp = args.spp or SCENES.get(name, 16)
-        for colour in colours:
-            scene = dataclasses.replace(base, yarns=[dataclasses.replace(y, color=colour) for y in base.yarns])
-            d, seed = yarn_diameter_px(scene), scene.render.seed
-            ref = np.asarray(trace_reference(scene, spp, seed, scene.render.max_depth)[0], np.float64)[..., :3]
-            inst = np.asarray(trace_reference(scene, spp, seed + 1, scene.render.max_depth, fiber_seed=seed + 1)[0],
-                              np.float64)[..., :3]
-            floor = yarn_scale_metrics(inst, ref, d)["rel_l1"]
-            label = ", ".join(f"{x:g}" for x in colour)
-            rows = [("*other fiber instance*", inst)] + [
-                (m, np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, ABLATIONS[m]).render().image,
-                               np.float64)[..., :3]) for m in models]
-            for model, image in rows:
-                metrics = yarn_scale_metrics(image, ref, d)
-                channels = " / ".join(f"{x:.3f}" for x in image.mean(axis=(0, 1)) / ref.mean(axis=(0, 1)))
-                print(f"| {name} | {label} | {model} | {metrics['mean_ratio']:.3f} | {channels} | "
-                      f"{metrics['rel_l1'] / floor:.2f}× |", flush=True)
+    for name, colour, scene, spp in scenes_in_colours(names, colours, args.spp):
+        d, seed = yarn_diameter_px(scene), scene.render.seed
+        ref = np.asarray(trace_reference(scene, spp, seed, scene.render.max_depth)[0], np.float64)[..., :3]
+        inst = np.asarray(trace_reference(scene, spp, seed + 1, scene.render.max_depth, fiber_seed=seed + 1)[0],
+                          np.float64)[..., :3]
+        floor = yarn_scale_metrics(inst, ref, d)["rel_l1"]
+        label = ", ".join(f"{x:g}" for x in colour)
+        rows = [("*other fiber instance*", inst)] + [
+            (m, np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, ABLATIONS[m]).render().image,
+                           np.float64)[..., :3]) for m in models]
+        for model, image in rows:
+            metrics = yarn_scale_metrics(image, ref, d)
+            channels = " / ".join(f"{x:.3f}" for x in image.mean(axis=(0, 1)) / ref.mean(axis=(0, 1)))
+            print(f"| {name} | {label} | {model} | {metrics['mean_ratio']:.3f} | {channels} | "
+                  f"{metrics['rel_l1'] / floor:.2f}× |", flush=True)
 
 
 if __name__ == "__main__":

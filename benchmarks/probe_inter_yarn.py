@@ -18,13 +18,11 @@ inter-yarn light B_ref. The strip renderer's counterpart is the ablation ``yarn_
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_filter
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
@@ -32,10 +30,9 @@ from knitrun.render import pipeline
 from knitrun.render.ablations import ABLATIONS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from probe_colour import parse_colours  # noqa: E402
-from probe_split import SCENES, checked_models_and_scenes  # noqa: E402  (SCENES: name → the ruler's spp)
+from probe_colour import parse_colours, scenes_in_colours  # noqa: E402
+from probe_split import checked_models_and_scenes  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_SCENES = ("knit_patch_directional", "knit_patch_grazing", "simulated_patch_directional")
 
 
@@ -53,29 +50,25 @@ def main():
     print("| scene | colour | inter-yarn share of the reference (RGB) | bounce / inter-yarn | yarn-scale correlation "
           "| full model / reference without inter-yarn light |")
     print("|---|---|---|---|---|---|")
-    for name in names:
-        base = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
-        spp = args.spp or SCENES.get(name, 16)
-        for colour in colours:
-            scene = dataclasses.replace(base, yarns=[dataclasses.replace(y, color=colour) for y in base.yarns])
-            d, seed = yarn_diameter_px(scene), scene.render.seed
+    for name, colour, scene, spp in scenes_in_colours(names, colours, args.spp):
+        d, seed = yarn_diameter_px(scene), scene.render.seed
 
-            def traced(inter_yarn, scene=scene, seed=seed):
-                return np.asarray(trace_reference(scene, spp, seed, scene.render.max_depth, inter_yarn=inter_yarn)[0],
-                                  np.float64)[..., :3]
+        def traced(inter_yarn, scene=scene, seed=seed, spp=spp):
+            return np.asarray(trace_reference(scene, spp, seed, scene.render.max_depth, inter_yarn=inter_yarn)[0],
+                              np.float64)[..., :3]
 
-            def drawn(model, scene=scene):
-                return np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, ABLATIONS[model]).render().image,
-                                  np.float64)[..., :3]
+        def drawn(model, scene=scene):
+            return np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, ABLATIONS[model]).render().image,
+                              np.float64)[..., :3]
 
-            full, own = traced(True), traced(False)
-            strips, bounced = drawn("full"), drawn("yarn_bounce")
-            between, bounce = full - own, bounced - strips
-            share = " / ".join(f"{x:.3f}" for x in between.mean(axis=(0, 1)) / full.mean(axis=(0, 1)))
-            a, b = yarn_filter(between, d).mean(-1).ravel(), yarn_filter(bounce, d).mean(-1).ravel()
-            corr = float(np.corrcoef(a, b)[0, 1]) if a.std() > 0 and b.std() > 0 else float("nan")
-            print(f"| {name} | {', '.join(f'{x:g}' for x in colour)} | {share} | {bounce.mean() / between.mean():.2f} | "
-                  f"{corr:.2f} | {strips.mean() / own.mean():.3f} |", flush=True)
+        full, own = traced(True), traced(False)
+        strips, bounced = drawn("full"), drawn("yarn_bounce")
+        between, bounce = full - own, bounced - strips
+        share = " / ".join(f"{x:.3f}" for x in between.mean(axis=(0, 1)) / full.mean(axis=(0, 1)))
+        a, b = yarn_filter(between, d).mean(-1).ravel(), yarn_filter(bounce, d).mean(-1).ravel()
+        corr = float(np.corrcoef(a, b)[0, 1]) if a.std() > 0 and b.std() > 0 else float("nan")
+        print(f"| {name} | {', '.join(f'{x:g}' for x in colour)} | {share} | {bounce.mean() / between.mean():.2f} | "
+              f"{corr:.2f} | {strips.mean() / own.mean():.3f} |", flush=True)
 
 
 if __name__ == "__main__":
