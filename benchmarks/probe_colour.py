@@ -25,7 +25,7 @@ from knitbake.compare.image_metrics import yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
 from knitrun.render import pipeline
-from knitrun.render.ablations import ABLATIONS
+from knitrun.render.ablations import combined
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from probe_split import SCENES, checked_models_and_scenes  # noqa: E402  (SCENES: name → the ruler's spp)
@@ -61,7 +61,7 @@ def main():
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
     parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES), help="comma-separated example scene names")
     parser.add_argument("--colors", default="1,1,1:0.9,0.25,0.2", help="colours R,G,B separated by ':'")
-    parser.add_argument("--models", default="full,yarn_bounce", help="names of knitrun.render.ablations")
+    parser.add_argument("--models", default="full,yarn_bounce", help="names of knitrun.render.ablations, or combinations a+b")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)
@@ -76,7 +76,7 @@ def main():
         floor = yarn_scale_metrics(inst, ref, d)["rel_l1"]
         label = ", ".join(f"{x:g}" for x in colour)
         rows = [("*other fiber instance*", inst)] + [
-            (m, np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, ABLATIONS[m]).render().image,
+            (m, np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, combined(m)).render().image,
                            np.float64)[..., :3]) for m in models]
         for model, image in rows:
             metrics = yarn_scale_metrics(image, ref, d)

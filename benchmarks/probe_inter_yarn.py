@@ -27,7 +27,7 @@ from knitbake.compare.image_metrics import yarn_filter
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
 from knitrun.render import pipeline
-from knitrun.render.ablations import ABLATIONS
+from knitrun.render.ablations import combined
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from probe_colour import parse_colours, scenes_in_colours  # noqa: E402
@@ -58,7 +58,7 @@ def main():
                               np.float64)[..., :3]
 
         def drawn(model, scene=scene):
-            return np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, ABLATIONS[model]).render().image,
+            return np.asarray(pipeline.Renderer(scene, {"cotton1": args.pack}, combined(model)).render().image,
                               np.float64)[..., :3]
 
         full, own = traced(True), traced(False)

@@ -45,7 +45,7 @@ from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
 from knitrun.render import pipeline
-from knitrun.render.ablations import ABLATIONS
+from knitrun.render.ablations import combined
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from probe_tilt import TILT_BINS, curve_tilts  # noqa: E402
@@ -66,7 +66,7 @@ def traced(scene, spp, seed, fiber_seed):
 
 def rendered(scene, pack, model):
     """(full, single) strip images of ``scene`` for ablation ``model``."""
-    features = ABLATIONS[model]
+    features = combined(model)
     full = pipeline.Renderer(scene, {"cotton1": pack}, features).render().image
     single = pipeline.Renderer(scene, {"cotton1": pack},
                                dataclasses.replace(features, multiple_scattering=False)).render().image
@@ -118,9 +118,11 @@ def checked_models_and_scenes(parser, args):
     """(models, scene names) of ``--models`` and ``--scenes``, each checked, and ``--pack`` a file; a one-line
     ``parser.error`` for the first that is not."""
     models = args.models.split(",")
-    unknown = sorted(set(models) - set(ABLATIONS))
-    if unknown:
-        parser.error(f"--models: unknown model {unknown[0]!r} ({', '.join(ABLATIONS)})")
+    for model in models:
+        try:
+            combined(model)
+        except ValueError as error:
+            parser.error(f"--models: {error}")
     names = args.scenes.split(",")
     missing = [n for n in names if not (ROOT / "examples" / "scenes" / f"{n}.toml").is_file()]
     if missing:
@@ -134,7 +136,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
     parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
-    parser.add_argument("--models", default="full,no_tables,plain_ds", help="names of knitrun.render.ablations")
+    parser.add_argument("--models", default="full,no_tables,plain_ds", help="names of knitrun.render.ablations, or combinations a+b")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     parser.add_argument("--tilt-bins", action="store_true", help="bin SS and MS along the curves by |ω_o · t|")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")

@@ -11,7 +11,7 @@ also takes its input stages' results, ``run_stage``):
 | textures | ``textures/{normal,tangent,ao,coverage}/mip*`` | always |
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
-| interreflection | ``interreflection/albedo``, ``interreflection/transmittance`` (the yarn tube's ρ_Y, T_Y) | always |
+| interreflection | ``interreflection/{albedo,transmittance}`` (the yarn tube's ρ_Y, T_Y) and ``*_by_colour`` | always |
 | closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer), ``*_ss``, ``*_ms`` | its inputs are baked |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
@@ -62,7 +62,7 @@ QUALITY = {
         "textures": {"width": 128, "height": 32, "samples": 2, "ao_rays": 8},
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (12, 24, 12, 32)},
-        "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2},
+        "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2, "n_colours": 17},
         "closure": {"iterations": 4},
     },
     "standard": {
@@ -73,7 +73,7 @@ QUALITY = {
         "textures": {"width": 256, "height": 64, "samples": 4, "ao_rays": 16},
         "flyaway": {"width": 256, "height": 64, "samples": 4},
         "environment": {"shape": (24, 48, 24, 96)},
-        "interreflection": {"n_views": 6, "rows": 16, "spp": 4, "batches": 3},
+        "interreflection": {"n_views": 6, "rows": 16, "spp": 4, "batches": 3, "n_colours": 17},
         "closure": {"iterations": 4},
     },
     "final": {
@@ -84,7 +84,7 @@ QUALITY = {
         "textures": {"width": 512, "height": 128, "samples": 6, "ao_rays": 32},
         "flyaway": {"width": 512, "height": 128, "samples": 6},
         "environment": {"shape": (32, 64, 32, 128)},
-        "interreflection": {"n_views": 8, "rows": 32, "spp": 8, "batches": 4},
+        "interreflection": {"n_views": 8, "rows": 32, "spp": 8, "batches": 4, "n_colours": 17},
         "closure": {"iterations": 4},
     },
 }
@@ -95,9 +95,10 @@ QUALITY = {
 # quadrature error; correction 5, shadowing 3, interreflection 2, textures 2, flyaway 2: the fibers traced as Embree
 # curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn;
 # interreflection 4: the yarn's transmittance T_Y as well; correction 7: Ψ_* kept (correction/radiance);
-# closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view; 3: and apart on single and multiple scattering
+# closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view; 3: and apart on single and multiple scattering;
+# interreflection 5: ρ_Y and T_Y against the colour (interreflection/*_by_colour)
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
-                 "interreflection": 4, "textures": 2, "flyaway": 2, "closure": 3}
+                 "interreflection": 5, "textures": 2, "flyaway": 2, "closure": 3}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64

@@ -45,7 +45,7 @@ def provenance():
             "sample_counts": {"correction/xi_M": {"batches": 4, "paths_per_batch": 1000}, "textures": 16}}
 
 
-SIZES = {"N_theta": 7, "N_v": 5, "N_phi": 8, "H": 8, "W": 16, "N_a": 3, "N_b": 4, "N_c": 2, "N_d": 5}
+SIZES = {"N_theta": 7, "N_v": 5, "N_phi": 8, "H": 8, "W": 16, "N_a": 3, "N_b": 4, "N_c": 2, "N_d": 5, "N_k": 6}
 FLY_HW = {"H": 4, "W": 8}
 
 

@@ -14,10 +14,11 @@ from data_formats.asset_pack import read_pack
 from data_formats.conventions import LUMINANCE
 from data_formats.scene import load_scene
 from data_formats.yarn_spec import load_preset
-from knitbake.stages.yarn_hull import TABLE, TRANSMITTANCE_TABLE, bake_yarn_hull, hemisphere_env, hull_radiance
+from knitbake.stages.yarn_hull import (BY_COLOUR, TABLE, TRANSMITTANCE_TABLE, bake_yarn_hull, colour_scales,
+                                       hemisphere_env, hull_radiance)
 from knitrun.render.ablations import Features
 from knitrun.render.interreflection import interreflected_visibility
-from knitrun.render.yarn_look import gap_transmittance, load_look
+from knitrun.render.yarn_look import gap_transmittance, hull_colour, load_look
 from knitrun.shading.dual_scattering import transmittance_count
 from knitrun.shading.table_lookup import lookup_theta
 from tests.helpers import FRONT, SKY, SUN, straight, write_scene
@@ -63,6 +64,43 @@ def test_yarn_albedo_is_one_for_lossless_fibers_and_below_the_fiber_albedo_other
         assert np.all(np.isfinite(errors[name]) & (errors[name] > 0))
     with pytest.raises(ValueError, match="batches = 1"):
         bake_yarn_hull(cotton, batches=1)
+
+
+def _coloured(spec, colour):
+    optics = spec.optics
+    optics = dataclasses.replace(optics, **{name: tuple(np.multiply(getattr(optics, name), colour))
+                                            for name in ("r_color", "tt_color", "d_color")})
+    return dataclasses.replace(spec, optics=optics)
+
+
+def test_hull_against_the_colour_is_the_coloured_yarns_own():
+    """ρ_Y and T_Y against the colour scale k of the lobe albedos: the row at k = 1 is the white yarn's tables; at
+    k = 0 no path scatters, so both are the light crossing between the fibers, alike in every channel and equal;
+    both grow with k (common random numbers), T_Y ≤ ρ_Y. Read per channel at a colour, they are that coloured yarn's
+    own bake within the errors and the interpolation's 1 %, where the white yarn's times the colour is far off in the
+    dark channels (the gaps keep their colour). A count of samples that misses k = 0 or 1 is refused."""
+    cotton = load_preset("cotton1")
+    settings = {"n_views": 3, "rows": 8, "spp": 2, "batches": 2}
+    tables, errors = bake_yarn_hull(cotton, seed=3, **settings)
+    rho, t = tables[BY_COLOUR[TABLE]], tables[BY_COLOUR[TRANSMITTANCE_TABLE]]
+    assert rho.shape == t.shape == (17, 3) and colour_scales(17)[[0, -1]].tolist() == [0.0, 1.0]
+    np.testing.assert_array_equal(rho[-1], tables[TABLE])
+    np.testing.assert_array_equal(t[-1], tables[TRANSMITTANCE_TABLE])
+    np.testing.assert_allclose(rho[0], t[0], rtol=1e-12)
+    np.testing.assert_allclose(rho[0], rho[0, 0], rtol=1e-12)
+    assert 0.05 < rho[0, 0] < 0.4
+    slack = 3 * errors[BY_COLOUR[TABLE]]
+    assert np.all(np.diff(rho, axis=0) > -slack[1:]) and np.all(t <= rho + slack)
+    red = np.array([0.9, 0.25, 0.2])
+    own, own_err = bake_yarn_hull(_coloured(cotton, red), seed=3, n_colours=0, **settings)
+    assert BY_COLOUR[TABLE] not in own
+    for name in (TABLE, TRANSMITTANCE_TABLE):
+        curve = tables[BY_COLOUR[name]]
+        read = np.array([np.interp(red[c], colour_scales(17), curve[:, c]) for c in range(3)])
+        np.testing.assert_allclose(read, own[name], rtol=0.02, atol=4 * float(np.max(own_err[name])))
+        assert np.all(np.abs(tables[name] * red - own[name])[1:] > 0.15 * own[name][1:])  # first order: off
+    with pytest.raises(ValueError, match="n_colours = 9"):
+        bake_yarn_hull(cotton, n_colours=9, **settings)
 
 
 def test_transmittance_and_reflectance_of_a_lossless_yarn_add_up_to_one():
@@ -127,6 +165,36 @@ def test_gap_transmittance_is_what_the_coverage_texture_leaves_uncovered(tmp_pat
     assert look.n_cross == pytest.approx(transmittance_count(t_y, a_f0, 1e9), rel=1e-9)
     assert look.n_cross_rest > look.n_cross  # less left to pass once the gaps are split out
     assert "between the fibers" in look.n_cross_from
+
+
+def test_a_coloured_entry_reads_its_hull_off_the_curves_and_a_pack_without_them_tints(tmp_path, pack):
+    """A red entry's ρ_Y and T_Y are the pack's curves read per channel at its colour (a white entry's the pack's
+    tables, exactly); a schema-2.5 pack (no curves) gives the white yarn's times the colour; ``hull_from`` says
+    which, and the luminance the environment's inter-reflection uses follows."""
+    red = (0.9, 0.25, 0.2)
+    entry = load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)).yarns[0]
+    data = read_pack(pack)
+    white = load_look(pack, entry, "cm")
+    np.testing.assert_array_equal(white.hull_albedo, data.tables[TABLE])
+    np.testing.assert_array_equal(white.hull_transmittance, data.tables[TRANSMITTANCE_TABLE])
+    look = load_look(pack, dataclasses.replace(entry, color=red), "cm")
+    assert look.hull_from == "the pack's curves against the colour"
+    for name, value in ((TABLE, look.hull_albedo), (TRANSMITTANCE_TABLE, look.hull_transmittance)):
+        curve = np.asarray(data.tables[BY_COLOUR[name]], np.float64)
+        np.testing.assert_allclose(value, [np.interp(red[c], colour_scales(17), curve[:, c]) for c in range(3)],
+                                   rtol=1e-12)
+        np.testing.assert_allclose(hull_colour(data, name, red), value, rtol=1e-12)
+    assert look.yarn_albedo == pytest.approx(float(look.hull_albedo @ LUMINANCE), rel=1e-12)
+    old = tmp_path / "old.h5"
+    shutil.copy(pack, old)
+    with h5py.File(old, "a") as f:
+        for name in BY_COLOUR.values():
+            del f[name], f[name + "_stderr"]
+        f.attrs["schema_version"] = "2.5"
+    tinted = load_look(old, dataclasses.replace(entry, color=red), "cm")
+    assert "times the colour" in tinted.hull_from
+    np.testing.assert_allclose(tinted.hull_albedo, data.tables[TABLE] * np.array(red), rtol=1e-6)
+    np.testing.assert_allclose(tinted.hull_transmittance, data.tables[TRANSMITTANCE_TABLE] * np.array(red), rtol=1e-6)
 
 
 def test_a_yarn_in_another_yarns_shadow_gets_the_light_the_yarn_lets_through(tmp_path, pack):

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from knitrun.render.ablations import ABLATIONS, Features
+from knitrun.render.ablations import ABLATIONS, Features, combined
 from knitrun.render.yarn_bounce import (CONTACT_RADII, INV_PI2, BounceLights, BounceYarns, lambert_cylinder,
                                         segment_solid_angle, vertex_bounce, vertex_tangents)
 from tests.helpers import FRONT, SUN, straight, write_scene
@@ -148,3 +148,15 @@ def test_the_bounce_ablation_brightens_crossing_yarns_and_is_off_by_default(tmp_
     lone = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="lone")
     np.testing.assert_array_equal(_render(lone, pack, features=Features(yarn_bounce=True)).image,
                                   _render(lone, pack).image)
+
+
+def test_ablations_combine_as_their_changes_to_the_full_model():
+    """"a+b" is the full model with what a and b each change (the probes' ``--models``); an unknown name is refused
+    in one line."""
+    assert combined("yarn_bounce+split_xi") == Features(yarn_bounce=True, split_xi=True)
+    assert combined("full") == ABLATIONS["full"] and combined("no_tables") == ABLATIONS["no_tables"]
+    assert combined("no_tables+yarn_bounce") == Features(xi=False, fiber_shadowing=False, fiber_detail=False,
+                                                         yarn_bounce=True)
+    assert combined("papers_xi+view_xi") == Features(closed_xi=False, view_xi=True)
+    with pytest.raises(ValueError, match="unknown ablation 'bounce'"):
+        combined("full+bounce")

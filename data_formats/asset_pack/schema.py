@@ -13,7 +13,7 @@ import numpy as np
 from ..conventions import HALF_PI, LENGTH_UNITS, PHI_RANGE, THETA_RANGE
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "2.5"
+SCHEMA_VERSION = "2.6"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
@@ -61,6 +61,9 @@ AXES = {a.name: a for a in (
          "|φ_j − φ_o| wrapped into [0, π]: azimuth of the SRBF centre minus azimuth of the view "
          "(I_M is even in it because f is even in φ)"),
     Axis("log10_lambda", True, (math.log10(0.5), 4.0), "clamp", "1", "log10 λ_j, λ_j the SRBF sharpness"),
+    Axis("colour_scale", True, (-1.0 / 32.0, 33.0 / 32.0), "clamp", "1",
+         "k: the factor on the fiber's lobe albedos A_R, A_TT, A_D in one channel (a scene colour's channel); 17 "
+         "cells put the samples at k = 0, 1/16, …, 1"),
     Axis("channel", False, None, None, "", "colour or vector channel"),
     Axis("variant", False, None, None, "", "flyaway texture variant 0, 1, 2"),
 )}
@@ -176,6 +179,13 @@ TABLES = (
     TableSpec("interreflection/transmittance", "interreflection", (3,), ("channel",), "1",
               "T_Y: the yarn tube's transmittance, mean radiance leaving the tube toward a camera when only the "
               "hemisphere behind the yarn has radiance 1 (since schema 2.2, §10)", value_range=(0.0, 1.0)),
+    TableSpec("interreflection/albedo_by_colour", "interreflection", ("N_k", 3), ("colour_scale", "channel"), "1",
+              "ρ_Y of the yarn whose fibers' lobe albedos are scaled by k: channel c at k is the hull albedo, in that "
+              "channel, of the yarn drawn in a colour whose channel c is k (since schema 2.6, §10)",
+              value_range=(0.0, 1.0)),
+    TableSpec("interreflection/transmittance_by_colour", "interreflection", ("N_k", 3), ("colour_scale", "channel"),
+              "1", "T_Y of the yarn whose fibers' lobe albedos are scaled by k, as albedo_by_colour (since schema "
+              "2.6, §10)", value_range=(0.0, 1.0)),
     TableSpec("textures/normal/mip{k}", "textures", ("H", "W", 3), ("v_tex", "u_tex", "channel"), "1",
               "coverage-premultiplied fiber normal in the strip frame (t, b, n)", channel_ranges=_UNIT_VEC,
               vector=3, mip=True),

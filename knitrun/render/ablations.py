@@ -69,7 +69,7 @@ the yarn-level bounce and with ξ closed apart on single and multiple scattering
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 
 @dataclass(frozen=True)
@@ -116,6 +116,19 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax",
                    "yarn_bounce": "full with the yarn-level bounce",
                    "split_xi": "full with ξ closed apart on single and multiple scattering"}
+
+
+def combined(name: str) -> Features:
+    """The features of ablation ``name`` or of a combination "a+b+…" of ablations: the full model with every switch
+    that one of them turns from the full model's turned (the switches are booleans, so two never disagree);
+    ValueError naming the first unknown name."""
+    full, changed = ABLATIONS["full"], {}
+    for part in name.split("+"):
+        if part not in ABLATIONS:
+            raise ValueError(f"unknown ablation {part!r} ({', '.join(ABLATIONS)})")
+        changed.update({f.name: getattr(ABLATIONS[part], f.name) for f in fields(Features)
+                        if getattr(ABLATIONS[part], f.name) != getattr(full, f.name)})
+    return replace(full, **changed)
 
 
 def regular_fibers(name: str) -> Features:

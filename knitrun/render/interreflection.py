@@ -18,9 +18,9 @@ direction, which forward-scattering fibers make plausible) and, through the lobe
 multiple-scattering lights. It is not applied to directional lights: there V is 0 or 1 but for the penumbra, and the
 blocked light reaches the receiver from the lit side of the blocker, a different light path this term does not
 model; the part of it the blocker lets through enters the dual-scattering estimate instead, through the fiber count
-for light crossing a yarn (``dual_scattering.transmittance_count``, from the pack's transmittance T_Y). The scene
-colour c tints ρ_Y (ρ_Y·c, a first-order approximation: ρ_Y is not linear in the fiber albedo), and one ρ per
-receiver, the luminance of ρ_Y·c, scales every channel.
+for light crossing a yarn (``dual_scattering.transmittance_count``, from the pack's transmittance T_Y). ρ_Y is the
+yarn's in the scene colour (``yarn_look.hull_colour``), and one ρ per receiver, its luminance, scales every
+channel.
 """
 
 from __future__ import annotations

@@ -398,6 +398,7 @@ class Renderer:
         self.looks = looks
         self.setup_facts["n_cross"] = {look.name: look.n_cross_from for look in looks}
         self.setup_facts["xi"] = {look.name: look.xi_from if features.xi else "none (switched off)" for look in looks}
+        self.setup_facts["yarn_hull"] = {look.name: look.hull_from for look in looks}
         self.kernel_looks = [shading_look(look) for look in looks]
         self.im_tables = [look.im if look.im is not None else no_im_table() for look in looks]
         self.environment = environment

@@ -46,8 +46,8 @@ directional lights of irradiance E_L toward ω_L:
 The shading points take B interpolated along their curve by rest arc length (``bounce_at_points``) and add it to
 their radiance before the fiber-level detail (``strip_shading.shade_regular``): a yarn-level term, not corrected by
 ξ (which corrects the dual-scattering estimate of the light's own path). R_Y and T_Y per channel are the pack's
-tables times the entry's colour (first order: they are not linear in the fiber albedo, ``yarn_look``); a pack
-without them has no bounce. The environment takes none here: its lobes' inter-reflection carries that light.
+in the entry's colour (``yarn_look.hull_colour``: read off the pack's curves against the colour, or the white
+yarn's times the colour for a pack without them); a pack without ρ_Y and T_Y has no bounce. The environment takes none here: its lobes' inter-reflection carries that light.
 
 Neighbours are found on a uniform grid of cell ``reach`` (a counting sort of the vertices by cell); each vertex's
 sums are its own (``prange`` over vertices, no shared output).
@@ -71,7 +71,7 @@ INV_PI2 = 1.0 / (math.pi * math.pi)
 class BounceYarns(NamedTuple):
     """The polylines as the bounce kernel reads them: ``points`` (P, 3), ``tangent`` (P, 3) unit, ``curve`` (P,) int64
     curve of each vertex, ``offsets`` (C + 1,), ``rest`` (P,) rest arc length, ``radius`` (C,), ``reflect`` and
-    ``transmit`` (P, 3) the tube's R_Y and T_Y at each vertex (tinted), ``toward_camera`` (P, 3) unit."""
+    ``transmit`` (P, 3) the tube's R_Y and T_Y at each vertex (in its colour), ``toward_camera`` (P, 3) unit."""
 
     points: np.ndarray
     tangent: np.ndarray

@@ -10,11 +10,15 @@ flyaways, environment) and converts everything to the scene:
   f is linear in those colours, so I_M and the dual-scattering averages ā_f, ā_b scale with the colour while the
   shifts and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
   correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked.
-* Hull albedo ρ_Y (``/interreflection/albedo``, read with an environment light or with ``transmission``): tinted by
-  the colour (``hull_albedo``, RGB: the ρ_Y of the directional lights' yarn-level bounce, ``yarn_bounce``) and
-  reduced to its luminance (``yarn_albedo``, the ρ of the environment's inter-reflection,
-  ``knitrun.render.interreflection``); None (neither term) for a pack baked before schema 2.1, which
-  ``RenderResult.facts["interreflection"]`` then reports.
+* Hull albedo ρ_Y (``/interreflection/albedo``, read with an environment light or with ``transmission``) and
+  transmittance T_Y in the entry's colour (``hull_colour``): each channel read off the pack's curve against the
+  colour (``/interreflection/*_by_colour``, schema 2.6: ρ_Y and T_Y of the yarn whose fibers' lobe albedos are
+  scaled by k, linear in k between its samples) at that channel's colour; a pack without the curves (schema < 2.6)
+  gives the white yarn's times the colour, a first-order approximation (cotton1 in the examples' red: T_Y 0.41 /
+  0.11 / 0.08 against the curve's 0.37 / 0.21 / 0.20), and ``hull_from`` says which. ``hull_albedo`` (RGB) is the
+  ρ_Y of the directional lights' yarn-level bounce (``yarn_bounce``), its luminance (``yarn_albedo``) the ρ of the
+  environment's inter-reflection (``knitrun.render.interreflection``); None (neither term) for a pack baked before
+  schema 2.1, which ``RenderResult.facts["interreflection"]`` then reports.
 * Fiber counts for the dual-scattering estimate at run time: ``dual_scattering.fiber_counts`` (n_cross, n_occluded)
   from the yarn spec stored in the pack's provenance. With ``transmission`` and a pack that has the yarn's
   transmittance T_Y (``/interreflection/transmittance``, schema 2.2), n_cross, the count for light crossing another
@@ -35,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from data_formats.asset_pack import read_pack
-from data_formats.conventions import CM_PER_UNIT, LUMINANCE
+from data_formats.conventions import CM_PER_UNIT, LUMINANCE, cell_centres
 from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
 from knitrun.render.shading_inputs import Corrections, Look
@@ -55,6 +59,8 @@ SPLIT_XI = {"ss": "correction/xi_closed_ss", "ms": "correction/xi_closed_ms"}
 SPLIT_VIEW_XI = {"ss": "correction/xi_view_ss", "ms": "correction/xi_view_ms"}
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
+BY_COLOUR = {ALBEDO_TABLE: "interreflection/albedo_by_colour",  # optional: absent from packs of schema < 2.6
+             TRANSMITTANCE_TABLE: "interreflection/transmittance_by_colour"}
 
 
 DETAIL_MAX = 4.0  # cap on the fiber-level detail D (a texel far brighter than its row: a lone lit fiber)
@@ -92,9 +98,10 @@ class YarnLook:
     d_f: float  # DS density factors (``dual_scattering.D_F``, ``D_B``); 0 and 0: single scattering alone
     d_b: float
     twist_sign: float  # +1 when the plies turn counter-clockwise seen along +z (ply angle grows with s), else −1
-    hull_albedo: np.ndarray | None  # (3,) ρ_Y·colour (``yarn_bounce``); None: the pack has no ρ_Y or it is not read
-    hull_transmittance: np.ndarray | None  # (3,) T_Y·colour (``yarn_bounce``); None: no T_Y, or not read
-    yarn_albedo: float | None  # luminance of ρ_Y·colour (``interreflection``); None: the pack has no ρ_Y
+    hull_albedo: np.ndarray | None  # (3,) ρ_Y in the colour (``yarn_bounce``); None: no ρ_Y in the pack, or not read
+    hull_transmittance: np.ndarray | None  # (3,) T_Y in the colour (``yarn_bounce``); None: no T_Y, or not read
+    hull_from: str  # how ρ_Y and T_Y were put in the colour (``hull_colour``), for RenderResult.facts
+    yarn_albedo: float | None  # luminance of hull_albedo (``interreflection``); None: the pack has no ρ_Y
     im: IMTable | None  # the I_M^{TT,D} table for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
 
@@ -204,6 +211,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         names.append(ALBEDO_TABLE)
     if transmission and TRANSMITTANCE_TABLE in stored:
         names.append(TRANSMITTANCE_TABLE)
+    names += [BY_COLOUR[n] for n in (ALBEDO_TABLE, TRANSMITTANCE_TABLE) if n in names and BY_COLOUR[n] in stored]
     missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
     if corrections and full_tables:
         names += [n for n in FULL_TABLES if n in stored]
@@ -251,7 +259,11 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     im = None
     if environment:
         im = im_table_from(pack.tables["environment/I_M_TT_D"] * colour, pack.info["environment/I_M_TT_D"].axes)
-    hull_albedo = np.asarray(pack.tables[ALBEDO_TABLE], np.float64) * colour if ALBEDO_TABLE in names else None
+    hull_albedo = hull_colour(pack, ALBEDO_TABLE, colour) if ALBEDO_TABLE in names else None
+    hull_transmittance = None if transmittance is None else hull_colour(pack, TRANSMITTANCE_TABLE, colour)
+    hull_from = ("none (the pack has no ρ_Y, schema < 2.1)" if hull_albedo is None else
+                 "the pack's curves against the colour" if BY_COLOUR[ALBEDO_TABLE] in names else
+                 "the white yarn's times the colour (the pack has no curves against the colour, schema < 2.6)")
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
                  if corrections}
     return YarnLook(
@@ -272,9 +284,23 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         d_f=D_F, d_b=D_B, xi_from=xi_from,
         warnings=warnings,
         twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
-        hull_albedo=hull_albedo, hull_transmittance=None if transmittance is None else transmittance * colour,
+        hull_albedo=hull_albedo, hull_transmittance=hull_transmittance, hull_from=hull_from,
         yarn_albedo=None if hull_albedo is None else float(hull_albedo @ LUMINANCE), im=im,
         residuals=residuals)
+
+
+def hull_colour(pack, name: str, colour) -> np.ndarray:
+    """ρ_Y or T_Y (``name``: ``ALBEDO_TABLE``, ``TRANSMITTANCE_TABLE``) of a yarn drawn in the RGB ``colour``: channel
+    c read off the pack's curve ``BY_COLOUR[name]`` at k = colour[c] (linear between the samples of its
+    ``colour_scale`` axis, clamped at its ends), or the white yarn's times the colour where the pack has no curve
+    (module docstring)."""
+    colour = np.asarray(colour, np.float64)
+    curve = BY_COLOUR[name]
+    if curve not in pack.tables:
+        return np.asarray(pack.tables[name], np.float64) * colour
+    table = np.asarray(pack.tables[curve], np.float64)
+    k = cell_centres(*pack.info[curve].axes[0].range, table.shape[0])
+    return np.array([np.interp(colour[c], k, table[:, c]) for c in range(3)])
 
 
 def shading_look(look: YarnLook) -> tuple:
