@@ -27,7 +27,7 @@ import bench_render  # noqa: E402
 from data_formats.scene import load_scene  # noqa: E402
 from data_formats.yarn_curves import write_yarn_curves  # noqa: E402
 from knitrun.render import pipeline  # noqa: E402
-from knitrun.render.shading_inputs import Lights, Lobes  # noqa: E402
+from knitrun.render.shading_inputs import Lobes, no_lights  # noqa: E402
 from knitrun.render.strip_shading import shade_regular  # noqa: E402
 from knitrun.shading.dual_scattering import D_B, D_F, _ds_batch  # noqa: E402
 from knitrun.shading.im_lookup import _im_batch, no_im_table  # noqa: E402
@@ -83,7 +83,7 @@ def main():
     for light, layer, call in cases:
         idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, bounce, rgb, alpha = call
         n = len(points.view_dir)
-        off = Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
+        off = no_lights(n)
         no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)))
         print(f"## {light}, {layer} layer: shade_regular on {len(idx)} shading points ({_count(lights)} directional, "
               f"{_count(lobes)} SRBF lobes, {_count(ms)} multiple-scattering clusters)")

@@ -218,6 +218,36 @@ def test_a_yarn_in_another_yarns_shadow_gets_the_light_the_yarn_lets_through(tmp
     assert np.all(with_term.image >= without.image - 1e-6) and with_term.image.mean() > without.image.mean()
 
 
+SIDE = """[camera]
+position = [0.0, -1.0, 0.12]
+look_at = [0.0, 0.0, 0.12]
+up = [0.0, 0.0, 1.0]
+fov_deg = 30.0
+width = 48
+height = 48"""
+OVERHEAD_SUN = """[[lights]]
+type = "directional"
+direction = [0.0, 0.0, 1.0]
+irradiance = [2.0, 2.0, 2.0]"""
+
+
+def test_two_blocking_yarns_let_less_light_between_their_fibers_than_one(tmp_path, pack):
+    """Three yarns stacked under an overhead sun, seen from the side: counting two blockers
+    (``Features.two_blockers``) leaves the top yarn (none) and the middle one (one blocker) as they were and darkens
+    only the bottom one, behind two yarns (τ_Y² instead of τ_Y, two crossings of the scattered rest); the facts say
+    how much of the image lies behind one and behind two."""
+    stack = [straight(z=z) for z in (0.24, 0.12, 0.0)]
+    scene = write_scene(tmp_path, stack, camera=SIDE, lights=OVERHEAD_SUN, name="stack")
+    one = _render(scene, pack)
+    two = _render(scene, pack, features=Features(two_blockers=True))
+    assert "two_blockers" not in one.facts
+    assert two.facts["two_blockers"]["behind_two_yarns"] > 0.05 and two.facts["two_blockers"]["behind_one_yarn"] > 0.05
+    change = np.abs(two.image - one.image).max(axis=(1, 2))
+    rows = np.flatnonzero(change > 1e-6)
+    assert rows.size and rows.min() >= 0.55 * len(change), rows  # the bottom yarn's rows (row 0 is the top)
+    assert np.all(two.image <= one.image + 1e-6) and two.image.mean() < one.image.mean()
+
+
 def test_renderer_reports_and_skips_inter_reflection_for_a_pack_without_yarn_albedo(tmp_path, pack):
     """A schema-2.0 pack (no ``/interreflection/albedo``) renders as before the term existed, and says so; with the
     table, blocked sky light comes back and the image is brighter, never darker."""

@@ -136,17 +136,20 @@ def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
     """A directional light's direct fraction at yarn level is V + (1 − V) τ_Y (``past_blockers``): with no fiber
     counted toward the light (n_occluded = n_cross = 0, so only the direct fraction differs), a point fully in
     another yarn's shadow (V = 0) with gap transmittance τ_Y = 0.25 shades as an unblocked point lit at V = 0.25; a
-    lit point (V = 1) does not move; a partly shadowed point (V = 0.4) takes 0.4 + 0.6·0.25 = 0.55."""
+    lit point (V = 1) does not move; a partly shadowed point (V = 0.4) takes 0.4 + 0.6·0.25 = 0.55. With two
+    blocking yarns counted (``Lights.beyond`` V₂, the fraction at most one yarn blocks), a point behind two
+    (V = V₂ = 0) passes τ_Y² = 0.0625, one behind one (V₂ = 1) τ_Y as before, and half and half (V₂ = 0.5)
+    0.5·0.25 + 0.5·0.0625."""
     n = 16
     tangent, view, flat, full, off = _kernel_frames(n, seed=11)
     ds = np.stack([np.full((4, 3), x) for x in (0.7, 0.2, 0.3, 0.1, 0.3)])
     points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
     sun = np.array([[0.3, 0.6, 1.0]]) / np.linalg.norm([0.3, 0.6, 1.0])
 
-    def shaded(visibility, gap):
+    def shaded(visibility, gap, beyond=1.0):
         look = Look(ROUGH, ds, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, gap, D_F, D_B)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
-        lights = Lights(sun, np.full((1, 3), 2.0), np.full((1, n), visibility))
+        lights = Lights(sun, np.full((1, 3), 2.0), np.full((1, n), visibility), np.full((1, n), beyond))
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), lights, None, None, None, None, rgb,
                       alpha)
         return rgb
@@ -156,6 +159,9 @@ def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
     np.testing.assert_allclose(shaded(1.0, 0.25), shaded(1.0, 0.0), rtol=1e-12)
     np.testing.assert_allclose(shaded(0.4, 0.25), shaded(0.55, 0.0), rtol=1e-12)
     assert np.all(shaded(0.0, 0.25) >= shaded(0.0, 0.0))
+    np.testing.assert_allclose(shaded(0.0, 0.25, beyond=0.0), shaded(0.0625, 0.0), rtol=1e-12)
+    np.testing.assert_allclose(shaded(0.0, 0.25, beyond=0.5), shaded(0.5 * 0.25 + 0.5 * 0.0625, 0.0), rtol=1e-12)
+    np.testing.assert_allclose(shaded(1.0, 0.25, beyond=1.0), shaded(1.0, 0.0), rtol=1e-12)
 
 
 def test_environment_shading_matches_quadrature_for_1_16_64_lobes():

@@ -5,7 +5,7 @@ import numba
 import numpy as np
 import pytest
 
-from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
+from knitrun.render.shadow_map import behind_map, build_shadow_map, shadow_visibility
 
 R = 0.1  # yarn radius
 BIAS = 1.5 * R
@@ -19,10 +19,10 @@ def yarns(*heights, half_length=2.0, n=21):
     return pts, np.arange(len(heights) + 1) * n, np.tile(x + half_length, len(heights))
 
 
-def shadow_map(heights, size=256, direction=UP):
+def shadow_map(heights, size=256, direction=UP, layers=1):
     pts, offsets, rest = yarns(*heights)
     lo, hi = pts.min(axis=0) - R, pts.max(axis=0) + R
-    return build_shadow_map(pts, offsets, False, rest, R, direction, size, lo, hi)
+    return build_shadow_map(pts, offsets, False, rest, R, direction, size, lo, hi, layers=layers)
 
 
 def across(y, zs, x=0.3):
@@ -54,6 +54,27 @@ def test_lower_yarn_is_shadowed_by_the_upper_one():
     assert np.all(shadow_visibility(sm, upper_top, BIAS, 0.0) > 0.98)
     assert np.all(shadow_visibility(sm, beside, BIAS, 0.0) > 0.98)
     assert np.all(shadow_visibility(sm, lower_top, np.full(7, BIAS), 0.02) < 0.02)
+
+
+def test_the_second_layer_counts_the_yarns_a_light_crosses():
+    """Three yarns stacked 5 radii apart under the light: the first layer is the one-layer map bit for bit; the second lies behind it wherever it is finite, and holds the
+    middle yarn under the top one. Past the second layer the top and middle yarns are lit, the bottom one (behind
+    two) is not; a one-layer map has no second layer to give."""
+    one, two = shadow_map([0.0, 0.5, 1.0]), shadow_map([0.0, 0.5, 1.0], layers=2)
+    np.testing.assert_array_equal(one.depth, two.depth)
+    assert one.behind is None and np.isfinite(two.behind).any()
+    both = np.isfinite(two.behind)
+    assert np.all(two.behind[both] > two.depth[both] + R) and np.all(np.isfinite(two.depth[both]))
+    zs = np.linspace(-0.6 * R, 0.6 * R, 7)
+    tops = [across(h + R, zs) for h in (1.0, 0.5, 0.0)]
+    v = [shadow_visibility(two, p, BIAS, 0.0) for p in tops]
+    v2 = [shadow_visibility(behind_map(two), p, BIAS, 0.0) for p in tops]
+    assert np.all(v[0] > 0.98) and np.all(v[1] < 0.02) and np.all(v[2] < 0.02)
+    assert np.all(v2[0] > 0.98) and np.all(v2[1] > 0.98) and np.all(v2[2] < 0.02)
+    with pytest.raises(ValueError, match="one layer"):
+        behind_map(one)
+    with pytest.raises(ValueError, match="layers = 3"):
+        shadow_map([0.0], layers=3)
 
 
 def test_no_self_shadowing_with_the_bias():

@@ -59,6 +59,15 @@ it corrects a dark colour channel (the lone red yarn's green 1.41 → 1.11 of th
 a directional light, but the sky scenes and the grazing patch get worse (BENCHMARKS.md, "Issue 13: ξ closed apart
 on single and multiple scattering").
 
+``two_blockers`` counts up to two yarns between a point and a directional light instead of one: a depth-peeled
+second shadow layer (``shadow_map``, ``behind``) gives V₂, the fraction of the light that at most one yarn blocks,
+and the light passing between the fibers becomes V + (V₂ − V) τ_Y + (1 − V₂) τ_Y², the scattered rest crossing
+(V₂ − V) + 2 (1 − V₂) yarns (``strip_shading.past_blockers``): under grazing light a point lies behind several
+yarns, and one gap per blocked ray let too much through. Not the default: on the grazing patch, the one example
+scene with points behind two yarns, the error falls from 1.58× to 1.54× the instance floor, the GL backend draws one
+layer, and the frame takes half again as long (BENCHMARKS.md "Issue 13: the yarn's hull in the scene's colour", "Two
+blocking yarns").
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
 the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
@@ -88,6 +97,7 @@ class Features:
     parallax: bool = False  # the regular points' texture coordinate and tangent where the tube's seen surface lies
     yarn_bounce: bool = False  # light the neighbouring yarns scatter onto a yarn under directional lights
     split_xi: bool = False  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms)
+    two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -106,6 +116,7 @@ ABLATIONS = {
     "parallax": Features(parallax=True),
     "yarn_bounce": Features(yarn_bounce=True),
     "split_xi": Features(split_xi=True),
+    "two_blockers": Features(two_blockers=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -115,7 +126,8 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ",
                    "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax",
                    "yarn_bounce": "full with the yarn-level bounce",
-                   "split_xi": "full with ξ closed apart on single and multiple scattering"}
+                   "split_xi": "full with ξ closed apart on single and multiple scattering",
+                   "two_blockers": "full with two blocking yarns counted"}
 
 
 def combined(name: str) -> Features:

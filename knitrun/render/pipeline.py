@@ -40,7 +40,9 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    lets through the gap transmittance τ_Y of the blocker (``strip_shading.past_blockers``, in the kernels). With
    ``Features.yarn_bounce`` (an ablation) the directional lights are looked up at the polyline vertices as well, and
    the light the neighbouring yarns scatter onto each vertex (``knitrun.render.yarn_bounce``) is interpolated to the
-   regular points.
+   regular points. With ``Features.two_blockers`` (an ablation) each directional light's map also draws the second
+   yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks, goes to the kernels as
+   ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
    (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
    frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
@@ -84,7 +86,7 @@ from knitrun.render.compile_ahead import start_compile_ahead
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
-from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
+from knitrun.render.shadow_map import behind_map, build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
                                           same_surface, shade_flyaway, shade_regular, shading_points)
@@ -342,15 +344,21 @@ def _environment(scene: Scene, use_cache: bool):
                       scene.render.seed, use_cache)
 
 
-def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers, depth_maps):
+def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers, depth_maps, two_layers=False):
     """Yarn-level visibility of each receiver set (position, bias) toward ``direction``; the shadow map's depth is
-    drawn into ``depth_maps[size]`` (kept there for the next map of that size)."""
+    drawn into ``depth_maps[size]`` (kept there for the next map of that size). With ``two_layers``, (visibility,
+    the fraction at most one yarn blocks) of each set, from the map's second layer (``shadow_map.behind_map``)."""
     if len(lines.entry) == 0:
-        return [np.ones(len(p)) for p, _ in receivers]
+        return [(np.ones(len(p)),) * 2 if two_layers else np.ones(len(p)) for p, _ in receivers]
     sm = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius_of_curve, direction, size,
-                          lines.points.min(axis=0), lines.points.max(axis=0), out=depth_maps.get(size))
-    depth_maps[size] = sm.depth
-    return [shadow_visibility(sm, p, bias, angular_radius) for p, bias in receivers]
+                          lines.points.min(axis=0), lines.points.max(axis=0),
+                          out=None if two_layers else depth_maps.get(size), layers=2 if two_layers else 1)
+    if not two_layers:
+        depth_maps[size] = sm.depth
+        return [shadow_visibility(sm, p, bias, angular_radius) for p, bias in receivers]
+    behind = behind_map(sm)
+    return [(shadow_visibility(sm, p, bias, angular_radius), shadow_visibility(behind, p, bias, angular_radius))
+            for p, bias in receivers]
 
 
 class Renderer:
@@ -528,6 +536,7 @@ class Renderer:
         light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
         size = scene.render.shadow_map_size
         light_vis = [np.ones((len(light_dir), len(s["weight"]))) for s in sets]
+        light_beyond = [np.ones((len(light_dir), len(s["weight"]))) for s in sets]  # ``Lights.beyond``
         # the yarn-level bounce under the directional lights (``yarn_bounce``) looks the lights up at the polyline
         # vertices too
         bounce_on = features.yarn_bounce and features.interreflection and features.multiple_scattering and \
@@ -536,12 +545,24 @@ class Renderer:
         vertex_receivers = [(lines.points, np.repeat(bias_radius[lines.entry], np.diff(lines.offsets)))] \
             if bounce_on else []
         vertex_vis = np.ones((len(light_dir), len(lines.points)))
+        vertex_beyond = np.ones((len(light_dir), len(lines.points)))
         for i, d in enumerate(light_dir):
-            found = _visibility(lines, radius, d, size, 0.0, receivers + vertex_receivers, self.shadow_depth)
-            for out, at, vis in zip(light_vis, where, found):
+            found = _visibility(lines, radius, d, size, 0.0, receivers + vertex_receivers, self.shadow_depth,
+                                features.two_blockers)
+            if not features.two_blockers:
+                found = [(vis, None) for vis in found]
+            for out, beyond, at, (vis, past_one) in zip(light_vis, light_beyond, where, found):
                 out[i, at] = vis
+                if past_one is not None:
+                    beyond[i, at] = past_one
             if bounce_on:
-                vertex_vis[i] = found[-1]
+                vertex_vis[i] = found[-1][0]
+                if features.two_blockers:
+                    vertex_beyond[i] = found[-1][1]
+        if features.two_blockers and len(light_dir) and len(light_beyond[0][0]):
+            facts["two_blockers"] = {"behind_two_yarns": round(float(np.mean(1.0 - light_beyond[0][0])), 4),
+                                     "behind_one_yarn": round(float(np.mean(light_beyond[0][0] - light_vis[0][0])),
+                                                              4)}
         lobe_dir = np.zeros((0, 3)) if fit is None else np.asarray(fit.directions, np.float64)
         lobe_lambda = np.zeros(0) if fit is None else np.asarray(fit.sharpness, np.float64)
         lobe_w = np.zeros((0, 3)) if fit is None else np.asarray(fit.weights, np.float64)
@@ -552,7 +573,7 @@ class Renderer:
                                                                  angular, receivers, self.shadow_depth)):
                 out[j, at] = vis
         if fly_points is not None:
-            for vis in (light_vis, lobe_vis):
+            for vis in (light_vis, light_beyond, lobe_vis):
                 vis[-1][:, shared] = vis[0][:, partner[shared]]
         albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
             np.zeros(len(looks))
@@ -567,7 +588,7 @@ class Renderer:
         facts["ms_lights"] = int(len(ms_dir))
         bounce = [None] * len(layers)
         if bounce_on:
-            bounce = _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, layers, facts)
+            bounce = _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, vertex_beyond, layers, facts)
         lap("shadow")
 
         if self._compile_helper is not None:  # its kernels are in the cache by now, or soon: load them, not compile
@@ -584,10 +605,12 @@ class Renderer:
             for k, look in enumerate(looks):
                 idx = np.flatnonzero(layer["yarn"] == k)
                 kernel_look, corrections, _ = self.kernel_looks[k]
-                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m]), Lights(ms_dir, ms_e, ms_vis[m]),
+                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m]),
+                               Lights(ms_dir, ms_e, ms_vis[m], np.ones_like(ms_vis[m])),
                                self.im_slices[k]) if len(lobe_dir) else (None, None, None)
                 shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
-                              Lights(light_dir, light_e, light_vis[m]) if len(light_dir) else None, *environment,
+                              Lights(light_dir, light_e, light_vis[m], light_beyond[m]) if len(light_dir) else None,
+                              *environment,
                               bounce[m], rgb, alpha)
             shaded.append((rgb, alpha))
         if fly_points is not None:
@@ -598,7 +621,8 @@ class Renderer:
                 environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1]), self.im_slices[k]) if len(lobe_dir) \
                     else (None, None)  # a kind of light the scene lacks is not compiled (``shade_flyaway``)
                 shade_flyaway(idx, hairs, *self.kernel_looks[k],
-                              Lights(light_dir, light_e, light_vis[-1]) if len(light_dir) else None, *environment,
+                              Lights(light_dir, light_e, light_vis[-1], light_beyond[-1]) if len(light_dir) else None,
+                              *environment,
                               fly_rgb, fly_alpha, fly_transmit)
         lap("shade")
 
@@ -656,9 +680,10 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     return result
 
 
-def _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, layers, facts) -> list:
+def _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, vertex_beyond, layers, facts) -> list:
     """The yarn-level bounce radiance (N, 3) of each layer's points under the directional lights
-    (``knitrun.render.yarn_bounce``), from the lights' visibility ``vertex_vis`` (L, P) at the polyline vertices;
+    (``knitrun.render.yarn_bounce``), from the lights' visibility ``vertex_vis`` (L, P) at the polyline vertices
+    (and ``vertex_beyond``, the fraction at most one yarn blocks, ``Lights.beyond``);
     ``facts["yarn_bounce"]`` gets the vertices' mean covered fraction of the sphere and mean bounce radiance."""
     entry = np.repeat(lines.entry, np.diff(lines.offsets))
     albedo = np.array([look.hull_albedo for look in looks], np.float64).reshape(-1, 3)[entry]
@@ -673,7 +698,7 @@ def _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, layers, f
                         np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets)), lines.offsets, lines.rest,
                         np.array([looks[k].radius for k in lines.entry], np.float64),
                         np.clip(albedo - transmit, 0.0, 1.0), transmit, np.ascontiguousarray(view, np.float64))
-    direct = past_blockers(vertex_vis, gap[None, :])
+    direct = past_blockers(vertex_vis, vertex_beyond, gap[None, :])
     vertex, covered = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
     if len(covered):
         facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),

@@ -25,7 +25,8 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
 ``MipStack``       a texture (``knitrun.render.texture_sampling``): tangent, coverage, flyaway (3 variants)
 ``Lights``         distant lights: ``direction`` (L, 3) unit toward the light, ``irradiance`` (L, 3),
                    ``visibility`` (L, N) yarn-level, per point (also the multiple-scattering clusters of the
-                   SRBF lobes, ``pipeline.ms_lights``)
+                   SRBF lobes, ``pipeline.ms_lights``), ``beyond`` (L, N) the fraction at most one yarn blocks
+                   (``Features.two_blockers``; 1 where not counted, and for the clusters)
 ``Lobes``          SRBF lobes: ``direction`` (J, 3), ``sharpness`` λ (J,), ``weight`` W (J, 3),
                    ``visibility`` (J, N)
 ``IMSlices``       the I_M^{TT,D} table at each lobe's λ and its other axes (``knitrun.shading.im_lookup``)
@@ -78,6 +79,7 @@ class Lights(NamedTuple):
     direction: np.ndarray
     irradiance: np.ndarray
     visibility: np.ndarray
+    beyond: np.ndarray
 
 
 class Lobes(NamedTuple):
@@ -89,4 +91,4 @@ class Lobes(NamedTuple):
 
 def no_lights(n_points: int) -> Lights:
     """No distant light (an environment-only scene, or no multiple-scattering cluster)."""
-    return Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n_points)))
+    return Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n_points)), np.zeros((0, n_points)))

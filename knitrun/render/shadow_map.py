@@ -17,6 +17,9 @@ Units and conventions:
 * A receiver at view depth z is occluded by a texel of depth d when d < z − bias. With bias 1.5·radius a yarn never
   shadows its own surface (the strip passes through the axis; the far side lies at axis + radius): yarn-level
   shadows are between yarns, self-shadowing is fiber-level (``ASSET_PACK.md`` §7).
+* ``behind`` (with ``layers`` = 2): the depth of the second yarn along each texel's ray, the nearest strip more
+  than the first one's radius behind it (``strip_raster.rasterize_behind``, depth peeling), +inf where there is
+  none; the same PCSS on it (``behind_map``) gives the fraction of the light that at most one yarn blocks.
 
 PCSS (Fernando 2005) for a light of angular radius θ (``light_angular_radius``, radians; 0 = a delta light):
 
@@ -33,14 +36,14 @@ same for any thread count.
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit, prange
 
 from data_formats.conventions import HALF_PI
 from knitrun.render.camera import Camera, view_matrix
-from knitrun.render.strip_raster import rasterize_depth
+from knitrun.render.strip_raster import rasterize_behind, rasterize_depth, rasterize_visibility
 
 MAX_FILTER_TEXELS = 32.0  # cap on the blocker-search and PCF half-widths
 MAX_TAPS = 8  # taps per axis of each filter grid
@@ -55,14 +58,25 @@ class ShadowMap:
     ortho_height: float  # side of the square view, scene units
     size: int  # texels per side
     depth: np.ndarray  # (size, size) float32 view depth of the nearest yarn strip, +inf where none
+    behind: np.ndarray | None = None  # (size, size) float32 view depth of the second yarn, +inf where none
+
+
+def behind_map(sm: ShadowMap) -> ShadowMap:
+    """The map of the second yarn layer of ``sm`` (built with ``layers`` = 2), for ``shadow_visibility``."""
+    if sm.behind is None:
+        raise ValueError("behind_map: the shadow map was built with one layer")
+    return replace(sm, depth=sm.behind, behind=None)
 
 
 def build_shadow_map(points, offsets, closed, rest_arclength, radius, direction, size, bounds_lo, bounds_hi,
-                     closing_length=None, out=None) -> ShadowMap:
+                     closing_length=None, out=None, layers=1) -> ShadowMap:
     """Render the yarn curves (as in ``rasterize_strips``; ``radius`` (C,) or a scalar) into a ``size`` × ``size``
     shadow map for a light toward unit-izable ``direction`` (3,), framing the box [bounds_lo, bounds_hi] (yarn
-    beyond it may fall off the map and cast no shadow); ``out`` a (size, size) float32 array to reuse for the depth.
-    ValueError for size < 1, a zero or non-finite direction, or bad bounds."""
+    beyond it may fall off the map and cast no shadow); ``out`` a (size, size) float32 array to reuse for the depth;
+    ``layers`` = 2 adds the second yarn layer (``behind``, module docstring). ValueError for size < 1, a zero or
+    non-finite direction, bad bounds or layers other than 1 and 2."""
+    if layers not in (1, 2):
+        raise ValueError(f"layers = {layers}, expected 1 or 2")
     direction = np.asarray(direction, np.float64).reshape(3)
     norm = np.linalg.norm(direction)
     if not (np.isfinite(direction).all() and norm > 0):
@@ -81,9 +95,17 @@ def build_shadow_map(points, offsets, closed, rest_arclength, radius, direction,
     centre = 0.5 * (lo + hi)
     up = np.eye(3)[int(np.argmin(np.abs(direction)))]  # the axis least aligned with the light: never parallel
     camera = Camera(centre + 2 * sphere * direction, centre, up, size, size, ortho_height=2 * sphere)
-    depth = rasterize_depth(points, offsets, closed, rest_arclength, radius, camera, near=0.5 * sphere,
-                            closing_length=closing_length, out=out)
-    return ShadowMap(view_matrix(camera), np.asarray(camera.position, np.float64), 2 * sphere, size, depth)
+    if layers == 1:
+        depth = rasterize_depth(points, offsets, closed, rest_arclength, radius, camera, near=0.5 * sphere,
+                                closing_length=closing_length, out=out)
+        return ShadowMap(view_matrix(camera), np.asarray(camera.position, np.float64), 2 * sphere, size, depth)
+    # the visibility buffer's depth is rasterize_depth's, bit for bit (an orthographic camera: the view depth)
+    front = rasterize_visibility(points, offsets, closed, rest_arclength, radius, 0, camera, 1, near=0.5 * sphere,
+                                 closing_length=closing_length)
+    back = rasterize_behind(front, camera, radius)
+    depth, behind = (np.where(v.curve[..., 0] >= 0, v.depth[..., 0], np.float32(np.inf)).astype(np.float32)
+                     for v in (front, back))
+    return ShadowMap(view_matrix(camera), np.asarray(camera.position, np.float64), 2 * sphere, size, depth, behind)
 
 
 def shadow_visibility(sm: ShadowMap, positions, bias, light_angular_radius: float,

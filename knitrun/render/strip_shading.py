@@ -24,14 +24,16 @@ the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where 
     V_d         = V + (1 − V) τ_Y                                         light past the other yarns unscattered:
                   around them or between their fibers (τ_Y, ``yarn_look.gap_transmittance``; ``past_blockers``)
     D           = V_d · Ψ^Fiber_G                                         fraction lit directly
-    n           = n_occluded + (1 − V) n_rest                             fibers toward the light when not lit
+    n           = n_occluded + k n_rest,  k = 1 − V                       fibers toward the light when not lit
                   (n_rest: the count of the scattered rest, τ_Y + (1 − τ_Y) ā_f^{n_rest} = T_Y, the pack's yarn
                   transmittance; ``Look.n_cross_rest``, ``yarn_look``)
     DS          = DS(θ_i^f, θ_o^f, φ^f; n, D)                             ``dual_scattering.ds_kernel``, fiber frame
     L_o        += E · (ξ_s S + ξ (DS − S))                                S = D f cos θ_i^f, DS's single scattering;
                   ξ_s = ξ but for ξ closed apart on single and multiple scattering (``_corrections``)
 
-with θ^f, φ^f against t_f. V_d (beyond Huang et al. 2025): the shadow map draws yarns as opaque tubes, but a sixth
+with θ^f, φ^f against t_f; with ``Features.two_blockers`` (an ablation) V_d = V + (V₂ − V) τ_Y + (1 − V₂) τ_Y² and
+k = (V₂ − V) + 2 (1 − V₂), V₂ the fraction of the light that at most one yarn blocks (``past_blockers``,
+``yarns_crossed``). V_d (beyond Huang et al. 2025): the shadow map draws yarns as opaque tubes, but a sixth
 of a beam crossing cotton1 meets no fiber, and without it the path-traced fibers in another yarn's shadow showed 2–3×
 the strips' single scattering (BENCHMARKS.md, "Issue 13: light between a blocking yarn's fibers, and light that
 neighbouring yarns scatter"). With ``bounce`` (the ablation ``yarn_bounce``, ``knitrun.render.yarn_bounce``) each
@@ -346,11 +348,20 @@ def _corrections(tables, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch):
 
 
 @njit(cache=True)
-def past_blockers(visibility, gap):
+def past_blockers(visibility, beyond, gap):
     """The fraction of a directional light that reaches a point unscattered at yarn level: past the other yarns
-    (``visibility`` V, the shadow map's, which treats them as opaque tubes) or between their fibers (the blocked rest
-    times the gap transmittance τ_Y, ``yarn_look.gap_transmittance``): V + (1 − V) τ_Y."""
-    return visibility + (1.0 - visibility) * gap
+    (``visibility`` V, the shadow map's, which treats them as opaque tubes) or between their fibers, the gap
+    transmittance τ_Y (``yarn_look.gap_transmittance``) for each yarn crossed: V + (V₂ − V) τ_Y + (1 − V₂) τ_Y²,
+    V₂ = ``beyond`` the fraction that at most one yarn blocks (``Features.two_blockers``; 1: every blocked ray
+    crosses one yarn, V + (1 − V) τ_Y)."""
+    return visibility + (beyond - visibility) * gap + (1.0 - beyond) * gap * gap
+
+
+@njit(cache=True)
+def yarns_crossed(visibility, beyond):
+    """The mean number of other yarns a directional light crosses to reach a point: (V₂ − V) + 2 (1 − V₂)
+    (``past_blockers``; 1 − V when V₂ = 1)."""
+    return 2.0 - visibility - beyond
 
 
 @njit(cache=True)
@@ -446,9 +457,9 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     _copy_row(lights.direction, light, w)
                     _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
                     fiber_lit = _fiber_lit(psi)
-                    vis = lights.visibility[light, q]
-                    n_front = n_occluded + (1.0 - vis) * n_cross_rest
-                    lit = past_blockers(vis, gap) * fiber_lit
+                    vis, beyond = lights.visibility[light, q], lights.beyond[light, q]
+                    n_front = n_occluded + yarns_crossed(vis, beyond) * n_cross_rest
+                    lit = past_blockers(vis, beyond, gap) * fiber_lit
                     phi_f = azimuth_difference(tf, wo, w)
                     spread_params(params, spread2, phi_f, wide)
                     theta_i_f = longitudinal_angle(tf, w)
@@ -595,7 +606,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                     evaluate(wide, ctx, wl, f)
                     cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
                     _hair_light(on_body, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
-                    lit = past_blockers(lights.visibility[light, q], gap) * cos_i
+                    lit = past_blockers(lights.visibility[light, q], lights.beyond[light, q], gap) * cos_i
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
             if lobes is not None:

@@ -250,6 +250,9 @@ class GLRenderer:
         if features.split_xi:
             raise FormatError("the GL backend does not draw ξ closed apart on single and multiple scattering "
                               "(Features.split_xi); the CPU renderer does")
+        if features.two_blockers:
+            raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
+                              "counts two")
         if features.yarn_bounce:
             raise FormatError("the GL backend does not draw the yarn-level bounce (Features.yarn_bounce); the CPU "
                               "renderer does")
