@@ -549,16 +549,11 @@ class Renderer:
         for i, d in enumerate(light_dir):
             found = _visibility(lines, radius, d, size, 0.0, receivers + vertex_receivers, self.shadow_depth,
                                 features.two_blockers)
-            if not features.two_blockers:
-                found = [(vis, None) for vis in found]
-            for out, beyond, at, (vis, past_one) in zip(light_vis, light_beyond, where, found):
-                out[i, at] = vis
-                if past_one is not None:
-                    beyond[i, at] = past_one
+            pairs = found if features.two_blockers else [(vis, np.ones_like(vis)) for vis in found]
+            for out, beyond, at, (vis, past_one) in zip(light_vis, light_beyond, where, pairs):
+                out[i, at], beyond[i, at] = vis, past_one
             if bounce_on:
-                vertex_vis[i] = found[-1][0]
-                if features.two_blockers:
-                    vertex_beyond[i] = found[-1][1]
+                vertex_vis[i], vertex_beyond[i] = pairs[-1]
         if features.two_blockers and len(light_dir) and len(light_beyond[0][0]):
             facts["two_blockers"] = {"behind_two_yarns": round(float(np.mean(1.0 - light_beyond[0][0])), 4),
                                      "behind_one_yarn": round(float(np.mean(light_beyond[0][0] - light_vis[0][0])),

@@ -261,7 +261,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         im = im_table_from(pack.tables["environment/I_M_TT_D"] * colour, pack.info["environment/I_M_TT_D"].axes)
     hull_albedo = hull_colour(pack, ALBEDO_TABLE, colour) if ALBEDO_TABLE in names else None
     hull_transmittance = None if transmittance is None else hull_colour(pack, TRANSMITTANCE_TABLE, colour)
-    hull_from = ("none (the pack has no ρ_Y, schema < 2.1)" if hull_albedo is None else
+    hull_from = (("none (not read: neither an environment nor transmission)" if ALBEDO_TABLE in stored else
+                  "none (the pack has no ρ_Y, schema < 2.1)") if hull_albedo is None else
                  "the pack's curves against the colour" if BY_COLOUR[ALBEDO_TABLE] in names else
                  "the white yarn's times the colour (the pack has no curves against the colour, schema < 2.6)")
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
