@@ -381,8 +381,11 @@ def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Same seed and settings → identical pack.")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Worker threads (default: all cores).")
 @click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
+@click.option("--split-xi", is_flag=True,
+              help="Also close ξ apart on single and multiple scattering (the tables of the ablation split_xi; "
+                   "the closure takes ~80 %% longer).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
-def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no_cache, as_json):
+def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no_cache, split_xi, as_json):
     """Bake one yarn type into an asset pack: stage by stage, cached, with an error estimate for every table.
 
     Example: knitbake bake cotton1 -o cotton1.h5 --quality draft
@@ -423,7 +426,8 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
     t0 = time.perf_counter()
     only_list = [o.strip() for o in only.split(",")] if only is not None else None
     summary = bake(spec, output, quality=quality, only=only_list, needs=needs, seed=seed, use_cache=not no_cache,
-                   on_stage=on_stage, progress_factory=progress_factory)
+                   on_stage=on_stage, progress_factory=progress_factory,
+                   overrides={"closure": {"split": True}} if split_xi else None)
     for bar in bars.values():
         if not bar.finished:
             bar.__exit__(None, None, None)

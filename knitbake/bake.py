@@ -12,9 +12,11 @@ also takes its input stages' results, ``run_stage``):
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
 | interreflection | ``interreflection/{albedo,transmittance}`` (the yarn tube's ρ_Y, T_Y) and ``*_by_colour`` | always |
-| closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer), ``*_ss``, ``*_ms`` | its inputs are baked |
+| closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer); ``*_ss``, ``*_ms`` with ``split`` | its inputs are baked |
 
-Quality presets (``QUALITY``) set every stage's resolution and sample counts; a scene (``scene_needs``) removes
+Quality presets (``QUALITY``) set every stage's resolution and sample counts (the closure's ξ closed apart on
+single and multiple scattering, which only the ablation ``split_xi`` reads, is off in every preset: ``overrides``
+``{"closure": {"split": True}}``, ``knitbake bake --split-xi``); a scene (``scene_needs``) removes
 stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
 is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed; the
 closure's settings hold its input stages' settings and versions), so an
@@ -63,7 +65,7 @@ QUALITY = {
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (12, 24, 12, 32)},
         "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2, "n_colours": 17},
-        "closure": {"iterations": 4},
+        "closure": {"iterations": 4, "split": False},
     },
     "standard": {
         "dual_scattering": {"n_theta": 64},
@@ -74,7 +76,7 @@ QUALITY = {
         "flyaway": {"width": 256, "height": 64, "samples": 4},
         "environment": {"shape": (24, 48, 24, 96)},
         "interreflection": {"n_views": 6, "rows": 16, "spp": 4, "batches": 3, "n_colours": 17},
-        "closure": {"iterations": 4},
+        "closure": {"iterations": 4, "split": False},
     },
     "final": {
         "dual_scattering": {"n_theta": 128},
@@ -85,7 +87,7 @@ QUALITY = {
         "flyaway": {"width": 512, "height": 128, "samples": 6},
         "environment": {"shape": (32, 64, 32, 128)},
         "interreflection": {"n_views": 8, "rows": 32, "spp": 8, "batches": 4, "n_colours": 17},
-        "closure": {"iterations": 4},
+        "closure": {"iterations": 4, "split": False},
     },
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.

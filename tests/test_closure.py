@@ -18,6 +18,7 @@ from tests.helpers import TINY
 
 SPEC = load_preset("cotton1")
 ROWS = TINY["correction"]["rows"]  # the closure's rows: max(rows, n_v) of the correction stage
+SPLIT = {**TINY, "closure": {**TINY["closure"], "split": True}}  # with ξ closed apart (off in the presets)
 
 
 @pytest.fixture(scope="module")
@@ -27,17 +28,29 @@ def closed_pack(tmp_path_factory):
     folder = tmp_path_factory.mktemp("closure")
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("KNIT_CACHE_DIR", str(folder / "cache"))
-        summary = bake(SPEC, folder / "cotton1.h5", overrides=TINY, only=list(closure.CLOSURE_INPUTS))
+        summary = bake(SPEC, folder / "cotton1.h5", overrides=SPLIT, only=list(closure.CLOSURE_INPUTS))
     assert list(summary)[-1] == "closure" and not summary["closure"]["cached"]
     return folder / "cotton1.h5"
 
 
 def test_the_closure_is_cached_like_every_stage(closed_pack, monkeypatch):
     monkeypatch.setenv("KNIT_CACHE_DIR", str(closed_pack.parent / "cache"))
-    again = bake(SPEC, closed_pack.parent / "again.h5", overrides=TINY, only=list(closure.CLOSURE_INPUTS))
+    again = bake(SPEC, closed_pack.parent / "again.h5", overrides=SPLIT, only=list(closure.CLOSURE_INPUTS))
     assert all(row["cached"] for row in again.values())
     with h5py.File(closed_pack) as a, h5py.File(closed_pack.parent / "again.h5") as b:
         assert np.array_equal(a["correction/xi_view"][()], b["correction/xi_view"][()])
+
+
+def test_without_the_split_the_closure_bakes_the_one_xi_alone_and_the_same(closed_pack, monkeypatch):
+    """The presets leave the split off: the closure (its inputs from the cache) then writes no ``*_ss``, ``*_ms``
+    tables, and its one closed ξ is the split bake's, bit for bit."""
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(closed_pack.parent / "cache"))
+    summary = bake(SPEC, closed_pack.parent / "one.h5", overrides=TINY, only=list(closure.CLOSURE_INPUTS))
+    assert not summary["closure"]["cached"] and all(row["cached"] for s, row in summary.items() if s != "closure")
+    with h5py.File(closed_pack) as a, h5py.File(closed_pack.parent / "one.h5") as b:
+        assert not any(name.endswith(("_ss", "_ms")) for name in b["correction"])
+        for name in ("xi_view", "xi_closed", "radiance_view"):
+            assert np.array_equal(a[f"correction/{name}"][()], b[f"correction/{name}"][()]), name
 
 
 def _miss(pack, xi_view, folder):

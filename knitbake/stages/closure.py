@@ -40,7 +40,9 @@ at a diagonal bin centre the two lookups read the same grid value and no other, 
 the one that stage ran, on the same Ψ_* (the diagonal bins of ``correction/radiance_view`` are the correction
 stage's ``correction/radiance``, not traced again).
 
-Apart on single and multiple scattering (closure version 3, schema 2.5). One ξ scales the renderer's single
+Apart on single and multiple scattering (closure version 3, schema 2.5; with the setting ``split``, which the
+quality presets leave off and ``knitbake bake --split-xi`` turns on: it costs 80 % more closure time, and only the
+ablation ``split_xi`` reads it). One ξ scales the renderer's single
 scattering and its multiple scattering alike, and closed on their sum it makes up for what one lacks with the
 other: on cotton1 the renderer's multiple scattering is about half the path tracer's and its single scattering about
 right (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter"), so the closed ξ leaves single scattering
@@ -198,23 +200,29 @@ def papers_xi_at_views(xi: np.ndarray) -> np.ndarray:
 
 
 def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, iterations: int, spp: int,
-                     batches: int, seed: int, progress=None) -> tuple[dict, dict, dict, dict]:
+                     batches: int, seed: int, progress=None, split=True) -> tuple[dict, dict, dict, dict]:
     """(tables, errors, counts, closure residuals: table → {max, rms}) of the view-closed ξ, its diagonal and the Ψ_*
-    it closes on, and of the ξ closed apart on single and multiple scattering (module docstring). ``inputs``: stage
-    → StageResult of ``CLOSURE_INPUTS``; ``write_pack_to(path, xi_view, split)`` writes them as a pack with
-    ``correction/xi_view`` = ``xi_view`` and, with ``split`` = (ss, ms), ``correction/xi_view_ss``, ``_ms``; ``spp``,
-    ``batches``: the correction stage's."""
+    it closes on, and, with ``split``, of the ξ closed apart on single and multiple scattering (module docstring).
+    ``inputs``: stage → StageResult of ``CLOSURE_INPUTS``; ``write_pack_to(path, xi_view, split)`` writes them as a
+    pack with ``correction/xi_view`` = ``xi_view`` and, with ``split`` = (ss, ms), ``correction/xi_view_ss``,
+    ``_ms``; ``spp``, ``batches``: the correction stage's."""
     paper_tab = inputs["correction"].tables["correction/xi"]
     n_v, n_theta, n_phi = paper_tab.shape[:3]
     shape = (n_v, n_theta, n_theta, n_phi)
     per_view = n_theta * n_theta * n_phi
-    total = (2 * batches + 3 * (iterations + 1)) * per_view
+    # progress in passes over every view bin: the whole trace, the renders closing ξ, then (split) the one-event
+    # trace and the renders closing each part
+    split_from = batches + iterations + 1
+    total = (split_from + (batches + 2 * (iterations + 1) if split else 0)) * per_view
+
+    def passes(start):
+        """progress of the passes from pass ``start`` on (each pass draws or traces every view bin once)."""
+        if progress is None:
+            return lambda p: None
+        return lambda p: (lambda done, _: progress((start + p) * per_view + done, total))
+
     diagonal = inputs["correction"].tables["correction/radiance"], inputs["correction"].errors["correction/radiance"]
-    target, target_err = trace_view_radiance(
-        spec, diagonal, rows, spp, batches, seed, progress=None if progress is None else (lambda d, _: progress(d, total)))
-    single, single_err = trace_view_radiance(
-        spec, None, rows, spp, batches, seed, max_depth=1, shape=(n_v, n_theta, n_phi),
-        progress=None if progress is None else (lambda d, _: progress(batches * per_view + d, total)))
+    target, target_err = trace_view_radiance(spec, diagonal, rows, spp, batches, seed, progress=passes(0)(0))
     paper = papers_xi_at_views(paper_tab)
     paper_err = papers_xi_at_views(inputs["correction"].errors["correction/xi"])
 
@@ -222,17 +230,11 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
         return np.all((radiance > SIGNAL * target.max()) & (error <= MAX_RELATIVE_ERROR * radiance), axis=-1,
                       keepdims=True)
 
-    def passes(start):
-        """progress of the render passes from pass ``start`` on (each pass draws every view bin once)."""
-        if progress is None:
-            return lambda p: None
-        return lambda p: (lambda done, _: progress((2 * batches + start + p) * per_view + done, total))
-
     xi = paper.copy()
     used_total = measured(target, target_err)
     with tempfile.TemporaryDirectory(prefix="knit-closure-pack-") as tmp:
         pack = Path(tmp) / "inputs.h5"
-        step = passes(0)
+        step = passes(batches)
         for it in range(iterations + 1):  # ξ closed on the totals
             write_pack_to(pack, xi)
             rendered = render_bins(pack, spec, shape, rows, step(it))
@@ -242,13 +244,27 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
             ratio = np.where(used, target / np.where(used, rendered, 1.0), 1.0)
             xi = np.clip(xi * ratio, paper / CLAMP, paper * CLAMP)
         closed = np.where(used, xi, paper)
+        relative = np.where(used, target_err / np.where(used, target, 1.0), paper_err / np.maximum(paper, 1e-300))
+        counts = {"iterations": iterations, "bins_closed": int(used.all(axis=-1).sum()),
+                  "bins": int(np.prod(shape)), "batches": batches, "paths_per_pixel": spp}
+        left = {"correction/xi_view": _residual(rendered, target, used),
+                "correction/xi_closed": _residual(diagonal_of(rendered), diagonal_of(target), diagonal_of(used))}
+        tables = {"correction/xi_view": closed, "correction/radiance_view": target,
+                  "correction/xi_closed": diagonal_of(closed)}
+        errors = {"correction/xi_view": closed * relative, "correction/radiance_view": target_err,
+                  "correction/xi_closed": diagonal_of(closed * relative)}
+        if not split:
+            return tables, errors, counts, left
         # ξ closed apart: single scattering on the one-event radiance, multiple on the rest, from the closed ξ
+        single, single_err = trace_view_radiance(spec, None, rows, spp, batches, seed, max_depth=1,
+                                                 shape=(n_v, n_theta, n_phi), progress=passes(split_from)(0))
+        tables["correction/radiance_view_ss"], errors["correction/radiance_view_ss"] = single, single_err
         parts = {"ss": (single, single_err), "ms": (target - single, np.hypot(target_err, single_err))}
-        split = {name: closed.copy() for name in parts}
+        apart = {name: closed.copy() for name in parts}
         measured_parts = {name: measured(*value) for name, value in parts.items()}
-        step = passes(iterations + 1)
+        step = passes(split_from + batches)
         for it in range(iterations + 1):
-            write_pack_to(pack, closed, (split["ss"], split["ms"]))
+            write_pack_to(pack, closed, (apart["ss"], apart["ms"]))
             drawn = render_bins(pack, spec, shape, rows, step(2 * it), split=True)
             drawn_single = render_bins(pack, spec, shape, rows, step(2 * it + 1), split=True, single=True)
             drawn_parts = {"ss": drawn_single, "ms": drawn - drawn_single}
@@ -258,20 +274,11 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
             for name, (want, _) in parts.items():
                 ok = used_parts[name]
                 ratio = np.where(ok, want / np.where(ok, drawn_parts[name], 1.0), 1.0)
-                split[name] = np.clip(split[name] * ratio, paper / CLAMP, paper * CLAMP)
-    counts = {"iterations": iterations, "bins_closed": int(used.all(axis=-1).sum()), "bins": int(np.prod(shape)),
-              "batches": batches, "paths_per_pixel": spp,
-              **{f"bins_closed_{name}": int(used_parts[name].all(axis=-1).sum()) for name in parts}}
-    relative = np.where(used, target_err / np.where(used, target, 1.0), paper_err / np.maximum(paper, 1e-300))
-    left = {"correction/xi_view": _residual(rendered, target, used),
-            "correction/xi_closed": _residual(diagonal_of(rendered), diagonal_of(target), diagonal_of(used))}
-    tables = {"correction/xi_view": closed, "correction/radiance_view": target,
-              "correction/xi_closed": diagonal_of(closed), "correction/radiance_view_ss": single}
-    errors = {"correction/xi_view": closed * relative, "correction/radiance_view": target_err,
-              "correction/xi_closed": diagonal_of(closed * relative), "correction/radiance_view_ss": single_err}
+                apart[name] = np.clip(apart[name] * ratio, paper / CLAMP, paper * CLAMP)
     for name, (want, want_err) in parts.items():
         ok = used_parts[name]
-        value = np.where(ok, split[name], closed)
+        counts[f"bins_closed_{name}"] = int(ok.all(axis=-1).sum())
+        value = np.where(ok, apart[name], closed)
         error = value * np.where(ok, want_err / np.where(ok, np.abs(want), 1.0), relative)
         tables[f"correction/xi_view_{name}"], errors[f"correction/xi_view_{name}"] = value, error
         tables[f"correction/xi_closed_{name}"] = diagonal_of(value)
@@ -291,11 +298,11 @@ def _residual(rendered, target, used) -> dict:
 
 def bake_closure_stage(spec, settings, seed, progress=None, inputs=None, write_pack_to=None) -> StageResult:
     """Stage ``closure`` of ``knitbake.bake``: settings ``rows``, ``spp``, ``batches`` (the correction stage's),
-    ``iterations`` and ``inputs`` (the settings of ``CLOSURE_INPUTS``, part of the cache key only). ``inputs``: their
+    ``iterations``, ``split`` (ξ closed apart as well) and ``inputs`` (the settings of ``CLOSURE_INPUTS``, part of the cache key only). ``inputs``: their
     StageResults; ``write_pack_to``: see ``close_correction``."""
     tables, errors, counts, left = close_correction(spec, inputs, write_pack_to, settings["rows"],
                                                     settings["iterations"], settings["spp"], settings["batches"],
-                                                    seed, progress)
+                                                    seed, progress, settings["split"])
     kind = (f"standard error of the path-traced radiance Ψ_* over {settings['batches']} independent batches (fiber "
             f"geometry, paths and pixel jitter reseeded), carried into the closed ξ")
     attrs = {name: {"error_kind": kind} for name in tables}
