@@ -105,6 +105,9 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
     assert summary["ablations"]["full"]["xi"] == {"cotton1": "closed on the renderer"}
     assert summary["ablations"]["papers_xi"]["xi"] == {"cotton1": "the paper's"}
+    # the test pack is baked without the split closure (the presets' default): its split_xi row says what it drew
+    assert "the pack has no ξ closed apart" in summary["ablations"]["split_xi"]["xi"]["cotton1"]
+    assert "Rows drawn without the tables they ask for: full with ξ closed apart" in report
     old = tmp_path / "schema22.h5"  # a pack from before the closure: every row shaded with the paper's ξ, and said
     shutil.copy(pack, old)
     with h5py.File(old, "r+") as f:

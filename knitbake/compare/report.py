@@ -210,6 +210,12 @@ def _markdown(summary) -> str:
     xi = summary["ablations"].get("full", {}).get("xi")
     if xi:
         lines += ["", "ξ of the full model: " + "; ".join(f"{yarn}: {how}" for yarn, how in xi.items()) + "."]
+    # an ablation whose tables the pack lacks draws what it falls back to: say so beside its row's figures
+    lacking = [f"{ABLATION_LABELS.get(name, name)}: " + "; ".join(f"{yarn}: ξ {how}" for yarn, how in row["xi"].items())
+               for name, row in summary["ablations"].items()
+               if name != "full" and any("the pack has no" in how for how in (row.get("xi") or {}).values())]
+    if lacking:
+        lines += ["", "Rows drawn without the tables they ask for: " + ". ".join(lacking) + "."]
     lines += ["", "## Every metric", "",
               "Yarn scale (d = the projected yarn diameter): rel L1, relMSE and FLIP of the box-filtered images; mean "
               "and worst-tile radiance ratios over tiles of 2d px where the reference has signal.", "",
