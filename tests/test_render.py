@@ -146,10 +146,11 @@ def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
     points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
     sun = np.array([[0.3, 0.6, 1.0]]) / np.linalg.norm([0.3, 0.6, 1.0])
 
-    def shaded(visibility, gap, beyond=1.0):
+    def shaded(visibility, gap, beyond=None):
         look = Look(ROUGH, ds, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, gap, D_F, D_B)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
-        lights = Lights(sun, np.full((1, 3), 2.0), np.full((1, n), visibility), np.full((1, n), beyond))
+        lights = Lights(sun, np.full((1, 3), 2.0), np.full((1, n), visibility),
+                        np.zeros((1, 0)) if beyond is None else np.full((1, n), beyond))  # (1, 0): not counted
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), lights, None, None, None, None, rgb,
                       alpha)
         return rgb
@@ -162,6 +163,7 @@ def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
     np.testing.assert_allclose(shaded(0.0, 0.25, beyond=0.0), shaded(0.0625, 0.0), rtol=1e-12)
     np.testing.assert_allclose(shaded(0.0, 0.25, beyond=0.5), shaded(0.5 * 0.25 + 0.5 * 0.0625, 0.0), rtol=1e-12)
     np.testing.assert_allclose(shaded(1.0, 0.25, beyond=1.0), shaded(1.0, 0.0), rtol=1e-12)
+    np.testing.assert_array_equal(shaded(0.4, 0.25, beyond=1.0), shaded(0.4, 0.25))  # counted at 1 = not counted
 
 
 def test_environment_shading_matches_quadrature_for_1_16_64_lobes():

@@ -536,7 +536,8 @@ class Renderer:
         light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
         size = scene.render.shadow_map_size
         light_vis = [np.ones((len(light_dir), len(s["weight"]))) for s in sets]
-        light_beyond = [np.ones((len(light_dir), len(s["weight"]))) for s in sets]  # ``Lights.beyond``
+        # ``Lights.beyond``: V₂ with ``two_blockers``, else (L, 0), read as 1
+        light_beyond = [np.ones((len(light_dir), len(s["weight"]) if features.two_blockers else 0)) for s in sets]
         # the yarn-level bounce under the directional lights (``yarn_bounce``) looks the lights up at the polyline
         # vertices too
         bounce_on = features.yarn_bounce and features.interreflection and features.multiple_scattering and \
@@ -549,11 +550,15 @@ class Renderer:
         for i, d in enumerate(light_dir):
             found = _visibility(lines, radius, d, size, 0.0, receivers + vertex_receivers, self.shadow_depth,
                                 features.two_blockers)
-            pairs = found if features.two_blockers else [(vis, np.ones_like(vis)) for vis in found]
+            pairs = found if features.two_blockers else [(vis, None) for vis in found]
             for out, beyond, at, (vis, past_one) in zip(light_vis, light_beyond, where, pairs):
-                out[i, at], beyond[i, at] = vis, past_one
+                out[i, at] = vis
+                if past_one is not None:
+                    beyond[i, at] = past_one
             if bounce_on:
-                vertex_vis[i], vertex_beyond[i] = pairs[-1]
+                vertex_vis[i] = pairs[-1][0]
+                if features.two_blockers:
+                    vertex_beyond[i] = pairs[-1][1]
         if features.two_blockers and len(light_dir) and len(light_beyond[0][0]):
             facts["two_blockers"] = {"behind_two_yarns": round(float(np.mean(1.0 - light_beyond[0][0])), 4),
                                      "behind_one_yarn": round(float(np.mean(light_beyond[0][0] - light_vis[0][0])),
@@ -568,7 +573,7 @@ class Renderer:
                                                                  angular, receivers, self.shadow_depth)):
                 out[j, at] = vis
         if fly_points is not None:
-            for vis in (light_vis, light_beyond, lobe_vis):
+            for vis in (light_vis, light_beyond, lobe_vis) if features.two_blockers else (light_vis, lobe_vis):
                 vis[-1][:, shared] = vis[0][:, partner[shared]]
         albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
             np.zeros(len(looks))
@@ -601,7 +606,7 @@ class Renderer:
                 idx = np.flatnonzero(layer["yarn"] == k)
                 kernel_look, corrections, _ = self.kernel_looks[k]
                 environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m]),
-                               Lights(ms_dir, ms_e, ms_vis[m], np.ones_like(ms_vis[m])),
+                               Lights(ms_dir, ms_e, ms_vis[m], np.zeros((len(ms_dir), 0))),
                                self.im_slices[k]) if len(lobe_dir) else (None, None, None)
                 shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
                               Lights(light_dir, light_e, light_vis[m], light_beyond[m]) if len(light_dir) else None,

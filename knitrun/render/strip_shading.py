@@ -357,6 +357,12 @@ def past_blockers(visibility, beyond, gap):
     return visibility + (beyond - visibility) * gap + (1.0 - beyond) * gap * gap
 
 
+@njit(cache=True, inline="always")
+def _beyond(lights, light, q):
+    """V₂ of point q toward light ``light``: ``lights.beyond`` where counted, else 1 (``shading_inputs.Lights``)."""
+    return lights.beyond[light, q] if lights.beyond.shape[1] > 0 else 1.0
+
+
 @njit(cache=True)
 def yarns_crossed(visibility, beyond):
     """The mean number of other yarns a directional light crosses to reach a point: (V₂ − V) + 2 (1 − V₂)
@@ -457,7 +463,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     _copy_row(lights.direction, light, w)
                     _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
                     fiber_lit = _fiber_lit(psi)
-                    vis, beyond = lights.visibility[light, q], lights.beyond[light, q]
+                    vis, beyond = lights.visibility[light, q], _beyond(lights, light, q)
                     n_front = n_occluded + yarns_crossed(vis, beyond) * n_cross_rest
                     lit = past_blockers(vis, beyond, gap) * fiber_lit
                     phi_f = azimuth_difference(tf, wo, w)
@@ -606,7 +612,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                     evaluate(wide, ctx, wl, f)
                     cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
                     _hair_light(on_body, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
-                    lit = past_blockers(lights.visibility[light, q], lights.beyond[light, q], gap) * cos_i
+                    lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap) * cos_i
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
             if lobes is not None:
