@@ -461,8 +461,10 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
               help="Worker processes of the embedded cluster (default: one per 2 cores); each gets cores/workers "
                    "Numba threads.")
 @click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
+@click.option("--split-xi", is_flag=True, help="Also close ξ apart on single and multiple scattering (as for bake).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
-def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, scheduler, workers, no_cache, as_json):
+def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, scheduler, workers, no_cache, split_xi,
+                         as_json):
     """Bake many yarn types at once on Dask: one task per stage of each yarn, the stage cache shared with bake.
 
     Runs on an embedded cluster sized to this machine, or on a Dask cluster given by --scheduler (README, "Running
@@ -495,7 +497,8 @@ def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, sch
             def on_task(done, total):
                 bar.length = total
                 bar.update(done - bar.pos)
-            results = bake_library(client, jobs, quality, seed, not no_cache, on_task)
+            results = bake_library(client, jobs, quality, seed, not no_cache, on_task,
+                                   {"closure": {"split": True}} if split_xi else None)
     total = time.perf_counter() - t0
     failed = {name: exc for name, exc in results.items() if isinstance(exc, Exception)}
     if as_json:

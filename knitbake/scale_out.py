@@ -87,15 +87,15 @@ def submit_bake(client, spec: YarnSpec, output, quality: str = "draft", seed: in
 
 
 def bake_library(client, jobs: list[tuple[YarnSpec, str]], quality: str = "draft", seed: int = 0,
-                 use_cache: bool = True, on_task=None) -> dict:
+                 use_cache: bool = True, on_task=None, overrides=None) -> dict:
     """Bake every (spec, output) of ``jobs`` on ``client``; returns {yarn name: summary, or the exception that
     stopped it} (one yarn's failure does not stop the others). ``on_task(finished, total)`` is called as each task
-    (stage or pack) ends."""
+    (stage or pack) ends; ``overrides`` as for ``knitbake.bake.bake``."""
     from distributed import as_completed
 
     packs, tasks = {}, []
     for spec, output in jobs:
-        pack, stages = submit_bake(client, spec, output, quality, seed, use_cache)
+        pack, stages = submit_bake(client, spec, output, quality, seed, use_cache, overrides)
         packs[pack] = spec.name
         tasks += [*stages, pack]
     out = {}

@@ -122,6 +122,28 @@ def test_the_bake_library_command(tmp_path):
     assert "1 of 1 pack(s)" in result.output and (tmp_path / "silk1.h5").exists()
 
 
+def test_bake_library_passes_split_xi_on(tmp_path, monkeypatch):
+    """`--split-xi` asks every yarn's closure for ξ closed apart, as `knitbake bake --split-xi` does."""
+    import contextlib
+
+    from click.testing import CliRunner
+
+    import knitbake.scale_out as scale_out
+    from cli.knitbake_cli import main as knitbake
+
+    seen = []
+
+    def fake_library(client, jobs, quality, seed, use_cache, on_task, overrides):
+        seen.append(overrides)
+        return {spec.name: RuntimeError("not baked") for spec, _ in jobs}
+
+    monkeypatch.setattr(scale_out, "dask_client", lambda *a: contextlib.nullcontext())
+    monkeypatch.setattr(scale_out, "bake_library", fake_library)
+    for flags in ([], ["--split-xi"]):
+        CliRunner().invoke(knitbake, ["bake-library", "silk1", "-o", str(tmp_path), *flags])
+    assert seen == [None, {"closure": {"split": True}}]
+
+
 def _small_scene():
     from data_formats.scene import load_scene
 
