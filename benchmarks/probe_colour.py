@@ -61,7 +61,8 @@ def main():
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
     parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES), help="comma-separated example scene names")
     parser.add_argument("--colors", default="1,1,1:0.9,0.25,0.2", help="colours R,G,B separated by ':'")
-    parser.add_argument("--models", default="full,yarn_bounce", help="names of knitrun.render.ablations, or combinations a+b")
+    parser.add_argument("--models", default="full,yarn_bounce",
+                        help="names of knitrun.render.ablations, or combinations a+b")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)

@@ -136,7 +136,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
     parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
-    parser.add_argument("--models", default="full,no_tables,plain_ds", help="names of knitrun.render.ablations, or combinations a+b")
+    parser.add_argument("--models", default="full,no_tables,plain_ds",
+                        help="names of knitrun.render.ablations, or combinations a+b")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     parser.add_argument("--tilt-bins", action="store_true", help="bin SS and MS along the curves by |ω_o · t|")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")

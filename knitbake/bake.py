@@ -12,7 +12,8 @@ also takes its input stages' results, ``run_stage``):
 | flyaway | ``textures/flyaway/mip*`` | the yarn has flyaways |
 | environment | ``environment/I_M_TT_D`` | no scene given, or the scene has an environment light |
 | interreflection | ``interreflection/{albedo,transmittance}`` (the yarn tube's ρ_Y, T_Y) and ``*_by_colour`` | always |
-| closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer); ``*_ss``, ``*_ms`` with ``split`` | its inputs are baked |
+| closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer) | its inputs are baked |
+| | ``correction/*_ss``, ``*_ms`` (ξ closed apart) | closure setting ``split`` |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts (the closure's ξ closed apart on
 single and multiple scattering, which only the ablation ``split_xi`` reads, is off in every preset: ``overrides``

@@ -57,9 +57,9 @@ def test_lower_yarn_is_shadowed_by_the_upper_one():
 
 
 def test_the_second_layer_counts_the_yarns_a_light_crosses():
-    """Three yarns stacked 5 radii apart under the light: the first layer is the one-layer map bit for bit; the second lies behind it wherever it is finite, and holds the
-    middle yarn under the top one. Past the second layer the top and middle yarns are lit, the bottom one (behind
-    two) is not; a one-layer map has no second layer to give."""
+    """Three yarns stacked 5 radii apart under the light: the first layer is the one-layer map bit for bit; the second
+    lies behind it wherever it is finite, and holds the middle yarn under the top one. Past the second layer the top and
+    middle yarns are lit, the bottom one (behind two) is not; a one-layer map has no second layer to give."""
     one, two = shadow_map([0.0, 0.5, 1.0]), shadow_map([0.0, 0.5, 1.0], layers=2)
     np.testing.assert_array_equal(one.depth, two.depth)
     assert one.behind is None and np.isfinite(two.behind).any()

@@ -211,7 +211,8 @@ def _markdown(summary) -> str:
     if xi:
         lines += ["", "ξ of the full model: " + "; ".join(f"{yarn}: {how}" for yarn, how in xi.items()) + "."]
     # an ablation whose tables the pack lacks draws what it falls back to: say so beside its row's figures
-    lacking = [f"{ABLATION_LABELS.get(name, name)}: " + "; ".join(f"{yarn}: ξ {how}" for yarn, how in row["xi"].items())
+    lacking = [f"{ABLATION_LABELS.get(name, name)}: "
+               + "; ".join(f"{yarn}: ξ {how}" for yarn, how in row["xi"].items())
                for name, row in summary["ablations"].items()
                if name != "full" and any("the pack has no" in how for how in (row.get("xi") or {}).values())]
     if lacking:

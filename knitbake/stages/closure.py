@@ -298,8 +298,8 @@ def _residual(rendered, target, used) -> dict:
 
 def bake_closure_stage(spec, settings, seed, progress=None, inputs=None, write_pack_to=None) -> StageResult:
     """Stage ``closure`` of ``knitbake.bake``: settings ``rows``, ``spp``, ``batches`` (the correction stage's),
-    ``iterations``, ``split`` (ξ closed apart as well) and ``inputs`` (the settings of ``CLOSURE_INPUTS``, part of the cache key only). ``inputs``: their
-    StageResults; ``write_pack_to``: see ``close_correction``."""
+    ``iterations``, ``split`` (ξ closed apart as well) and ``inputs`` (the settings of ``CLOSURE_INPUTS``, part of the
+    cache key only). ``inputs``: their StageResults; ``write_pack_to``: see ``close_correction``."""
     tables, errors, counts, left = close_correction(spec, inputs, write_pack_to, settings["rows"],
                                                     settings["iterations"], settings["spp"], settings["batches"],
                                                     seed, progress, settings["split"])

@@ -30,8 +30,9 @@ events carries c^n, so ρ_Y and T_Y are polynomials in c, not c times the white 
 in one channel, c = 0.25, has ρ_Y = 0.228 there, not 0.25 × 0.741 = 0.185: the light between the fibers keeps its
 colour). Both are baked with the lobe albedos of every channel scaled by k at the ``colour_scale`` axis' cell
 centres (``n_colours`` of them, 16 m + 1: 17 puts them at k = 0, 1/16, …, 1; linear interpolation between 9
-samples errs by up to 4 %, between 17 by up to 1.3 %, at k = 31/32), with the same fibers and paths at every k, so the curve in k is smooth. At k = 0 no path scatters
-and both are the light that crosses the tube between the fibers.
+samples errs by up to 4 %, between 17 by up to 1.3 %, at k = 31/32), with the same fibers and paths at every k, so
+the curve in k is smooth. At k = 0 no path scatters and both are the light that crosses the tube between the
+fibers.
 
 Paths are traced to ``max_depth`` scattering events (Russian roulette beyond), so both hold every order of
 scattering inside the yarn; an estimate above 1 (noise) is clipped to 1. ``batches`` independent batches (fiber

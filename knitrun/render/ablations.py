@@ -53,11 +53,11 @@ on a lone yarn already scales its single scattering up to make up for the dual-s
 multiple scattering (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter").
 
 ``split_xi`` shades with ξ closed apart on single and multiple scattering (the pack's ``correction/xi_closed_ss`` and
-``_ms``, schema 2.5, baked with ``knitbake bake --split-xi``; ASSET_PACK.md §6 "Closure apart"): single scattering (the BCSDF f of the lit fibers, and the
-environment's I_M) takes the first, the dual-scattering terms of multiple scattering the second. Not the default:
-it corrects a dark colour channel (the lone red yarn's green 1.41 → 1.11 of the reference) and the lone yarn under
-a directional light, but the sky scenes and the grazing patch get worse (BENCHMARKS.md, "Issue 13: ξ closed apart
-on single and multiple scattering").
+``_ms``, schema 2.5, baked with ``knitbake bake --split-xi``; ASSET_PACK.md §6 "Closure apart"): single scattering (the
+BCSDF f of the lit fibers, and the environment's I_M) takes the first, the dual-scattering terms of multiple scattering
+the second. Not the default: it corrects a dark colour channel (the lone red yarn's green 1.41 → 1.11 of the reference)
+and the lone yarn under a directional light, but the sky scenes and the grazing patch get worse (BENCHMARKS.md, "Issue
+13: ξ closed apart on single and multiple scattering").
 
 ``two_blockers`` counts up to two yarns between a point and a directional light instead of one: a depth-peeled
 second shadow layer (``shadow_map``, ``behind``) gives V₂, the fraction of the light that at most one yarn blocks,

@@ -45,9 +45,10 @@ directional lights of irradiance E_L toward ω_L:
 
 The shading points take B interpolated along their curve by rest arc length (``bounce_at_points``) and add it to
 their radiance before the fiber-level detail (``strip_shading.shade_regular``): a yarn-level term, not corrected by
-ξ (which corrects the dual-scattering estimate of the light's own path). R_Y and T_Y per channel are the pack's
+ξ (which corrects the dual-scattering estimate of the light's own path). R_Y and T_Y per channel are the pack's,
 in the entry's colour (``yarn_look.hull_colour``: read off the pack's curves against the colour, or the white
-yarn's times the colour for a pack without them); a pack without ρ_Y and T_Y has no bounce. The environment takes none here: its lobes' inter-reflection carries that light.
+yarn's times the colour for a pack without them); a pack without ρ_Y and T_Y has no bounce. The environment takes none
+here: its lobes' inter-reflection carries that light.
 
 Neighbours are found on a uniform grid of cell ``reach`` (a counting sort of the vertices by cell); each vertex's
 sums are its own (``prange`` over vertices, no shared output).
