@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from data_formats.asset_pack import read_pack
-from data_formats.conventions import CM_PER_UNIT, LUMINANCE, cell_centres
+from data_formats.conventions import CM_PER_UNIT, LUMINANCE
 from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
 from knitrun.render.shading_inputs import Corrections, Look
@@ -48,7 +48,7 @@ from knitrun.shading.dual_scattering import (D_B, D_F, DS_NAMES, TABLE_NAMES, ba
                                              pack_tables, transmittance_count)
 from knitrun.shading.fiber_bcsdf import params_from_pack, tinted
 from knitrun.shading.im_lookup import IMTable, im_table_from
-from knitrun.shading.table_lookup import lookup_theta
+from knitrun.shading.table_lookup import axis_cell, lookup_theta
 
 CORRECTION_TABLES = ("correction/xi_M", "correction/xi_N", "shadowing/psi_GM", "shadowing/psi_GN")
 FULL_TABLES = ("correction/xi", "shadowing/psi")  # optional: absent from packs baked without them
@@ -300,8 +300,12 @@ def hull_colour(pack, name: str, colour) -> np.ndarray:
     if curve not in pack.tables:
         return np.asarray(pack.tables[name], np.float64) * colour
     table = np.asarray(pack.tables[curve], np.float64)
-    k = cell_centres(*pack.info[curve].axes[0].range, table.shape[0])
-    return np.array([np.interp(colour[c], k, table[:, c]) for c in range(3)])
+    lo, hi = pack.info[curve].axes[0].range
+    out = np.empty(3)
+    for c in range(3):  # the grid rule of ASSET_PACK.md §4.3, clamped
+        i0, i1, f = axis_cell(float(colour[c]), lo, hi, table.shape[0], False)
+        out[c] = (1.0 - f) * table[i0, c] + f * table[i1, c]
+    return out
 
 
 def shading_look(look: YarnLook) -> tuple:
