@@ -3,11 +3,12 @@ phase, and the bounce of two parallel yarns against a direct integration along t
 neighbour, none from a neighbour in the dark, linear in the light; the renderer's ablation."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from knitrun.render.ablations import ABLATIONS, Features, combined
+from knitrun.render.ablations import ABLATIONS, Features, combined, regular_fibers
 from knitrun.render.yarn_bounce import (CONTACT_RADII, INV_PI2, BounceLights, BounceYarns, lambert_cylinder,
                                         segment_solid_angle, vertex_bounce, vertex_tangents)
 from tests.helpers import FRONT, SUN, straight, write_scene
@@ -160,3 +161,8 @@ def test_ablations_combine_as_their_changes_to_the_full_model():
     assert combined("papers_xi+view_xi") == Features(closed_xi=False, view_xi=True)
     with pytest.raises(ValueError, match="unknown ablation 'bounce'"):
         combined("full+bounce")
+    # the flyaway-free probes take the same names
+    assert regular_fibers("view_xi+two_blockers") == Features(view_xi=True, two_blockers=True, flyaways=False)
+    assert regular_fibers("plain_ds") == replace(ABLATIONS["plain_ds"], flyaways=False)
+    with pytest.raises(ValueError, match="unknown ablation 'paper_xi'"):
+        regular_fibers("paper_xi")

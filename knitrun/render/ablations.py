@@ -144,6 +144,6 @@ def combined(name: str) -> Features:
 
 
 def regular_fibers(name: str) -> Features:
-    """Ablation ``name`` without its flyaway layer: what a probe that traces its reference without flyaways compares
-    (``benchmarks/probe_closure.py``, ``probe_orientation.py``)."""
-    return replace(ABLATIONS[name], flyaways=False)
+    """Ablation ``name`` (or a combination "a+b", as ``combined``) without its flyaway layer: what a probe that traces
+    its reference without flyaways compares (``benchmarks/probe_closure.py``, ``probe_orientation.py``)."""
+    return replace(combined(name), flyaways=False)
