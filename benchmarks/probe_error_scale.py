@@ -4,8 +4,8 @@ For each scene, the full model's image is multiplied by the brightness correctio
 give it (an *oracle*: ratio of the reference's summed luminance to the model's over a set of pixels) and its
 yarn-scale relative L1 at the projected diameter d (``knitbake.compare.image_metrics.yarn_scale_metrics``) is taken
 again. What an oracle removes, a term of that form (a brightness that depends only on the oracle's bins) could remove;
-what it leaves, no such term can. Oracles, each over the pixels the front strips cover (an MSAA-1 raster of the
-regular strips, ``strip_raster.rasterize_visibility``):
+what it leaves, no such term can. The first four oracles are over the pixels the front strips cover (an MSAA-1 raster
+of the regular strips, ``strip_raster.rasterize_visibility``):
 
 * ``one gain``: one factor for the whole image (the mean ratio's part of the error);
 * ``v``: one factor per 1/8 of the strip's width (16 bins of v ∈ [−1, 1]): a profile across the yarn, as the baked
@@ -16,12 +16,28 @@ regular strips, ``strip_raster.rasterize_visibility``):
   a brightness per stitch neighbourhood (shadows, inter-reflection between yarns). The same gain is applied to the
   reference's other fiber instance as a control: where it leaves the instance at its floor, the rest of the model's
   error lies below that scale.
+* ``stitch phase`` (the Crane patch scenes only, whose stitches are all alike: ``knitrun.sim.crane_stockinette``):
+  one factor per place inside the stitch, over every pixel whose ray meets the fabric plane z = 0 at least one stitch
+  inside the patch: per bin of (x mod the stitch width, y mod the row spacing), bins about a pixel wide, the ratio of
+  the reference's summed luminance to the model's. A bin pools the same place of 16 stitches, so the gain follows
+  what the stitches have in common and not one instance's fibers: what it removes is an error that every stitch
+  repeats (light placed or shaded wrongly in the stitch), which a model can fix. Its control is the same oracle built
+  for the other fiber instance (how far such a gain goes on an image that has no systematic error). This oracle and
+  the next are measured on the interior's bounding box, against that crop's own instance floor.
+* ``average stitch`` (the same scenes and bins): the image with each interior pixel replaced by its bin's mean (the
+  stitch that the image shows on average), for the model, the reference and the instance: if the model's average
+  stitch scores as the model does, its stitch-to-stitch variation costs nothing and the error is in the average
+  stitch; the reference's own average stitch is the best any image that repeats per stitch can do.
+
+With ``--out``, the stitch-phase scenes also get ``<scene>_average_stitch.png``: the reference's average stitch, the
+model's, and the log ratio of their luminance at half the yarn scale (red: the model too bright, blue: too dark,
+green: within ±19 %), over a window of 2 × 2 stitches, enlarged 3×.
 
 Printed per scene: the instance floor, the model's error, and each oracle's error (and ratio to the floor). Needs
 the references of ``bench_floors.py`` (``<scene>.exr`` and ``<scene>_instance.exr``). About 5 s per scene on 2 cores.
 
     .venv/bin/python benchmarks/probe_error_scale.py --pack out/bench/cotton1_standard.h5 \\
-        --reference-dir out/bench/refs2 [--scenes knit_patch_directional,knit_patch_sky] [--ablation full]
+        --reference-dir out/bench/refs2 [--scenes knit_patch_directional,knit_patch_sky] [--ablation full] [--out DIR]
 """
 
 from __future__ import annotations
@@ -32,13 +48,14 @@ from pathlib import Path
 import numpy as np
 
 from data_formats.conventions import LUMINANCE
-from data_formats.images import read_exr
+from data_formats.images import read_exr, write_png
 from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitrun.render import pipeline
 from knitrun.render.ablations import ABLATIONS
-from knitrun.render.camera import scene_camera
+from knitrun.render.camera import scene_camera, tan_half_fov
+from knitrun.sim.crane_stockinette import CRANE_RADIUS, ROW_SPACING
 from knitrun.render.strip_raster import rasterize_visibility, sample_attributes
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
@@ -46,6 +63,7 @@ PATCHES = "knit_patch_directional,knit_patch_sky,knit_patch_grazing,simulated_pa
 V_BINS = 16
 ANGLE_BINS = 18  # 10° each over [0°, 180°): a line on screen has no sign
 GAIN_SCALES = (2, 4, 8)
+CRANE_CURVES = "knit_patch_6x6.h5"  # the example scenes' Crane patch: every stitch the same (stitch-phase oracle)
 
 
 def front_strips(scene, renderer):
@@ -60,6 +78,77 @@ def front_strips(scene, renderer):
     attributes = sample_attributes(vis, rows, cols, sample)
     t = np.asarray(attributes["tangent"], np.float64)
     return rows, cols, np.asarray(attributes["v"]), np.degrees(np.arctan2(t[:, 1], t[:, 0])) % 180.0
+
+
+def stitch_phase_bins(scene, curves, shape):
+    """(H·W,) bin of each pixel's place inside the stitch, −1 for a pixel whose ray meets the fabric plane z = 0
+    less than one stitch inside the patch; None for a scene that is not the example Crane patch. The place is (x mod
+    2πs, y mod w·s) of the ray's hit (``crane_stockinette``: one stitch per 2π·s along x, rows w·s apart, s = radius
+    / CRANE_RADIUS), binned about a pixel wide there; the patch is the box of the points of ``curves`` (the
+    renderer's ``YarnCurves``, one per yarn entry)."""
+    if len(scene.yarns) != 1 or Path(scene.yarns[0].curves).name != CRANE_CURVES:
+        return None
+    camera = scene_camera(scene)
+    rows, cols = np.divmod(np.arange(shape[0] * shape[1]), shape[1])
+    fwd, right, up = (np.asarray(a, np.float64) for a in camera.basis())
+    sx = (2.0 * (cols + 0.5) - camera.width) / camera.height
+    sy = 1.0 - 2.0 * (rows + 0.5) / camera.height
+    if camera.ortho_height > 0:
+        origin = np.asarray(camera.position) + 0.5 * camera.ortho_height * (sx[:, None] * right + sy[:, None] * up)
+        ray = np.broadcast_to(fwd, origin.shape)
+        pixel = camera.ortho_height / camera.height
+    else:
+        origin = np.broadcast_to(np.asarray(camera.position, np.float64), (len(rows), 3))
+        ray = fwd + tan_half_fov(camera) * (sx[:, None] * right + sy[:, None] * up)
+        pixel = abs(float(camera.position[2] / fwd[2])) * 2.0 * tan_half_fov(camera) / camera.height
+    hit = origin - (origin[:, 2] / ray[:, 2])[:, None] * ray
+    s = scene.yarns[0].radius / CRANE_RADIUS
+    period = np.array([2.0 * np.pi * s, ROW_SPACING * s])
+    points = np.concatenate([np.asarray(c.points, np.float64).reshape(-1, 3) for c in curves])
+    lo, hi = points.min(axis=0)[:2] + period, points.max(axis=0)[:2] - period
+    inside = np.all((hit[:, :2] > lo) & (hit[:, :2] < hi), axis=1)
+    n = np.maximum(1, np.round(period / pixel)).astype(np.int64)
+    phase = (hit[:, :2] / period) % 1.0
+    ix, iy = (np.minimum((phase[:, k] * n[k]).astype(np.int64), n[k] - 1) for k in range(2))
+    return np.where(inside, iy * n[0] + ix, -1)
+
+
+def average_stitch(img, bins):
+    """``img`` (H, W, C) with each pixel of bin ≥ 0 replaced by its bin's mean (``stitch_phase_bins``)."""
+    flat = img.reshape(-1, img.shape[-1]).copy()
+    at = bins >= 0
+    count = np.maximum(np.bincount(bins[at]), 1)
+    for c in range(flat.shape[1]):
+        flat[at, c] = (np.bincount(bins[at], weights=flat[at, c], minlength=len(count)) / count)[bins[at]]
+    return flat.reshape(img.shape)
+
+
+def stitch_gain(test, reference, bins):
+    """(H, W) gains: per stitch-phase bin, the reference's summed luminance over ``test``'s (1 outside the bins)."""
+    at = bins >= 0
+    lt = np.bincount(bins[at], weights=test.reshape(-1)[at])
+    lr = np.bincount(bins[at], weights=reference.reshape(-1)[at], minlength=len(lt))
+    gain = np.ones(test.size)
+    gain[at] = np.where(lt > 0.0, lr / np.where(lt > 0.0, lt, 1.0), 1.0)[bins[at]]
+    return gain.reshape(test.shape)
+
+
+def average_stitch_png(path, reference, model, bins, d):
+    """``--out``'s picture (module docstring) of the images cropped to the stitch interior (``bins`` of the crop):
+    reference and model average stitches, and their log luminance ratio."""
+    lum = np.asarray(LUMINANCE, np.float64)
+    ref_avg, model_avg = average_stitch(reference, bins), average_stitch(model, bins)
+    window = (slice(0, int(round(5.6 * d))), slice(0, int(round(7.9 * d))))  # ~2 × 2 stitches from the top left
+    half = max(1, int(round(d / 2)))
+    ratio = np.log2(np.maximum(yarn_filter((model_avg @ lum)[..., None], half)[..., 0], 1e-9)
+                    / np.maximum(yarn_filter((ref_avg @ lum)[..., None], half)[..., 0], 1e-9))[window]
+    scale = 1.0 / max(float(np.percentile(ref_avg[window], 99.5)), 1e-12)
+    tone = [np.clip(a[window] * scale, 0.0, 1.0) ** (1 / 2.2) for a in (ref_avg, model_avg)]
+    signed = np.stack([np.clip(ratio, 0, 1.5) / 1.5, 0.6 * np.clip(1 - np.abs(ratio) / 0.25, 0, 1),
+                       np.clip(-ratio, 0, 1.5) / 1.5], axis=-1)
+    gap = np.ones((tone[0].shape[0], 3, 3))
+    picture = np.concatenate([tone[0], gap, tone[1], gap, signed], axis=1) ** 2.2
+    write_png(path, np.repeat(np.repeat(picture, 3, axis=0), 3, axis=1))  # 3× nearest: a stitch ~200 px wide
 
 
 def binned_gain(model, reference, rows, cols, bins):
@@ -80,7 +169,7 @@ def local_gain(test, reference, size):
     return np.where(ft > 0.0, fr / np.where(ft > 0.0, ft, 1.0), 1.0)
 
 
-def probe(name, pack, reference_dir, ablation):
+def probe(name, pack, reference_dir, ablation, out=None):
     scene = load_scene(EXAMPLES / f"{name}.toml")
     packs = {"cotton1": str(pack)}  # the example scenes draw cotton1, as bench_compare.py
     reference = read_exr(Path(reference_dir) / f"{name}.exr").astype(np.float64)[..., :3]
@@ -109,6 +198,27 @@ def probe(name, pack, reference_dir, ablation):
         e, e_instance = error(model, local_gain(lm, lr, size)), error(instance, local_gain(li, lr, size))
         lines.append(f"  oracle gain at {k}d  {e:.4f} ({e / floor:.2f}× floor); the instance under the same oracle "
                      f"{e_instance:.4f}")
+    bins = stitch_phase_bins(scene, renderer.curves, lm.shape)
+    if bins is not None:  # on the interior's bounding box alone, where every pixel has a bin
+        rows_in, cols_in = np.divmod(np.flatnonzero(bins >= 0), lm.shape[1])
+        box = (slice(rows_in.min(), rows_in.max() + 1), slice(cols_in.min(), cols_in.max() + 1))
+        bins = bins.reshape(lm.shape)[box].reshape(-1)
+        crop = [a[box] for a in (model, reference, instance)]
+        inner_floor = yarn_scale_metrics(crop[2], crop[1], d)["rel_l1"]
+
+        def inner(img, gain=None):
+            test = img if gain is None else img * gain[..., None]
+            return yarn_scale_metrics(test, crop[1], d)["rel_l1"] / inner_floor
+
+        lm_in, lr_in, li_in = (a @ lum for a in crop)
+        lines.append(f"  stitch interior ({box[0].stop - box[0].start} × {box[1].stop - box[1].start} px, every "
+                     f"pixel in a bin): instance floor {inner_floor:.4f}, {ablation} {inner(crop[0]):.2f}× floor; "
+                     f"oracle stitch phase {inner(crop[0], stitch_gain(lm_in, lr_in, bins)):.2f}×, the instance "
+                     f"under the same oracle {inner(crop[2], stitch_gain(li_in, lr_in, bins)):.2f}×")
+        lines.append("  average stitch: the model's {:.2f}× floor, the reference's {:.2f}×, the instance's {:.2f}×"
+                     .format(*(inner(average_stitch(img, bins)) for img in crop)))
+        if out is not None:
+            average_stitch_png(Path(out) / f"{name}_average_stitch.png", crop[1], crop[0], bins, d)
     return "\n".join(lines)
 
 
@@ -118,9 +228,12 @@ def main():
     parser.add_argument("--reference-dir", required=True)
     parser.add_argument("--scenes", default=PATCHES)
     parser.add_argument("--ablation", choices=sorted(ABLATIONS), default="full")
+    parser.add_argument("--out", help="folder for the stitch-phase scenes' average-stitch pictures (module docstring)")
     args = parser.parse_args()
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
     for name in args.scenes.split(","):
-        print(probe(name, args.pack, args.reference_dir, args.ablation), flush=True)
+        print(probe(name, args.pack, args.reference_dir, args.ablation, args.out), flush=True)
 
 
 if __name__ == "__main__":
