@@ -20,7 +20,8 @@ from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
-from knitrun.render.pipeline import PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render
+from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render,
+                                     tube_surface)
 from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, resolve_behind, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
@@ -321,6 +322,40 @@ def test_the_axial_parallax_leaves_a_yarn_across_the_view_and_moves_a_tilted_ben
     arc = np.stack([0.25 * np.cos(t), 0.05 * np.sin(t), 0.2 * np.sin(t)], axis=1)  # rises toward the camera
     bent = write_scene(tmp_path, [arc], camera=FRONT, lights=SUN, name="bent")
     assert np.abs(_render(bent, pack, features=on).image - _render(bent, pack).image).max() > 1e-3
+
+
+def test_the_tube_surface_is_the_strip_point_moved_toward_the_camera_by_the_tubes_height():
+    """``tube_surface``: r √(1 − v²) along the view ray from the strip point, r of the point's yarn entry; the strip
+    point itself at the edges."""
+    points = {"weight": np.ones(4), "position": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
+                                                          [0.0, 0.0, 2.0]]),
+              "view_dir": np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]),
+              "v": np.array([0.0, 0.6, -1.0, 1.0], np.float32), "yarn": np.array([0, 1, 0, 1], np.int32)}
+    looks = [SimpleNamespace(radius=0.03), SimpleNamespace(radius=0.05)]
+    expect = points["position"] + np.array([0.03, 0.05 * 0.8, 0.0, 0.0])[:, None] * points["view_dir"]
+    np.testing.assert_allclose(tube_surface(points, looks), expect, atol=1e-9)
+
+
+def test_surface_shadows_light_the_front_of_a_yarn_whose_axis_plane_a_touching_neighbour_shadows(tmp_path, pack):
+    """Two touching yarns side by side in the image plane, the light grazing across them from B's side (16° above
+    the plane): the ray toward the light from A's axis passes 0.56 r from B's axis (shadowed), the ray from the
+    front of A's tube 1.52 r (lit). Looked up on the tube's surface (``Features.surface_shadows``), A's middle is
+    lit as the reference's fibers there are; B, with nothing between it and the light, does not change."""
+    r = 0.03
+    a, b = straight(), straight() + np.array([0.0, 2 * r, 0.0])
+    camera = FRONT.replace("fov_deg = 30.0", "ortho_height = 0.3")
+    grazing = SUN.replace("direction = [0.3, 0.6, 1.0]", "direction = [0.0, 1.0, 0.29]")
+    path = write_scene(tmp_path, [a, b], camera=camera, lights=grazing, render="layers = 1",
+                       name="touching")
+    path.write_text(path.read_text().replace("background = [0.1, 0.2, 0.3]", "background = [0.0, 0.0, 0.0]"))
+    axis_plane = _render(path, pack, features=Features(flyaways=False)).image.sum(axis=-1)
+    surface = _render(path, pack, features=Features(flyaways=False, surface_shadows=True)).image.sum(axis=-1)
+    px = 0.3 / 48  # ortho_height / height: rows of A's middle third and of B's, away from the shared edge
+    row_a = slice(24 - int(r / 3 / px), 24 + int(r / 3 / px) + 1)
+    row_b = slice(24 - int((2 * r + r / 3) / px), 24 - int((2 * r - r / 3) / px) + 1)
+    cols = slice(16, 48)
+    assert surface[row_a, cols].mean() > 1.5 * axis_plane[row_a, cols].mean()
+    np.testing.assert_allclose(surface[row_b, cols], axis_plane[row_b, cols], rtol=1e-6, atol=1e-9)
 
 
 def test_pack_errors_are_one_line(tmp_path, pack):

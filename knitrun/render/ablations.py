@@ -68,11 +68,22 @@ scene with points behind two yarns, the error falls from 1.58× to 1.54× the in
 layer, and the frame takes half again as long (BENCHMARKS.md "Issue 13: the yarn's hull in the scene's colour", "Two
 blocking yarns").
 
+``surface_shadows`` looks the lights up on the tube surface the camera sees at a regular point (the strip point moved
+r √(1 − v²) toward the camera, ``pipeline.tube_surface``) instead of on the strip plane through the yarn's axis, up
+to a radius deeper: under the grazing patch's light the axis plane puts one leg of every stitch in its neighbours'
+shadow, which the reference lights (the fully shadowed pixels hold 21.6 % of the reference's light there, 8.4 % with
+the lookups on the surface). Not the default: alone it leaves the grazing patch 1.21× too bright (the lone yarn's
+brightness at grazing light, which the axis plane's wrong shadows had hidden); with the axial parallax and ξ closed
+at every view it lowers the yarn-scale error on five of the seven example scenes, but the GL backend draws neither
+it nor the parallax yet (BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the
+tube's surface").
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
 the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
 factored tables, without the detail, with the paper's ξ, with ξ closed at every view, with the axial parallax, with
-the yarn-level bounce and with ξ closed apart on single and multiple scattering.
+the yarn-level bounce, with ξ closed apart on single and multiple scattering, with two blocking yarns counted and
+with shadows looked up on the tube's surface.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -98,6 +109,7 @@ class Features:
     yarn_bounce: bool = False  # light the neighbouring yarns scatter onto a yarn under directional lights
     split_xi: bool = False  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms)
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
+    surface_shadows: bool = False  # regular points look their lights up on the tube surface seen, not the axis plane
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -117,6 +129,7 @@ ABLATIONS = {
     "yarn_bounce": Features(yarn_bounce=True),
     "split_xi": Features(split_xi=True),
     "two_blockers": Features(two_blockers=True),
+    "surface_shadows": Features(surface_shadows=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -127,7 +140,8 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax",
                    "yarn_bounce": "full with the yarn-level bounce",
                    "split_xi": "full with ξ closed apart on single and multiple scattering",
-                   "two_blockers": "full with two blocking yarns counted"}
+                   "two_blockers": "full with two blocking yarns counted",
+                   "surface_shadows": "full with shadows looked up on the tube's surface"}
 
 
 def combined(name: str) -> Features:

@@ -35,6 +35,11 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    image moves by at most 0.4 % of its peak on the example scenes (BENCHMARKS.md, "Issue 15: the flyaway layer's
    shadow lookups"); with a reach of a yarn radius 64 % would share, but a hair on a hard shadow's edge then took
    the light of a sample up to a pixel away (15 % of the peak at one pixel of the grazing-light patch).
+   With ``Features.surface_shadows`` (an ablation) a regular point looks its lights up on the tube surface the camera
+   sees there (``tube_surface``: the strip point r √(1 − v²) toward the camera) rather than on the strip plane
+   through the axis, which lies up to a radius deeper: under a light from the fabric's side a receiver that deep
+   falls into its neighbours' shadows (on the grazing patch the axis plane shadows one leg of every stitch that the
+   reference lights).
    With ``Features.interreflection`` each T̃_j becomes T̃_j / (1 − ρ (1 − T̃_j)), ρ the receiver's yarn hull albedo
    (``knitrun.render.interreflection``): the light the neighbours block and send on; and a directional light's V
    lets through the gap transmittance τ_Y of the blocker (``strip_shading.past_blockers``, in the kernels). With
@@ -212,6 +217,18 @@ def parallax_shift(points, lines, looks):
               new_segment, new_s, new_tangent)
     out.update(segment=new_segment, arclength=new_s, tangent=new_tangent)
     return out
+
+
+def tube_surface(points, looks):
+    """(N, 3) world positions of the tube surface the camera sees at regular ``points``: the strip point moved
+    toward the camera along its view ray by r √(1 − v²) (r the yarn radius), where a tube of radius r about the
+    strip's axis meets the ray; the strip point itself at the edges (v = ±1). ``Features.surface_shadows`` looks
+    the lights up there (module docstring, step 4)."""
+    if len(points["weight"]) == 0:
+        return points["position"]
+    radius = np.array([look.radius for look in looks], np.float64)[points["yarn"]]
+    v = np.clip(np.asarray(points["v"], np.float64), -1.0, 1.0)
+    return points["position"] + (radius * np.sqrt(1.0 - v * v))[:, None] * points["view_dir"]
 
 
 @njit(cache=True, inline='always')
@@ -529,8 +546,10 @@ class Renderer:
             where.append(np.flatnonzero(covered & (partner < 0)))
             facts["flyaway_points_shared"] = int(len(shared))
         bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
-        receivers = [(s["position"][at], bias_radius[s["yarn"][at]] if len(s["yarn"]) else np.zeros(0))
-                     for s, at in zip(sets, where)]
+        seen = [tube_surface(s, looks) if features.surface_shadows else s["position"] for s in layers] + \
+            [s["position"] for s in sets[len(layers):]]
+        receivers = [(p[at], bias_radius[s["yarn"][at]] if len(s["yarn"]) else np.zeros(0))
+                     for p, s, at in zip(seen, sets, where)]
         directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)
         light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)

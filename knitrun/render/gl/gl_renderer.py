@@ -256,6 +256,9 @@ class GLRenderer:
         if features.yarn_bounce:
             raise FormatError("the GL backend does not draw the yarn-level bounce (Features.yarn_bounce); the CPU "
                               "renderer does")
+        if features.surface_shadows:
+            raise FormatError("the GL backend looks shadows up on the strip plane; the tube surface "
+                              "(Features.surface_shadows) is drawn by the CPU renderer")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
