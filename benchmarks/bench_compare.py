@@ -5,7 +5,10 @@ radiance ratio, the yarn-scale rel L1 and its ratio to the fiber-instance floor,
 ratio to the reference. One `knitrun compare` report folder per scene under ``--out``.
 
     .venv/bin/python benchmarks/bench_compare.py --pack cotton1.h5 [--spp 64] [--out out/compare]
-                                                 [--reference-dir DIR] [--scenes a,b]
+                                                 [--reference-dir DIR] [--scenes a,b] [--models a,b+c]
+
+``--models`` names the models to draw (default: every ablation, ``knitrun.render.ablations.ABLATION_ORDER``), each
+an ablation or a combination "a+b" of them (``ablations.combined``).
 
 ``--reference-dir`` reuses references rendered earlier: ``DIR/<scene>.exr`` and its floors ``<scene>_instance.exr``,
 ``<scene>_mc.exr`` (``benchmarks/bench_floors.py --out DIR`` writes all three, with the JSON summaries that give
@@ -16,7 +19,7 @@ import argparse
 from pathlib import Path
 
 from knitbake.compare.report import FLOOR_LABELS, compare_scene
-from knitrun.render.ablations import ABLATION_LABELS
+from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER, combined
 
 SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
           "knit_patch_sky", "knit_patch_grazing", "simulated_patch_directional")
@@ -34,7 +37,17 @@ def main():
     parser.add_argument("--out", default="out/compare")
     parser.add_argument("--reference-dir", default=None)
     parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
+    parser.add_argument("--models", default=",".join(ABLATION_ORDER),
+                        help="comma-separated ablations or combinations a+b (default: every ablation)")
     args = parser.parse_args()
+    models = args.models.split(",")
+    for name in models:
+        try:
+            combined(name)
+        except ValueError as e:
+            parser.error(f"--models: {e}")
+    if any(s not in SCENES for s in args.scenes.split(",")):
+        parser.error(f"--scenes: expected names among {', '.join(SCENES)}")
     root = Path(__file__).resolve().parent.parent / "examples" / "scenes"
     print("| scene | model | mean ratio | yarn-scale rel L1 (d) | (2d) | ratio to instance floor (d) | yarn FLIP | "
           "pixel FLIP | strip ms | speed-up |")
@@ -48,10 +61,11 @@ def main():
                 floors = {k: folder / f"{name}{s}.exr" for k, s in FLOOR_FILES.items()
                           if (folder / f"{name}{s}.exr").is_file()}
         summary = compare_scene(root / f"{name}.toml", Path(args.out) / name, reference=ref,
-                                spp=None if ref else args.spp, packs={"cotton1": args.pack}, floor_references=floors)
+                                spp=None if ref else args.spp, packs={"cotton1": args.pack}, floor_references=floors,
+                                ablations=models)
         inst = summary["floors"].get("instance")
         rows = [(FLOOR_LABELS[k], r, None) for k, r in summary["floors"].items()] + \
-            [(ABLATION_LABELS[k], r, r["to_instance_floor"]) for k, r in summary["ablations"].items()]
+            [(ABLATION_LABELS.get(k, k), r, r["to_instance_floor"]) for k, r in summary["ablations"].items()]
         for label, row, to_floor in rows:
             y = row["yarn"]
             ratio = to_floor["rel_l1"] if to_floor else (y["rel_l1"] / inst["yarn"]["rel_l1"] if inst else None)

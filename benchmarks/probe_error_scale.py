@@ -53,7 +53,7 @@ from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitrun.render import pipeline
-from knitrun.render.ablations import ABLATIONS
+from knitrun.render.ablations import combined
 from knitrun.render.camera import scene_camera, tan_half_fov
 from knitrun.sim.crane_stockinette import CRANE_RADIUS, ROW_SPACING
 from knitrun.render.strip_raster import rasterize_visibility, sample_attributes
@@ -174,7 +174,7 @@ def probe(name, pack, reference_dir, ablation, out=None):
     packs = {"cotton1": str(pack)}  # the example scenes draw cotton1, as bench_compare.py
     reference = read_exr(Path(reference_dir) / f"{name}.exr").astype(np.float64)[..., :3]
     instance = read_exr(Path(reference_dir) / f"{name}_instance.exr").astype(np.float64)[..., :3]
-    renderer = pipeline.Renderer(scene, packs, features=ABLATIONS[ablation])  # the packs loaded once for both uses
+    renderer = pipeline.Renderer(scene, packs, features=combined(ablation))  # the packs loaded once for both uses
     model = np.asarray(renderer.render().image, np.float64)[..., :3]
     d = yarn_diameter_px(scene)
     lum = np.asarray(LUMINANCE, np.float64)
@@ -227,9 +227,13 @@ def main():
     parser.add_argument("--pack", required=True)
     parser.add_argument("--reference-dir", required=True)
     parser.add_argument("--scenes", default=PATCHES)
-    parser.add_argument("--ablation", choices=sorted(ABLATIONS), default="full")
+    parser.add_argument("--ablation", default="full", help="an ablation or a combination a+b (ablations.combined)")
     parser.add_argument("--out", help="folder for the stitch-phase scenes' average-stitch pictures (module docstring)")
     args = parser.parse_args()
+    try:
+        combined(args.ablation)
+    except ValueError as e:
+        parser.error(f"--ablation: {e}")
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
     for name in args.scenes.split(","):

@@ -34,7 +34,7 @@ from data_formats.images import read_exr, write_exr, write_png
 from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import compare_images, flip_error, yarn_filter, yarn_scale_metrics
 from knitbake.trace.reference import read_summary, reference_seconds, trace_reference
-from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER, ABLATIONS
+from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER, ABLATIONS, combined
 from knitrun.render.camera import pixel_size, scene_camera
 from knitrun.render.pipeline import render
 
@@ -99,7 +99,8 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
 
     ``reference``: an EXR to use instead of path tracing one (its cost is read from the JSON summary `knitbake
     reference` writes beside it, else unknown); ``spp``: samples per pixel of what is path traced (default: the
-    scene's); ``packs``: yarn → pack overrides for the strip renderer. ``floor_references``: floor name (``FLOORS``)
+    scene's); ``packs``: yarn → pack overrides for the strip renderer; ``ablations``: the models drawn, each an
+    ablation or a combination "a+b" (``knitrun.render.ablations.combined``). ``floor_references``: floor name (``FLOORS``)
     → an EXR of that floor image, rendered at the reference's spp with the seeds ``FLOORS`` gives; a floor not given
     is path traced when ``floors`` is true and the reference is traced here too (a given reference's seeds are not
     known), else not reported. ``client``: a Dask client (``knitbake.scale_out.dask_client``) that traces the
@@ -142,7 +143,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     rows, full = {}, None
     for name in ablations:
         say(f"strip renderer: {name}")
-        result = render(scene, packs, ABLATIONS[name])
+        result = render(scene, packs, combined(name))
         seconds = sum(result.timings.values())
         metrics, error_map = _metrics(result.image, ref, diameter, exposure, magma=True)
         if name == "full":
