@@ -74,8 +74,8 @@ to a radius deeper: under the grazing patch's light the axis plane puts one leg 
 shadow, which the reference lights (the fully shadowed pixels hold 21.6 % of the reference's light there, 8.4 % with
 the lookups on the surface). Not the default: alone it leaves the grazing patch 1.21× too bright (the lone yarn's
 brightness at grazing light, which the axis plane's wrong shadows had hidden); with the axial parallax and ξ closed
-at every view it lowers the yarn-scale error on five of the seven example scenes, but the GL backend draws neither
-it nor the parallax yet (BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the
+at every view it lowers the yarn-scale error on five of the seven example scenes, but the GL backend does not draw
+the parallax yet (BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the
 tube's surface").
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):

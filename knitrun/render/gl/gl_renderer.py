@@ -256,9 +256,6 @@ class GLRenderer:
         if features.yarn_bounce:
             raise FormatError("the GL backend does not draw the yarn-level bounce (Features.yarn_bounce); the CPU "
                               "renderer does")
-        if features.surface_shadows:
-            raise FormatError("the GL backend looks shadows up on the strip plane; the tube surface "
-                              "(Features.surface_shadows) is drawn by the CPU renderer")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
@@ -329,6 +326,7 @@ class GLRenderer:
             "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
             "detail_levels": int(detail_levels),
             "use_xi_full": use_xi, "use_psi_full": use_psi, "use_xi_view": use_view,
+            "surface_shadows": int(self.features.surface_shadows),
             "xi_view_n_theta": int(view.shape[2]),
             "im_lo": im.lo, "im_hi": im.hi, "im_repeat": [int(r) for r in im.repeat],
             "im_size": [na, nb, nc, nd], "im_code": [int(c) for c in im.codes],

@@ -11,6 +11,7 @@ uniform sampler2D coverage_tex;
 uniform int texture_levels;
 uniform sampler2D detail_tex;    // fiber-level detail (yarn_look.fiber_detail_chain), or one texel of 1
 uniform int detail_levels;
+uniform int surface_shadows;     // Features.surface_shadows: lights looked up on the tube surface seen
 
 void main() {
     StripPoint sp = strip_point();
@@ -29,12 +30,14 @@ void main() {
     float spread2 = tangent_spread(tex, cov);
     float theta_o = clamped_asin(dot(t, wo));
     float theta_o_f = clamped_asin(dot(tf, wo));
+    // where the lights are looked up: the strip point, or the tube surface the camera sees there (pipeline.tube_surface)
+    vec3 receiver = surface_shadows != 0 ? sp.position + radius * sqrt(max(1.0 - v * v, 0.0)) * wo : sp.position;
     Params p = yarn_params();
     vec3 rgb = vec3(0.0), xi, psi, total, back_direct, f_scatter;
     for (int l = 0; l < n_lights; ++l) {
         vec3 w = light_dir[l];
         corrections(v, t, n, b, theta_o, w, xi, psi);
-        float vis = pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS);
+        float vis = pcss(light_atlas, light_map[l], receiver, shadow_bias, PCF_RADIUS);
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), clamped_asin(dot(tf, w)), theta_o_f, phi_f,
                   n_occluded + (1.0 - vis) * n_cross_rest, past_blockers(vis) * fiber_lit(psi), true, total, back_direct,
@@ -43,7 +46,7 @@ void main() {
     }
     float lobe_vis[MAX_LOBES];
     for (int j = 0; j < n_lobes; ++j) {
-        float vis = lobe_visibility(j, sp.position);
+        float vis = lobe_visibility(j, receiver);
         lobe_vis[j] = vis;
         if (vis <= 0.0) continue;
         vec3 w = lobe_dir[j];
