@@ -4,7 +4,7 @@ against its other fiber instance, ``benchmarks/bench_floors.py``); frame ms of e
 (the GL one with its set-up kept, the CPU one likewise). Targets: mean within 2 %, L1 at most a quarter of the floor.
 
     .venv/bin/python benchmarks/bench_gl_agreement.py --pack out/bench/cotton1_standard.h5 \\
-        --reference-dir out/bench/refs2 [--scenes a,b] [--ablation papers_xi]
+        --reference-dir out/bench/refs2 [--scenes a,b] [--ablation papers_xi | surface_shadows+parallax]
 """
 
 import argparse
@@ -15,7 +15,7 @@ from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
-from knitrun.render.ablations import ABLATIONS
+from knitrun.render.ablations import combined
 from knitrun.render.gl.gl_renderer import GLRenderer, gl_context
 
 SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
@@ -35,14 +35,18 @@ def main():
     parser.add_argument("--pack", required=True, help="cotton1 asset pack")
     parser.add_argument("--reference-dir", required=True, help="folder of <scene>.exr and <scene>_instance.exr")
     parser.add_argument("--scenes", default=",".join(SCENES))
-    parser.add_argument("--ablation", choices=sorted(ABLATIONS), default="full")
+    parser.add_argument("--ablation", default="full", help="an ablation or a combination a+b (ablations.combined)")
     args = parser.parse_args()
+    try:
+        features = combined(args.ablation)
+    except ValueError as e:
+        parser.error(f"--ablation: {e}")
     print(f"GL: {gl_context().info['GL_RENDERER']}; ablation {args.ablation}\n")
     print("| scene | mean GL / CPU | yarn-scale rel L1 | / instance floor | GL ms | CPU ms |")
     print("|---|---|---|---|---|---|")
     for name in args.scenes.split(","):
         scene = load_scene(EXAMPLES / f"{name}.toml")
-        renderer = GLRenderer(scene, {"cotton1": args.pack}, ABLATIONS[args.ablation])
+        renderer = GLRenderer(scene, {"cotton1": args.pack}, features)
         gl, gl_ms = timed(renderer.render)
         cpu, cpu_ms = timed(renderer.cpu.render)
         diameter = yarn_diameter_px(scene)

@@ -12,7 +12,7 @@ import click
 from cli.common import CONTEXT, FriendlyGroup, SuffixPath, check_outputs, echo_json, file_kind
 from data_formats import FormatError
 from data_formats.input_files import regular_file
-from knitrun.render.ablations import ABLATION_LABELS, ABLATIONS
+from knitrun.render.ablations import ABLATION_LABELS, ABLATIONS, combined
 
 PROGRESS_FRAMES = 100  # simulate shows a progress bar from this many frames on
 
@@ -281,6 +281,16 @@ def _labels(path):
     return str(Path(path).with_suffix(".labels")) if str(path).lower().endswith(".obj") else None
 
 
+def _ablation(ctx, param, value):
+    """``--ablation``: an ablation or a combination a+b (``ablations.combined``); a usage error naming the unknown
+    part otherwise."""
+    try:
+        combined(value)
+    except ValueError as e:
+        raise click.BadParameter(str(e)) from None
+    return value
+
+
 def _pack_overrides(values):
     """--pack YARN=FILE (or INDEX=FILE) options as a dict."""
     out = {}
@@ -308,8 +318,9 @@ def _pack_overrides(values):
               help="Frame rate of the GIF.")
 @click.option("--pack", "pack_values", multiple=True, metavar="YARN=FILE",
               help="Asset pack for a yarn (its name or entry index); overrides the scene's `pack`. Repeatable.")
-@click.option("--ablation", type=click.Choice(list(ABLATIONS)), default="full", show_default=True,
-              help="Which baked terms to use (the ablations of Huang et al. 2025 Fig. 7).")
+@click.option("--ablation", default="full", show_default=True, callback=_ablation,
+              help="Which baked terms to use (the ablations of Huang et al. 2025 Fig. 7): one of "
+                   f"{', '.join(ABLATIONS)}, or a combination a+b (the full model with what each changes).")
 @click.option("--samples-per-segment", type=click.IntRange(1, 64), default=4, show_default=True,
               help="Polyline samples per segment of smooth (C0/BS/BZ) curves.")
 @click.option("--msaa", type=click.Choice(["1", "2", "4", "8", "16"]), default=None,
@@ -349,10 +360,10 @@ def render(scene_path, output, exr_path, frame_range, gif_path, fps, pack_values
     if gif_path is not None and frame_range is None:
         raise FormatError("--gif needs --frames (the frames to animate)")
     if frame_range is not None:
-        _render_frames(Renderer(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
+        _render_frames(Renderer(scene, _pack_overrides(pack_values), combined(ablation), samples_per_segment,
                                 **ahead), scene_path, frame_range, output, exr_path, gif_path, fps, exposure, as_json)
         return
-    result = render_scene(scene, _pack_overrides(pack_values), ABLATIONS[ablation], samples_per_segment,
+    result = render_scene(scene, _pack_overrides(pack_values), combined(ablation), samples_per_segment,
                           progress=lambda name, s: click.echo(f"  {name}: {s * 1e3:.0f} ms", err=True), **ahead)
     for warning in result.facts["warnings"]:
         click.echo(f"warning: {warning}", err=True)

@@ -383,6 +383,21 @@ def test_cli_render_writes_png_exr_and_json(tmp_path, pack):
     assert bad.exit_code != 0 and "has no asset pack" in bad.output and "Traceback" not in bad.output
 
 
+def test_cli_render_takes_a_combination_of_ablations_and_names_an_unknown_one(tmp_path, pack):
+    """``--ablation a+b`` draws what ``ablations.combined`` gives (the image of the library call); an unknown part is
+    a usage error that names it."""
+    path = write_scene(tmp_path, [straight(z=0.0), straight(z=-0.1) + [0.0, -0.04, 0.0]], camera=FRONT, lights=SUN)
+    exr = tmp_path / "out.exr"
+    result = CliRunner().invoke(knitrun, ["render", str(path), "-o", str(tmp_path / "out.png"), "--exr", str(exr),
+                                          "--pack", f"cotton1={pack}", "--ablation", "surface_shadows+parallax"])
+    assert result.exit_code == 0, result.output
+    expect = _render(path, pack, features=Features(surface_shadows=True, parallax=True)).image
+    np.testing.assert_array_equal(read_exr(exr), expect)
+    bad = CliRunner().invoke(knitrun, ["render", str(path), "-o", str(tmp_path / "b.png"), "--pack",
+                                       f"cotton1={pack}", "--ablation", "full+bounce"])
+    assert bad.exit_code == 2 and "unknown ablation 'bounce'" in bad.output and "Traceback" not in bad.output
+
+
 # --- building blocks ---------------------------------------------------------------------------------------------
 
 def test_texture_sampling_hits_texel_centres_and_wraps_u():

@@ -41,9 +41,9 @@ halves of the light, single and multiple, scene by scene.
 
 ``parallax`` moves each regular point's texture coordinate and tangent along the yarn to the centre-line point whose
 tube surface the camera sees there (``pipeline.parallax_shift``): nothing moves on a yarn across the view, a yarn
-tilted toward the camera is read further along. Not the default: the GL backend does not draw it yet, and it lowers
-the error on three patches of four but darkens the grazing-light patch (BENCHMARKS.md, "Issue 13: single and
-multiple scattering, split").
+tilted toward the camera is read further along (both backends). Not the default: it lowers the error on three
+patches of four but darkens the grazing-light patch (BENCHMARKS.md, "Issue 13: single and multiple scattering,
+split").
 
 ``yarn_bounce`` adds, under directional lights, the light the neighbouring yarns scatter onto a yarn
 (``knitrun.render.yarn_bounce``: from the pack's hull albedo and transmittance, no fitted constant; it needs
@@ -74,9 +74,9 @@ to a radius deeper: under the grazing patch's light the axis plane puts one leg 
 shadow, which the reference lights (the fully shadowed pixels hold 21.6 % of the reference's light there, 8.4 % with
 the lookups on the surface). Not the default: alone it leaves the grazing patch 1.21× too bright (the lone yarn's
 brightness at grazing light, which the axis plane's wrong shadows had hidden); with the axial parallax and ξ closed
-at every view it lowers the yarn-scale error on five of the seven example scenes, but the GL backend does not draw
-the parallax yet (BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the
-tube's surface").
+at every view it lowers the yarn-scale error on five of the seven example scenes but moves the back-lit yarn's
+brightness out of ±5 % (BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the
+tube's surface"). Both backends draw it.
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on

@@ -30,6 +30,13 @@ is shaded twice, each weighted by its own coverage); the shadow maps are rasteri
 of a shadow map is the nearest projected polyline point. ``tests/test_gl_render.py`` holds the two renderers
 together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
 
+Two ablations read more than a fragment's own attributes: ``Features.surface_shadows`` looks the lights up on the
+tube surface seen (the fragment's position moved r √(1 − v²) toward the camera, ``pipeline.tube_surface``), and
+``Features.parallax`` walks the frame's polylines (a texture of points, rest arc lengths, vertex tangents and yarn
+frame normals, ``_polyline_textures``) from the fragment's segment as ``pipeline.parallax_shift`` does, first to the
+segment its sample lies on (a fragment's sample may lie past its own segment's end), then by the shift, at most
+``PARALLAX_STEPS`` segments each way.
+
 The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
 textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
 sample keeps the nearest flyaway strip where no regular strip is nearer than that radius (the CPU's mask);
@@ -62,7 +69,10 @@ MAX_LIGHTS = 8  # directional lights a scene may have on this backend
 MAX_LOBES = 64  # SRBF lobes (the scene format's largest srbf_count)
 NO_YARN = 3.0e38  # depth of a shadow-map texel no yarn covers
 PCF_RADIUS = 1.5  # texels (shadow_map.shadow_visibility's default)
-ATLAS_UNITS = (24, 25, 26, 27)  # texture units of the light atlas, lobe atlas, cluster weights, flyaway variants
+ATLAS_UNITS = (24, 25, 26, 27, 28, 29)  # texture units of the light atlas, lobe atlas, cluster weights, flyaway
+# variants, and the axial parallax's polyline and curve bounds
+POLYLINE_ROW = 1024  # polyline points per row of the parallax's texture (regular.frag)
+PARALLAX_STEPS = 64  # segments the parallax walks at most each way (the CPU walks to the curve's end)
 # (a yarn entry's own textures take units 0, 1, … in the order of ``_upload_look``)
 VARIANT_OFFSET = 2  # column of period index 0 in the flyaway variant table (flyaway.frag)
 
@@ -123,6 +133,9 @@ def gl_constants() -> str:
         f"const int MAX_TAPS = {MAX_TAPS};",
         f"const float NO_YARN = {NO_YARN!r};",
         f"const float PCF_RADIUS = {PCF_RADIUS!r};",
+        f"const float PARALLAX_MAX_SIN = {pipeline.PARALLAX_MAX_SIN!r};",
+        f"const int PARALLAX_STEPS = {PARALLAX_STEPS};",
+        f"const int POLYLINE_ROW = {POLYLINE_ROW};",
         f"#define MAX_LIGHTS {MAX_LIGHTS}",
         f"#define MAX_LOBES {MAX_LOBES}",
     ]
@@ -204,6 +217,21 @@ def _texture3d(ctx, array):
     return ctx.texture3d((a.shape[2], a.shape[1], a.shape[0]), a.shape[3], a.tobytes(), dtype="f4")
 
 
+def _polyline_textures(ctx, lines, tangent):
+    """The frame's polylines for the axial parallax (``regular.frag``): (points, curve bounds) textures. Point i at
+    row i // POLYLINE_ROW, columns 3 (i mod POLYLINE_ROW) + 0, 1, 2: (x, y, z, rest arc length), (vertex tangent,
+    0), (the yarn frame's normal N, 0); curve c at (c mod POLYLINE_ROW, c // POLYLINE_ROW): (its first point, its
+    last point), exact as float32 below 2²⁴ points."""
+    n, n_curves = len(lines.points), len(lines.offsets) - 1
+    data = np.zeros((-(-n // POLYLINE_ROW) * POLYLINE_ROW, 3, 4), np.float32)
+    data[:n, 0, :3], data[:n, 0, 3] = lines.points, lines.rest
+    data[:n, 1, :3], data[:n, 2, :3] = tangent, lines.normal
+    bounds = np.zeros((-(-n_curves // POLYLINE_ROW) * POLYLINE_ROW, 2), np.float32)
+    bounds[:n_curves, 0], bounds[:n_curves, 1] = lines.offsets[:-1], lines.offsets[1:] - 1
+    return (_texture2d(ctx, data.reshape(-1, 3 * POLYLINE_ROW, 4)),
+            _texture2d(ctx, bounds.reshape(-1, POLYLINE_ROW, 2)))
+
+
 def _mip_texture(ctx, mip, variant=0):
     """A 2-D texture whose GL mip levels are the levels of ``variant`` of a ``texture_sampling.MipStack``."""
     data, offset, rows, cols = mip
@@ -244,9 +272,6 @@ class GLRenderer:
         if not features.multiple_scattering:
             raise FormatError("the GL backend draws the full light transport; Features.multiple_scattering=False "
                               "(single scattering alone) is drawn by the CPU renderer")
-        if features.parallax:
-            raise FormatError("the GL backend does not draw the axial parallax (Features.parallax); the CPU renderer "
-                              "does")
         if features.split_xi:
             raise FormatError("the GL backend does not draw ξ closed apart on single and multiple scattering "
                               "(Features.split_xi); the CPU renderer does")
@@ -326,7 +351,7 @@ class GLRenderer:
             "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
             "detail_levels": int(detail_levels),
             "use_xi_full": use_xi, "use_psi_full": use_psi, "use_xi_view": use_view,
-            "surface_shadows": int(self.features.surface_shadows),
+            "surface_shadows": int(self.features.surface_shadows), "parallax": int(self.features.parallax),
             "xi_view_n_theta": int(view.shape[2]),
             "im_lo": im.lo, "im_hi": im.hi, "im_repeat": [int(r) for r in im.repeat],
             "im_size": [na, nb, nc, nd], "im_code": [int(c) for c in im.codes],
@@ -372,7 +397,9 @@ class GLRenderer:
             lap("load")
             image = np.broadcast_to(background.astype(np.float32), (h, w, 3)).copy()
             return pipeline.RenderResult(image, timings, facts)
-        draws = self._upload_segments(lines)
+        tangent = vertex_tangents(lines.points, lines.offsets)
+        draws = self._upload_segments(lines, tangent)
+        polyline = _polyline_textures(ctx, lines, tangent) if self.features.parallax else ()
         lap("load")
 
         radius = np.array([self.cpu.looks[k].radius for k in lines.entry])
@@ -402,6 +429,9 @@ class GLRenderer:
         light_atlas.use(location=ATLAS_UNITS[0])
         lobe_atlas.use(location=ATLAS_UNITS[1])
         self.cluster_weights.use(location=ATLAS_UNITS[2])
+        for name, tex, unit in zip(("polyline", "curve_bounds"), polyline, ATLAS_UNITS[4:]):
+            tex.use(location=unit)
+            _set(self.regular, name, unit)
         fly_entries = [d for d in draws if "fly_tex0" in self.looks[d[0]][1]]
         for program in (self.regular, self.flyaway) if fly_entries else (self.regular,):
             self._camera_uniforms(program, camera, near, far)
@@ -444,7 +474,7 @@ class GLRenderer:
                 source.release()
             fly_radiance, fly_cover = resolved
             image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
-        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers):
+        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers, *polyline):
             obj.release()
         for _, arrays, _ in draws:
             for obj in arrays:
@@ -455,10 +485,10 @@ class GLRenderer:
         facts["residuals"] = {look.name: look.residuals for look in self.cpu.looks}
         return pipeline.RenderResult(image, timings, facts)
 
-    def _upload_segments(self, lines):
+    def _upload_segments(self, lines, tangent):
         """One vertex array of segments with their neighbours (GL_LINES_ADJACENCY: previous point, the segment's two,
-        next point; an end repeats its own) per yarn entry: [(entry, (vao, vbo, depth vao, flyaway vao), vertices)]."""
-        tangent = vertex_tangents(lines.points, lines.offsets)
+        next point; an end repeats its own) per yarn entry: [(entry, (vao, vbo, depth vao, flyaway vao), vertices)];
+        ``tangent`` the points' vertex tangents (``vertex_tangents``)."""
         draws = []
         for k in np.unique(lines.entry):
             index = []
@@ -469,16 +499,14 @@ class GLRenderer:
             index = np.concatenate(index) if index else np.zeros(0, np.int64)
             curve_of = np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets))[index]
             record = np.zeros(len(index), dtype=[("p", "f4", 3), ("t", "f4", 3), ("s", "f4"), ("n", "f4", 3),
-                                                 ("c", "i4")])
+                                                 ("c", "i4"), ("i", "i4")])
             record["p"], record["t"], record["s"] = lines.points[index], tangent[index], lines.rest[index]
-            record["n"], record["c"] = lines.normal[index], curve_of
+            record["n"], record["c"], record["i"] = lines.normal[index], curve_of, index
             vbo = self.ctx.buffer(record.tobytes())
-            vao = self.ctx.vertex_array(self.regular, [(vbo, "3f 3f 1f 3f 1i", "in_position", "in_tangent",
-                                                        "in_arclength", "in_normal", "in_curve")], skip_errors=True)
-            depth_vao = self.ctx.vertex_array(self.depth, [(vbo, "3f 3f 1f 3f 1i", "in_position", "in_tangent",
-                                                            "in_arclength", "in_normal", "in_curve")], skip_errors=True)
-            fly_vao = self.ctx.vertex_array(self.flyaway, [(vbo, "3f 3f 1f 3f 1i", "in_position", "in_tangent",
-                                                            "in_arclength", "in_normal", "in_curve")], skip_errors=True)
+            layout = [(vbo, "3f 3f 1f 3f 1i 1i", "in_position", "in_tangent", "in_arclength", "in_normal", "in_curve",
+                       "in_index")]
+            vao, depth_vao, fly_vao = (self.ctx.vertex_array(program, layout, skip_errors=True)
+                                       for program in (self.regular, self.depth, self.flyaway))
             draws.append((int(k), (vao, vbo, depth_vao, fly_vao), len(index)))
         return draws
 

@@ -9,6 +9,7 @@ in FragmentData {
     centroid float depth;
     flat vec2 segment_s;
     flat int curve;
+    flat int segment;
 } fin;
 
 uniform float far_plane;

@@ -10,6 +10,7 @@ in FragmentData {
     centroid float depth;
     flat vec2 segment_s;
     flat int curve;
+    flat int segment;
 } fin;
 
 // the camera (as in strip.geom)
@@ -26,9 +27,26 @@ uniform float twist_sign;
 
 struct StripPoint {
     vec3 position, t, n, b, wo;
-    float u, v, depth, footprint;
+    float s, u, v, depth, footprint;  // s: the rest arc length; u: the texture coordinate (the view phase's)
     bool drawn;  // false when edge-on (|ω_o − (ω_o·t)t| < DEGENERATE)
 };
+
+// the strip frame of tangent t seen from wo (strip_shading._strip_frame)
+void strip_frame(inout StripPoint p) {
+    vec3 n = p.wo - dot(p.wo, p.t) * p.t;
+    p.drawn = length(n) >= DEGENERATE;
+    p.n = p.drawn ? normalize(n) : n;
+    p.b = cross(p.n, p.t);
+}
+
+// the texture coordinate u of rest arc length s, seen from the azimuth of the yarn frame's normal N
+// (pipeline.view_phase_arclength)
+float view_phase_u(vec3 t, vec3 wo, vec3 normal, float s) {
+    vec3 yn = normal - dot(normal, t) * t;
+    yn = length(yn) > 1e-9 ? normalize(yn) : normal;
+    float gamma = atan(dot(wo, cross(t, yn)), dot(wo, yn));
+    return (s - twist_sign * gamma / (2.0 * PI) * period) / period;
+}
 
 StripPoint strip_point() {
     StripPoint p;
@@ -55,15 +73,8 @@ StripPoint strip_point() {
     p.wo = ortho_height > 0.0 ? -cam_fwd : normalize(cam_position - p.position);
     p.footprint = ortho_height > 0.0 ? ortho_height / float(image_height)
                                      : 2.0 * p.depth * tan_half / float(image_height);
-    // strip frame (strip_shading._strip_frame)
-    vec3 n = p.wo - dot(p.wo, p.t) * p.t;
-    p.drawn = length(n) >= DEGENERATE;
-    p.n = p.drawn ? normalize(n) : n;
-    p.b = cross(p.n, p.t);
-    // the view phase (pipeline.view_phase_arclength)
-    vec3 yn = normal - dot(normal, p.t) * p.t;
-    yn = length(yn) > 1e-9 ? normalize(yn) : normal;
-    float gamma = atan(dot(p.wo, cross(p.t, yn)), dot(p.wo, yn));
-    p.u = (arclength - twist_sign * gamma / (2.0 * PI) * period) / period;
+    strip_frame(p);
+    p.s = arclength;
+    p.u = view_phase_u(p.t, p.wo, normal, arclength);
     return p;
 }

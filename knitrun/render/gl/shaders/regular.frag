@@ -12,9 +12,69 @@ uniform int texture_levels;
 uniform sampler2D detail_tex;    // fiber-level detail (yarn_look.fiber_detail_chain), or one texel of 1
 uniform int detail_levels;
 uniform int surface_shadows;     // Features.surface_shadows: lights looked up on the tube surface seen
+// the axial parallax (Features.parallax; pipeline.parallax_shift): the frame's polylines, POLYLINE_ROW points a row,
+// per point three texels (x, y, z, rest arc length), (vertex tangent, 0), (yarn frame's N, 0); per curve one texel
+// (its first point, its last point)
+uniform int parallax;
+uniform sampler2D polyline;
+uniform sampler2D curve_bounds;
+
+vec4 polyline_at(int i, int k) {
+    return texelFetch(polyline, ivec2(3 * (i % POLYLINE_ROW) + k, i / POLYLINE_ROW), 0);
+}
+
+float segment_length(int j) {
+    return distance(polyline_at(j, 0).xyz, polyline_at(j + 1, 0).xyz);
+}
+
+// move ``at`` (current length from point j along its segment of length len) onto the segment it falls in, at most
+// PARALLAX_STEPS segments each way (the CPU walks on to the curve's ends, lo and hi)
+void walk(inout float at, inout int j, inout float len, int lo, int hi) {
+    for (int k = 0; k < PARALLAX_STEPS && at > len && j + 1 < hi; ++k) {
+        at -= len;
+        j += 1;
+        len = segment_length(j);
+    }
+    for (int k = 0; k < PARALLAX_STEPS && at < 0.0 && j > lo; ++k) {
+        j -= 1;
+        len = segment_length(j);
+        at += len;
+    }
+}
+
+// the regular point read r √(1 − v²) tan θ_o further along its curve (pipeline.parallax_shift), walked in current
+// length: its tangent turned by the vertex tangents' change, its rest arc length, strip frame and view phase there.
+// A fragment's sample may lie past its own segment's end (strip_point extends a segment's attributes to its
+// neighbours), where the CPU shades the neighbour's triangle: the point is first found on the segment it lies on.
+void axial_parallax(inout StripPoint sp) {
+    vec2 bounds = texelFetch(curve_bounds, ivec2(fin.curve % POLYLINE_ROW, fin.curve / POLYLINE_ROW), 0).xy;
+    int lo = int(bounds.x), hi = int(bounds.y), j = fin.segment;
+    if (j >= hi)
+        return;
+    float sin_o = clamp(dot(sp.t, sp.wo), -PARALLAX_MAX_SIN, PARALLAX_MAX_SIN);
+    float shift = radius * sqrt(max(0.0, 1.0 - sp.v * sp.v)) * sin_o / sqrt(1.0 - sin_o * sin_o);
+    vec4 a = polyline_at(j, 0), b = polyline_at(j + 1, 0);
+    float d_rest = b.w - a.w, len = distance(a.xyz, b.xyz);
+    float at = d_rest > 0.0 ? (sp.s - a.w) / d_rest * len : 0.0;
+    walk(at, j, len, lo, hi);
+    float f0 = len > 0.0 ? clamp(at / len, 0.0, 1.0) : 0.0;
+    vec3 h = mix(polyline_at(j, 1).xyz, polyline_at(j + 1, 1).xyz, f0);
+    at = f0 * len + shift;
+    walk(at, j, len, lo, hi);
+    float f = len > 0.0 ? clamp(at / len, 0.0, 1.0) : 0.0;
+    vec3 m = sp.t + mix(polyline_at(j, 1).xyz, polyline_at(j + 1, 1).xyz, f) - h;
+    if (length(m) > 0.0)
+        sp.t = normalize(m);
+    vec4 pj = polyline_at(j, 0), pk = polyline_at(j + 1, 0);
+    sp.s = pj.w + f * (pk.w - pj.w);
+    strip_frame(sp);
+    sp.u = view_phase_u(sp.t, sp.wo, mix(polyline_at(j, 2).xyz, polyline_at(j + 1, 2).xyz, f), sp.s);
+}
 
 void main() {
     StripPoint sp = strip_point();
+    if (parallax != 0 && sp.drawn)
+        axial_parallax(sp);
     gl_FragDepth = clamp(fin.depth / far_plane, 0.0, 1.0);
     if (!sp.drawn) { out_colour = vec4(background, 1.0); return; }  // edge-on: not drawn, the background shows
     vec3 t = sp.t, n = sp.n, b = sp.b, wo = sp.wo;
@@ -30,7 +90,7 @@ void main() {
     float spread2 = tangent_spread(tex, cov);
     float theta_o = clamped_asin(dot(t, wo));
     float theta_o_f = clamped_asin(dot(tf, wo));
-    // where the lights are looked up: the strip point, or the tube surface the camera sees there (pipeline.tube_surface)
+    // where the lights are looked up: the strip point, or the tube surface seen there (pipeline.tube_surface)
     vec3 receiver = surface_shadows != 0 ? sp.position + radius * sqrt(max(1.0 - v * v, 0.0)) * wo : sp.position;
     Params p = yarn_params();
     vec3 rgb = vec3(0.0), xi, psi, total, back_direct, f_scatter;

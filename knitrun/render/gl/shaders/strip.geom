@@ -13,6 +13,7 @@ in VertexData {
     float arclength;
     vec3 normal;
     flat int curve;
+    flat int index;
 } vin[];
 
 out FragmentData {
@@ -24,6 +25,7 @@ out FragmentData {
     centroid float depth;      // view depth (pinhole: distance from the camera, as strip_raster)
     flat vec2 segment_s;  // rest arc lengths from the previous point to the next (ascending): the curve around here
     flat int curve;
+    flat int segment;     // the segment's first point among the frame's polyline points (strip_raster's segment)
 } gout;
 
 uniform vec3 cam_position;
@@ -70,6 +72,7 @@ void emit(int i, vec3 b, float v) {
     gout.depth = ortho_height > 0.0 ? dot(p - cam_position, cam_fwd) : length(p - cam_position);
     gout.segment_s = vec2(min(vin[0].arclength, vin[3].arclength), max(vin[0].arclength, vin[3].arclength));
     gout.curve = vin[1].curve;
+    gout.segment = vin[1].index;
     gl_Position = clip_of(p);
     EmitVertex();
 }
