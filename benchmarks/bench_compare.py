@@ -16,10 +16,14 @@ the reference's cost); otherwise the reference and its floors are path traced at
 """
 
 import argparse
+import sys
 from pathlib import Path
 
 from knitbake.compare.report import FLOOR_LABELS, compare_scene
-from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER, combined
+from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from probe_split import checked_models_and_scenes  # noqa: E402
 
 SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
           "knit_patch_sky", "knit_patch_grazing", "simulated_patch_directional")
@@ -40,14 +44,7 @@ def main():
     parser.add_argument("--models", default=",".join(ABLATION_ORDER),
                         help="comma-separated ablations or combinations a+b (default: every ablation)")
     args = parser.parse_args()
-    models = args.models.split(",")
-    for name in models:
-        try:
-            combined(name)
-        except ValueError as e:
-            parser.error(f"--models: {e}")
-    if any(s not in SCENES for s in args.scenes.split(",")):
-        parser.error(f"--scenes: expected names among {', '.join(SCENES)}")
+    models, _ = checked_models_and_scenes(parser, args)
     root = Path(__file__).resolve().parent.parent / "examples" / "scenes"
     print("| scene | model | mean ratio | yarn-scale rel L1 (d) | (2d) | ratio to instance floor (d) | yarn FLIP | "
           "pixel FLIP | strip ms | speed-up |")

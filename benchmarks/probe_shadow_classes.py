@@ -20,6 +20,7 @@ references of ``bench_floors.py`` (``<scene>.exr``); about 10 s per scene and mo
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,9 @@ from knitrun.render.camera import scene_camera
 from knitrun.render.shadow_map import build_shadow_map, shadow_visibility
 from knitrun.render.strip_raster import rasterize_visibility
 from knitrun.render.strip_shading import shading_points
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from probe_split import checked_models_and_scenes  # noqa: E402
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 SCENES = "knit_patch_directional,knit_patch_grazing,simulated_patch_directional"
@@ -81,12 +85,7 @@ def main():
                         help="ablations or combinations a+b (ablations.combined); a model with surface_shadows is "
                              "classed by its own lookups")
     args = parser.parse_args()
-    models = args.models.split(",")
-    for name in models:
-        try:
-            combined(name)
-        except ValueError as e:
-            parser.error(f"--models: {e}")
+    models, _ = checked_models_and_scenes(parser, args)
     lum = np.asarray(LUMINANCE, np.float64)
     print("| scene | lookups at | class | pixels | reference's light | " + " | ".join(models) + " |")
     print("|---|---|---|---|---|" + "---|" * len(models))
