@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from knitrun.render.ablations import ABLATIONS, Features, combined, regular_fibers
+from knitrun.render.strip_raster import vertex_tangents
 from knitrun.render.yarn_bounce import (CONTACT_RADII, INV_PI2, BounceLights, BounceYarns, lambert_cylinder,
-                                        segment_solid_angle, vertex_bounce, vertex_tangents)
+                                        segment_solid_angle, vertex_bounce)
 from tests.helpers import FRONT, SUN, straight, write_scene
 from tests.test_render import _render
 

@@ -92,10 +92,10 @@ from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import behind_map, build_shadow_map, shadow_visibility
-from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent
+from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent, vertex_tangents
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
                                           same_surface, shade_flyaway, shade_regular, shading_points)
-from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, vertex_bounce, vertex_tangents
+from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, vertex_bounce
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table

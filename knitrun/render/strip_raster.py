@@ -340,6 +340,24 @@ def vertex_tangent(points, i, before, after):
     return _unit(tx, ty, tz)
 
 
+def vertex_tangents(points, offsets):
+    """(P, 3) unit tangents of the vertices of open polylines (curve c: points offsets[c] … offsets[c + 1] − 1) by
+    ``vertex_tangent``'s rule, the tangents the strips are built with."""
+    points = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+    out = np.zeros_like(points)
+    _vertex_tangents(points, np.ascontiguousarray(offsets, np.int64), out)
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _vertex_tangents(points, offsets, out):
+    for c in prange(offsets.shape[0] - 1):
+        lo, hi = offsets[c], offsets[c + 1]
+        for i in range(lo, hi):
+            out[i, 0], out[i, 1], out[i, 2] = vertex_tangent(points, i, i - 1 if i > lo else -1,
+                                                             i + 1 if i + 1 < hi else -1)
+
+
 @njit(cache=True, error_model="numpy")
 def _unit(x, y, z):
     """(x, y, z) normalized; (0, 0, 0) stays (0, 0, 0)."""

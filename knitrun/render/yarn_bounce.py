@@ -62,7 +62,6 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from knitrun.render.strip_raster import vertex_tangent
 
 REACH_RADII = 8.0  # neighbours counted within this many yarn radii of a vertex (about one stitch of a knit)
 CONTACT_RADII = 2.0  # the nearest a neighbouring axis counts: touching tubes
@@ -92,23 +91,6 @@ class BounceLights(NamedTuple):
     direction: np.ndarray
     irradiance: np.ndarray
     direct: np.ndarray
-
-
-def vertex_tangents(points, offsets):
-    """(P, 3) unit tangents of the polylines' vertices by the rasterizer's rule (``strip_raster.vertex_tangent``)."""
-    points = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
-    out = np.zeros_like(points)
-    _vertex_tangents(points, np.ascontiguousarray(offsets, np.int64), out)
-    return out
-
-
-@njit(parallel=True, cache=True)
-def _vertex_tangents(points, offsets, out):
-    for c in prange(offsets.shape[0] - 1):
-        lo, hi = offsets[c], offsets[c + 1]
-        for i in range(lo, hi):
-            out[i, 0], out[i, 1], out[i, 2] = vertex_tangent(points, i, i - 1 if i > lo else -1,
-                                                             i + 1 if i + 1 < hi else -1)
 
 
 def vertex_bounce(yarns: BounceYarns, lights: BounceLights, reach_radii: float = REACH_RADII):

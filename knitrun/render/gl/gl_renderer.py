@@ -60,7 +60,7 @@ from knitrun.render.ablations import Features
 from knitrun.render.camera import Camera, scene_camera
 from knitrun.render.ms_lights import ms_cells
 from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS
-from knitrun.render.strip_raster import SAMPLE_PATTERNS
+from knitrun.render.strip_raster import SAMPLE_PATTERNS, vertex_tangents
 from knitrun.shading import fiber_bcsdf as fb
 
 SHADERS = Path(__file__).with_name("shaders")
@@ -177,27 +177,6 @@ def _set(program, name, value):
         member.value = tuple(flat) if len(flat) > 1 else flat[0]
     else:
         member.value = value
-
-
-def vertex_tangents(points, offsets) -> np.ndarray:
-    """Unit vertex tangents of open polylines by ``strip_raster``'s rule: the normalized sum of the unit directions of
-    a point's two segments (one at an end), zero-length segments ignored, at an exact hairpin the outgoing one."""
-    tangent = np.zeros_like(points)
-    for c in range(len(offsets) - 1):
-        p = points[offsets[c]:offsets[c + 1]]
-        if len(p) < 2:
-            continue
-        d = np.diff(p, axis=0)
-        length = np.linalg.norm(d, axis=1, keepdims=True)
-        unit = np.where(length > 0, d / np.where(length > 0, length, 1.0), 0.0)
-        incoming = np.vstack([np.zeros(3), unit])
-        outgoing = np.vstack([unit, np.zeros(3)])
-        t = incoming + outgoing
-        small = np.einsum("ij,ij->i", t, t) < 1e-18
-        t[small] = np.where(np.any(outgoing[small] != 0, axis=1, keepdims=True), outgoing[small], incoming[small])
-        norm = np.linalg.norm(t, axis=1, keepdims=True)
-        tangent[offsets[c]:offsets[c + 1]] = np.where(norm > 0, t / np.where(norm > 0, norm, 1.0), 0.0)
-    return tangent
 
 
 def _texture2d(ctx, array):
