@@ -10,7 +10,9 @@ the frames, whose ``load`` is evaluating this frame's curves into polylines. Bef
 whole one-shot ``pipeline.render`` per frame (set-up included: ``load`` ~110 ms, the sky's fit 4 ms from its cache).
 
     .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3] [--light directional|sky16]
-        [--no-sweep] [--backend cpu|gl]
+        [--no-sweep] [--backend cpu|gl] [--ablation surface_shadows+parallax+view_xi]
+
+``--ablation`` times another model than the default (an ablation or a combination a+b, ``ablations.combined``).
 
 ``--backend gl`` times the OpenGL backend (``knitrun.render.gl``) on whatever EGL gives: a GPU, or Mesa's llvmpipe.
 
@@ -29,6 +31,7 @@ from data_formats.yarn_curves import write_yarn_curves
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
 from knitrun.render import pipeline
+from knitrun.render.ablations import Features, combined
 from knitrun.sim.crane_stockinette import stockinette_curves
 
 SCENE = """format = "knit-scene"
@@ -56,9 +59,9 @@ LIGHTS = {"directional": 'type = "directional"\ndirection = [0.4, 0.6, 1.0]\nirr
           "sky16": 'type = "environment"\nbuiltin = "sky"'}
 
 
-def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", layers=2):
+def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", layers=2, features=Features()):
     """(median seconds per frame, its timings, facts, set-up seconds): one renderer set up once (``Renderer`` or
-    ``GLRenderer``), then its frames (what a viewer pays per frame)."""
+    ``GLRenderer``) with ``features``, then its frames (what a viewer pays per frame)."""
     write_yarn_curves(folder / "patch.h5", stockinette_curves(rows, 21))
     (folder / "scene.toml").write_text(SCENE.format(width=width, height=height, light=LIGHTS[light], layers=layers))
     scene = load_scene(folder / "scene.toml")
@@ -66,9 +69,9 @@ def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", 
     if backend == "gl":
         from knitrun.render.gl.gl_renderer import GLRenderer
 
-        renderer = GLRenderer(scene, {"cotton1": str(pack)})
+        renderer = GLRenderer(scene, {"cotton1": str(pack)}, features)
     else:
-        renderer = pipeline.Renderer(scene, {"cotton1": str(pack)})
+        renderer = pipeline.Renderer(scene, {"cotton1": str(pack)}, features=features)
     setup = time.perf_counter() - start
     draw = renderer.render
     result = draw()
@@ -91,7 +94,12 @@ def main():
                         help="gl: the OpenGL backend, plus the paper's 200K-point size under the sky")
     parser.add_argument("--layers", type=int, choices=(1, 2), default=2,
                         help="render.layers: 2 (default) draws the depth-peeled strips behind the front ones")
+    parser.add_argument("--ablation", default="full", help="the model timed: an ablation or a combination a+b")
     args = parser.parse_args()
+    try:
+        features = combined(args.ablation)
+    except ValueError as e:
+        parser.error(f"--ablation: {e}")
     folder = Path(tempfile.mkdtemp(prefix="knit_bench_render_"))
     pack = args.pack
     if pack is None:
@@ -102,7 +110,8 @@ def main():
         from knitrun.render.gl.gl_renderer import gl_context
 
         where = f"GL: {gl_context().info['GL_RENDERER']}"
-    print(f"## Strip renderer (cotton1, {where}, pack {Path(pack).name}, render.layers = {args.layers})")
+    print(f"## Strip renderer (cotton1, {where}, pack {Path(pack).name}, render.layers = {args.layers}, "
+          f"model {args.ablation})")
     print("| light | control points | pixels | shading points | set-up ms (once) | frame ms | load | raster | shadow "
           "| shade | resolve |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -115,7 +124,7 @@ def main():
         cases = cases[:3 if args.backend == "gl" else 2]
     for light, rows, width, height in [c for c in cases if args.light in (None, c[0])]:
         total, timings, facts, setup = time_scene(folder, pack, rows, width, height, light, args.frames, args.backend,
-                                                  args.layers)
+                                                  args.layers, features)
         passes = " | ".join(f"{1e3 * timings.get(k, 0.0):.0f}" for k in
                             ("load", "raster", "shadow", "shade", "resolve"))
         points = facts.get("shading_points", "—")
