@@ -89,8 +89,11 @@ def main():
     lum = np.asarray(LUMINANCE, np.float64)
     print("| scene | lookups at | class | pixels | reference's light | " + " | ".join(models) + " |")
     print("|---|---|---|---|---|" + "---|" * len(models))
-    for name in args.scenes.split(","):
-        scene = load_scene(EXAMPLES / f"{name}.toml")
+    scenes = {name: load_scene(EXAMPLES / f"{name}.toml") for name in args.scenes.split(",")}
+    for name, scene in scenes.items():
+        if all(isinstance(light, EnvironmentLight) for light in scene.lights):
+            parser.error(f"--scenes: {name} has no directional light (the classes are by a directional light's V)")
+    for name, scene in scenes.items():
         packs = {"cotton1": args.pack}
         reference = read_exr(Path(args.reference_dir) / f"{name}.exr").astype(np.float64)[..., :3] @ lum
         images, renderer = {}, None
