@@ -100,8 +100,8 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     ``reference``: an EXR to use instead of path tracing one (its cost is read from the JSON summary `knitbake
     reference` writes beside it, else unknown); ``spp``: samples per pixel of what is path traced (default: the
     scene's); ``packs``: yarn → pack overrides for the strip renderer; ``ablations``: the models drawn, each an
-    ablation or a combination "a+b" (``knitrun.render.ablations.combined``). ``floor_references``: floor name (``FLOORS``)
-    → an EXR of that floor image, rendered at the reference's spp with the seeds ``FLOORS`` gives; a floor not given
+    ablation or a combination "a+b" (``knitrun.render.ablations.combined``). ``floor_references``: floor name
+    (``FLOORS``) → an EXR of that floor image, rendered at the reference's spp with the seeds ``FLOORS`` gives; a floor not given
     is path traced when ``floors`` is true and the reference is traced here too (a given reference's seeds are not
     known), else not reported. ``client``: a Dask client (``knitbake.scale_out.dask_client``) that traces the
     reference and the floors at once, as tasks (the same images)."""
