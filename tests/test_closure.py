@@ -97,12 +97,13 @@ def test_the_renderer_reads_the_closed_xi_where_the_pack_has_it(closed_pack, tmp
     scene = closure._scene(tmp_path, SPEC, closed_pack)
     with h5py.File(closed_pack) as f:
         paper, closed = f["correction/xi"][()], f["correction/xi_view"][()]
-    view = Renderer(scene, features=Features(view_xi=True))
+    view = Renderer(scene)  # the default: ξ closed at every view
     assert np.array_equal(view.looks[0].xi_view, closed)
     assert view.setup_facts["xi"] == {SPEC.name: "closed on the renderer at every view"}
-    default = Renderer(scene).looks[0]  # the diagonal of the view-closed ξ
-    assert default.xi_view.shape[0] == 0 and np.array_equal(default.xi_full, closure.diagonal_of(closed))
-    assert Renderer(scene).setup_facts["xi"] == {SPEC.name: "closed on the renderer"}
+    diagonal = Renderer(scene, features=Features(view_xi=False))  # the diagonal of the view-closed ξ
+    assert diagonal.looks[0].xi_view.shape[0] == 0
+    assert np.array_equal(diagonal.looks[0].xi_full, closure.diagonal_of(closed))
+    assert diagonal.setup_facts["xi"] == {SPEC.name: "closed on the renderer"}
     # the pack was baked with --only (no flyaway stage): drawn without the flyaway layer, and said
     assert any("drawn without its flyaway layer" in w for w in Renderer(scene).warnings)
     papers = Renderer(scene, features=Features(closed_xi=False)).looks[0]
@@ -179,7 +180,7 @@ def test_the_renderer_reads_the_split_xi_when_asked(closed_pack, tmp_path):
     scene = closure._scene(tmp_path, SPEC, closed_pack)
     with h5py.File(closed_pack) as f:
         ss, ms = f["correction/xi_view_ss"][()], f["correction/xi_view_ms"][()]
-    split = Renderer(scene, features=Features(split_xi=True))
+    split = Renderer(scene, features=Features(split_xi=True, view_xi=False))
     look = split.looks[0]
     assert np.array_equal(look.xi_full, closure.diagonal_of(ms)) and np.array_equal(look.xi_single,
                                                                                    closure.diagonal_of(ss))

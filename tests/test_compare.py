@@ -103,7 +103,7 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
         assert (out / name).is_file(), name
     report = (out / "report.md").read_text()
     assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
-    assert summary["ablations"]["full"]["xi"] == {"cotton1": "closed on the renderer"}
+    assert summary["ablations"]["full"]["xi"] == {"cotton1": "closed on the renderer at every view"}
     assert summary["ablations"]["papers_xi"]["xi"] == {"cotton1": "the paper's"}
     # the test pack is baked without the split closure (the presets' default): its split_xi row says what it drew
     assert "the pack has no ξ closed apart" in summary["ablations"]["split_xi"]["xi"]["cotton1"]
@@ -111,7 +111,8 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     old = tmp_path / "schema22.h5"  # a pack from before the closure: every row shaded with the paper's ξ, and said
     shutil.copy(pack, old)
     with h5py.File(old, "r+") as f:
-        del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
+        for name in ("xi_closed", "xi_view", "radiance_view"):
+            del f[f"correction/{name}"], f[f"correction/{name}_stderr"]
     again = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"),
                                          "--instance-floor", str(out / "floor_instance.exr"),
                                          "--pack", f"cotton1={old}", "-o", str(tmp_path / "r2"), "--json"])

@@ -316,12 +316,12 @@ def test_the_axial_parallax_leaves_a_yarn_across_the_view_and_moves_a_tilted_ben
     camera sees its ends obliquely, which moves them). A yarn that rises toward the camera is drawn otherwise."""
     ortho = FRONT.replace("fov_deg = 30.0", "ortho_height = 0.5")
     across = write_scene(tmp_path, [straight()], camera=ortho, lights=SUN, name="across")
-    on = Features(parallax=True)
-    np.testing.assert_allclose(_render(across, pack, features=on).image, _render(across, pack).image, atol=1e-5)
+    off = Features(parallax=False)
+    np.testing.assert_allclose(_render(across, pack).image, _render(across, pack, features=off).image, atol=1e-5)
     t = np.linspace(0.0, np.pi, 25)
     arc = np.stack([0.25 * np.cos(t), 0.05 * np.sin(t), 0.2 * np.sin(t)], axis=1)  # rises toward the camera
     bent = write_scene(tmp_path, [arc], camera=FRONT, lights=SUN, name="bent")
-    assert np.abs(_render(bent, pack, features=on).image - _render(bent, pack).image).max() > 1e-3
+    assert np.abs(_render(bent, pack).image - _render(bent, pack, features=off).image).max() > 1e-3
 
 
 def test_the_tube_surface_is_the_strip_point_moved_toward_the_camera_by_the_tubes_height():
@@ -348,8 +348,9 @@ def test_surface_shadows_light_the_front_of_a_yarn_whose_axis_plane_a_touching_n
     path = write_scene(tmp_path, [a, b], camera=camera, lights=grazing, render="layers = 1",
                        name="touching")
     path.write_text(path.read_text().replace("background = [0.1, 0.2, 0.3]", "background = [0.0, 0.0, 0.0]"))
-    axis_plane = _render(path, pack, features=Features(flyaways=False)).image.sum(axis=-1)
-    surface = _render(path, pack, features=Features(flyaways=False, surface_shadows=True)).image.sum(axis=-1)
+    axis_plane = _render(path, pack, features=Features(flyaways=False, surface_shadows=False, yarn_bounce=False)
+                         ).image.sum(axis=-1)
+    surface = _render(path, pack, features=Features(flyaways=False, yarn_bounce=False)).image.sum(axis=-1)
     px = 0.3 / 48  # ortho_height / height: rows of A's middle third and of B's, away from the shared edge
     row_a = slice(24 - int(r / 3 / px), 24 + int(r / 3 / px) + 1)
     row_b = slice(24 - int((2 * r + r / 3) / px), 24 - int((2 * r - r / 3) / px) + 1)
@@ -389,9 +390,9 @@ def test_cli_render_takes_a_combination_of_ablations_and_names_an_unknown_one(tm
     path = write_scene(tmp_path, [straight(z=0.0), straight(z=-0.1) + [0.0, -0.04, 0.0]], camera=FRONT, lights=SUN)
     exr = tmp_path / "out.exr"
     result = CliRunner().invoke(knitrun, ["render", str(path), "-o", str(tmp_path / "out.png"), "--exr", str(exr),
-                                          "--pack", f"cotton1={pack}", "--ablation", "surface_shadows+parallax"])
+                                          "--pack", f"cotton1={pack}", "--ablation", "axis_shadows+no_parallax"])
     assert result.exit_code == 0, result.output
-    expect = _render(path, pack, features=Features(surface_shadows=True, parallax=True)).image
+    expect = _render(path, pack, features=Features(surface_shadows=False, parallax=False)).image
     np.testing.assert_array_equal(read_exr(exr), expect)
     bad = CliRunner().invoke(knitrun, ["render", str(path), "-o", str(tmp_path / "b.png"), "--pack",
                                        f"cotton1={pack}", "--ablation", "full+bounce"])
@@ -699,18 +700,22 @@ def test_flyaway_points_that_share_the_regular_points_shadow_lookups_move_the_im
     """Two crossing yarns under the sky (soft shadows of every lobe): the image with each flyaway point's own shadow
     lookups and with those shared from the regular point at the same sample (``same_surface``) differ by less than
     0.2 % of the peak anywhere and 0.1 % in mean (measured: not at all); pairing each with the first regular point
-    of its pixel, whatever its curve and position, moves a pixel by 0.53 % of the peak."""
+    of its pixel, whatever its curve and position, moves a pixel by 0.53 % of the peak. Both on the strip plane
+    (``axis_shadows``): the default looks a regular point up on its tube's surface, and a hair over its yarn's body
+    then takes that lookup, nearer to where the hair lies than its own strip plane (2.7 % of the peak at one pixel
+    here, measured)."""
     from knitrun.render import pipeline
 
     path = write_scene(tmp_path, [straight(), straight(z=0.1)[:, [1, 0, 2]]], camera=FRONT, lights=SKY)
-    shared = _render(path, pack)
+    axis = Features(surface_shadows=False)
+    shared = _render(path, pack, features=axis)
     assert 0 < shared.facts["flyaway_points_shared"] < shared.facts["flyaway_points_covered"]
 
     def own(start, curve, position, other_start, other_curve, other_position, reach, out):
         out[:] = -1
 
     monkeypatch.setattr(pipeline, "same_surface", own)
-    alone = _render(path, pack).image
+    alone = _render(path, pack, features=axis).image
     worst = np.abs(shared.image - alone).max() / alone.max()
     assert worst < 2e-3 and abs(shared.image.mean() / alone.mean() - 1.0) < 1e-3
 

@@ -4,14 +4,15 @@ neighbour, none from a neighbour in the dark, linear in the light; the renderer'
 
 import math
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from knitrun.render.ablations import ABLATIONS, Features, combined, regular_fibers
 from knitrun.render.strip_raster import vertex_tangents
-from knitrun.render.yarn_bounce import (CONTACT_RADII, INV_PI2, BounceLights, BounceYarns, lambert_cylinder,
-                                        segment_solid_angle, vertex_bounce)
+from knitrun.render.yarn_bounce import (CONTACT_RADII, INV_PI2, BounceLights, BounceYarns, lambert_pair,
+                                        segment_solid_angle, tube_optics, vertex_bounce)
 from tests.helpers import FRONT, SUN, straight, write_scene
 from tests.test_render import _render
 
@@ -41,16 +42,25 @@ def test_segment_solid_angle_matches_quadrature():
     assert segment_solid_angle(np.zeros(3), np.ones(3), np.ones(3), 0.1, 0.1) == 0.0
 
 
-def test_lambert_cylinder_is_a_normalised_phase():
+def _g(alpha):
+    """The Lambertian cylinder's phase over its mean, written out here: (π/4)(sin α + (π − α) cos α)."""
+    return 0.25 * math.pi * (math.sin(alpha) + (math.pi - alpha) * math.cos(alpha))
+
+
+def test_lambert_pair_is_a_normalised_phase_at_alpha_and_its_supplement():
     """g averages 1 over the circle (the tube's mean radiance is ρ E cos θ/π²), peaks at π²/4 toward the light, is 0
-    opposite and π/4 at right angles; outside [0, π] it clamps."""
+    opposite and π/4 at right angles; the kernel's pair is (g(α), g(π − α))."""
     alpha = np.linspace(0.0, math.pi, 100001)
-    g = np.array([lambert_cylinder(a) for a in alpha])
+    pairs = np.array([lambert_pair(a) for a in alpha])
+    g = pairs[:, 0]
     assert np.trapezoid(g, alpha) / math.pi == pytest.approx(1.0, rel=1e-9)
-    assert lambert_cylinder(0.0) == pytest.approx(math.pi ** 2 / 4)
-    assert lambert_cylinder(math.pi) == pytest.approx(0.0, abs=1e-15)
-    assert lambert_cylinder(0.5 * math.pi) == pytest.approx(math.pi / 4)
-    assert np.all(g >= -1e-15) and lambert_cylinder(-1.0) == lambert_cylinder(0.0)
+    assert lambert_pair(0.0)[0] == pytest.approx(math.pi ** 2 / 4) and lambert_pair(math.pi)[1] == pytest.approx(
+        math.pi ** 2 / 4)
+    assert lambert_pair(math.pi)[0] == pytest.approx(0.0, abs=1e-15)
+    assert lambert_pair(0.5 * math.pi)[0] == pytest.approx(math.pi / 4)
+    assert np.all(pairs >= -1e-15)
+    np.testing.assert_allclose(g, [_g(a) for a in alpha], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(pairs[:, 1], [_g(math.pi - a) for a in alpha], rtol=1e-12, atol=1e-14)
 
 
 def _yarns(curves, radius, reflect, transmit, camera):
@@ -100,9 +110,9 @@ def test_two_parallel_yarns_match_a_direct_integration():
             return np.linalg.norm(up), math.acos(np.clip(up @ vp / np.linalg.norm(up) / np.linalg.norm(vp), -1, 1))
 
         cos_l, alpha_l = across(light[0], d)
-        sent = e[0] * cos_l * (reflect * lambert_cylinder(alpha_l) + transmit * lambert_cylinder(math.pi - alpha_l))
+        sent = e[0] * cos_l * (reflect * _g(alpha_l) + transmit * _g(math.pi - alpha_l))
         cos_r, alpha_r = across(-d, yarns.toward_camera[i])
-        total += w * sent * cos_r * (reflect * lambert_cylinder(alpha_r) + transmit * lambert_cylinder(math.pi - alpha_r))
+        total += w * sent * cos_r * (reflect * _g(alpha_r) + transmit * _g(math.pi - alpha_r))
     f = -math.expm1(-omega / (4 * math.pi))
     expected = total * 4 * math.pi * f / omega * INV_PI2 ** 2 / (1 - (reflect + transmit) * f)
     assert covered[i] == pytest.approx(f, rel=1e-12)
@@ -136,34 +146,82 @@ def test_no_neighbour_no_dark_neighbour_no_bounce_and_linear_in_the_light():
     assert covered[100] > 0.0 and np.all(bounce[100] > 0.0)
 
 
-def test_the_bounce_ablation_brightens_crossing_yarns_and_is_off_by_default(tmp_path, pack):
-    """Two crossing yarns under the sun: with ``Features.yarn_bounce`` the image is at least as bright everywhere and
-    brighter near the crossing (finite); the default draws no bounce, as does a lone yarn with it; the facts report
-    the covered fraction."""
+def test_the_bounce_brightens_crossing_yarns_and_is_on_by_default(tmp_path, pack):
+    """Two crossing yarns under the sun: the default (``Features.yarn_bounce``) is at least as bright everywhere as
+    ``no_bounce`` and brighter near the crossing (finite); a lone yarn gets no bounce; the facts report the covered
+    fraction."""
     crossing = [straight(z=0.0), straight(z=0.07)[:, [1, 0, 2]]]
     scene = write_scene(tmp_path, crossing, camera=FRONT, lights=SUN, name="crossing")
-    default = _render(scene, pack)
-    with_bounce = _render(scene, pack, features=ABLATIONS["yarn_bounce"])
-    assert "yarn_bounce" not in default.facts and with_bounce.facts["yarn_bounce"]["covered_sphere"] > 0.0
+    without = _render(scene, pack, features=ABLATIONS["no_bounce"])
+    with_bounce = _render(scene, pack)
+    assert "yarn_bounce" not in without.facts and with_bounce.facts["yarn_bounce"]["covered_sphere"] > 0.0
     assert np.all(np.isfinite(with_bounce.image))
-    assert np.all(with_bounce.image >= default.image - 1e-6) and with_bounce.image.mean() > default.image.mean()
+    assert np.all(with_bounce.image >= without.image - 1e-6) and with_bounce.image.mean() > without.image.mean()
     lone = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="lone")
-    np.testing.assert_array_equal(_render(lone, pack, features=Features(yarn_bounce=True)).image,
-                                  _render(lone, pack).image)
+    np.testing.assert_array_equal(_render(lone, pack).image,
+                                  _render(lone, pack, features=Features(yarn_bounce=False)).image)
+
+
+def test_the_bounce_spreads_only_the_light_a_tube_scatters():
+    """``tube_optics``: R_Y = ρ_Y − T_Y back, S_Y = T_Y − τ_Y forward; a yarn whose fibers scatter nothing (all it
+    passes on crosses between them: ρ_Y = T_Y = τ_Y) sends no bounce either way; what it spreads is its albedo less
+    the gap light; noise that puts T_Y below τ_Y spreads nothing, not a negative amount."""
+    albedo, transmit = np.array([[0.785, 0.741, 0.641], [0.16, 0.16, 0.16]]), np.array([[0.46, 0.44, 0.40],
+                                                                                       [0.16, 0.16, 0.16]])
+    gap = np.array([0.16, 0.16])[:, None]
+    reflect, forward = tube_optics(albedo, transmit, gap)
+    np.testing.assert_allclose(reflect + forward, [[0.625, 0.581, 0.481], [0.0, 0.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(forward[0], [0.30, 0.28, 0.24], atol=1e-12)
+    assert np.all(tube_optics(albedo, transmit, 0.5)[1][1] == 0.0)
+
+
+def test_the_bounce_is_computed_about_one_and_a_half_radii_apart_and_interpolated_between():
+    """``pipeline.bounce_vertices`` keeps every curve's first and last point and points about
+    ``BOUNCE_SPACING_RADII`` radii apart (none of an empty curve); ``frame_bounce`` at those points, interpolated by
+    rest arc length, is the bounce computed at every point to 2 % of its peak: two wavy yarns 3 r apart, sampled
+    every 0.3 r, under a slanted light."""
+    from knitrun.render.camera import Camera
+    from knitrun.render.pipeline import BOUNCE_SPACING_RADII, _Polylines, bounce_vertices, frame_bounce
+
+    r, step = 0.03, 0.009
+    x = np.arange(0.0, 0.6, step)
+    wave = [np.stack([x, dy + 0.3 * r * np.sin(x / (4 * r)), 0.5 * r * np.cos(x / (3 * r))], axis=1)
+            for dy in (0.0, 3 * r)]
+    curves = [wave[0], np.zeros((0, 3)), wave[1]]
+    counts = [len(c) for c in curves]
+    points = np.concatenate(curves)
+    rest = np.concatenate([np.arange(n) * step for n in counts])
+    lines = _Polylines(points, np.cumsum([0] + counts), rest, np.zeros(3, np.int64), np.tile([0.0, 0.0, 1.0],
+                                                                                            (len(points), 1)))
+    look = SimpleNamespace(radius=r, hull_albedo=np.array([0.78, 0.74, 0.64]),
+                           hull_transmittance=np.array([0.46, 0.44, 0.40]), gap=0.16)
+    at = bounce_vertices(lines, [look])
+    first, last = lines.offsets[[0, 2]], lines.offsets[[1, 3]] - 1
+    assert set(first) | set(last) <= set(at) and np.all(np.diff(at) > 0)
+    spacing = np.linalg.norm(np.diff(points[at[:10]], axis=0), axis=1).mean()
+    assert 0.6 * BOUNCE_SPACING_RADII * r <= spacing <= 1.2 * BOUNCE_SPACING_RADII * r
+    camera = Camera(np.array([0.3, 0.05, 2.0]), np.array([0.3, 0.05, 0.0]), np.array([0.0, 1.0, 0.0]), 64, 48)
+    light, e = np.array([[0.3, 0.5, 0.8]]) / np.linalg.norm([0.3, 0.5, 0.8]), np.array([[1.0, 1.0, 1.0]])
+    everywhere = np.arange(len(points))
+    full, _ = frame_bounce(lines, [look], camera, light, e, everywhere, np.ones((1, len(points))),
+                           np.ones((1, len(points))))
+    thinned, _ = frame_bounce(lines, [look], camera, light, e, at, np.ones((1, len(at))), np.ones((1, len(at))))
+    assert full.max() > 0.0 and np.all(np.isfinite(thinned))
+    assert np.abs(thinned - full).max() < 0.02 * full.max()
 
 
 def test_ablations_combine_as_their_changes_to_the_full_model():
     """"a+b" is the full model with what a and b each change (the probes' ``--models``); an unknown name is refused
     in one line."""
-    assert combined("yarn_bounce+split_xi") == Features(yarn_bounce=True, split_xi=True)
+    assert combined("no_bounce+split_xi") == Features(yarn_bounce=False, split_xi=True)
     assert combined("full") == ABLATIONS["full"] and combined("no_tables") == ABLATIONS["no_tables"]
-    assert combined("no_tables+yarn_bounce") == Features(xi=False, fiber_shadowing=False, fiber_detail=False,
-                                                         yarn_bounce=True)
-    assert combined("papers_xi+view_xi") == Features(closed_xi=False, view_xi=True)
+    assert combined("no_tables+no_bounce") == Features(xi=False, fiber_shadowing=False, fiber_detail=False,
+                                                       yarn_bounce=False)
+    assert combined("papers_xi+no_parallax") == Features(closed_xi=False, parallax=False)
     with pytest.raises(ValueError, match="unknown ablation 'bounce'"):
         combined("full+bounce")
     # the flyaway-free probes take the same names
-    assert regular_fibers("view_xi+two_blockers") == Features(view_xi=True, two_blockers=True, flyaways=False)
+    assert regular_fibers("diagonal_xi+two_blockers") == Features(view_xi=False, two_blockers=True, flyaways=False)
     assert regular_fibers("plain_ds") == replace(ABLATIONS["plain_ds"], flyaways=False)
     with pytest.raises(ValueError, match="unknown ablation 'paper_xi'"):
         regular_fibers("paper_xi")

@@ -10,12 +10,21 @@ and the geometric fiber count for light crossing a yarn instead of the one from 
 False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N} (the paper's) instead of the pack's unfactorized
 tables.
 
-The full model (the defaults) draws the flyaway layer and shades the regular fibers with ξ closed on this renderer:
-measured against the reference on the seven example scenes (BENCHMARKS.md, "Issue 13: hairs in their own yarn's
-shadow, and the closed ξ with flyaways as the default"), the flyaway layer lowers the yarn-scale error on every scene
-once its hairs lie in their own yarn's shadow and the regular fibers are not already too bright: with the paper's ξ
-the lone yarn's regular fibers alone are 15–16 % brighter than the reference traced without hairs under the sky and
-back-lit ("Issue 13: ξ closed on the strip renderer"), and hairs drawn on top raise the error there.
+The full model (the defaults) draws the flyaway layer and shades the regular fibers with ξ closed on this renderer
+at every view, looks the lights up on the tube surface the camera sees, reads the textures with the axial parallax
+and adds the light the neighbouring yarns scatter onto each yarn. The flyaway layer lowers the yarn-scale error on
+every scene once its hairs lie in their own yarn's shadow and the regular fibers are not already too bright: with
+the paper's ξ the lone yarn's regular fibers alone are 15–16 % brighter than the reference traced without hairs
+under the sky and back-lit (BENCHMARKS.md, "Issue 13: hairs in their own yarn's shadow, and the closed ξ with
+flyaways as the default", "Issue 13: ξ closed on the strip renderer"). The last four terms became the default
+together in stop 49 (BENCHMARKS.md, "Issue 13: the default model of stop 49"): against the model without them
+(``diagonal_xi+no_parallax+no_bounce+axis_shadows``) the yarn-scale error over the instance floor falls on the
+four patches (1.70 / 1.58 / 1.80 / 2.02× → 1.51 / 1.46 / 1.70 / 1.87×: directional, grazing, sky, simulated)
+and the straight yarn under the sky (1.14 → 1.04×), the back-lit and directional straight yarns move by +0.01
+and +0.02×, and six of the seven mean radiance ratios lie in [0.95, 1.05] instead of five (the back-lit yarn's is
+1.058). Each alone does not: the view-closed ξ darkens the patches unless the bounce gives back the light that the
+diagonal ξ's excess had stood in for, and the surface lookups light legs that make the grazing patch too bright
+unless the ξ is right at grazing light.
 
 ``fiber_detail`` multiplies the regular fibers' radiance by the fiber-level detail of the pack's AO texture
 (``yarn_look.fiber_detail_chain``: each texel's ambient visibility over its row's mean), the crevices between plies
@@ -27,9 +36,9 @@ made to close on this renderer where it was measured, instead of the paper's Ψ_
 < 2.3, or baked with ``--only``) is shaded with the paper's ξ, and the render's facts say so (``facts["xi"]``). The
 closed ξ exists only as a full table: the factored rung (``full_tables`` False) uses the paper's factors.
 ``view_xi`` shades with the pack's ``correction/xi_view`` (schema 2.4) instead: ξ(v, θ_i, θ_o, φ) closed at every
-view and light, not only on the bake's diagonal θ_o = −θ_i. It is not the default: on the straight yarn it holds
-the brightness at every light angle where the diagonal ξ is up to 1.9× too bright at grazing light, but on the
-patches it is 1–5 % darker and, on three of the four, further from the reference at the yarn scale (BENCHMARKS.md,
+view and light, not only on the bake's diagonal θ_o = −θ_i; the ablation ``diagonal_xi`` reads the diagonal ξ. On
+the straight yarn the view-closed ξ holds the brightness at every light angle where the diagonal ξ is up to 1.9×
+too bright at grazing light; without the yarn-level bounce the patches are 1–5 % darker with it (BENCHMARKS.md,
 "Issue 13: ξ closed at every view").
 
 ``multiple_scattering`` False keeps single scattering alone: the fiber BCSDF f of every directional light and the
@@ -41,16 +50,17 @@ halves of the light, single and multiple, scene by scene.
 
 ``parallax`` moves each regular point's texture coordinate and tangent along the yarn to the centre-line point whose
 tube surface the camera sees there (``pipeline.parallax_shift``): nothing moves on a yarn across the view, a yarn
-tilted toward the camera is read further along (both backends). Not the default: it lowers the error on three
-patches of four but darkens the grazing-light patch (BENCHMARKS.md, "Issue 13: single and multiple scattering,
-split").
+tilted toward the camera is read further along (both backends; the ablation ``no_parallax`` reads the strip point's
+own). Alone it lowered the error on three patches of four but darkened the grazing-light patch (BENCHMARKS.md,
+"Issue 13: single and multiple scattering, split"); in the default it darkens the grazing patch's lit legs back
+(without it 1.174 of the reference's brightness, with it 1.041).
 
 ``yarn_bounce`` adds, under directional lights, the light the neighbouring yarns scatter onto a yarn
 (``knitrun.render.yarn_bounce``: from the pack's hull albedo and transmittance, no fitted constant; it needs
-``interreflection`` and ``multiple_scattering``). Not the default: it brings a white knit patch from 0.80 to 1.00 of
-the path-traced brightness, but the example scenes' red yarns overshoot (1.13 on the knit patch), because the ξ closed
-on a lone yarn already scales its single scattering up to make up for the dual-scattering estimate's missing
-multiple scattering (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter").
+``interreflection`` and ``multiple_scattering``; both backends, the ablation ``no_bounce`` leaves it out). A tube
+spreads what its fibers scatter, not the light that crosses between them (``yarn_bounce.tube_optics``): until stop
+49 it spread all of T_Y, τ_Y included, and the example patches came out 10–18 % too bright with it
+(BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter", "Issue 13: the default model of stop 49").
 
 ``split_xi`` shades with ξ closed apart on single and multiple scattering (the pack's ``correction/xi_closed_ss`` and
 ``_ms``, schema 2.5, baked with ``knitbake bake --split-xi``; ASSET_PACK.md §6 "Closure apart"): single scattering (the
@@ -72,18 +82,18 @@ blocking yarns").
 r √(1 − v²) toward the camera, ``pipeline.tube_surface``) instead of on the strip plane through the yarn's axis, up
 to a radius deeper: under the grazing patch's light the axis plane puts one leg of every stitch in its neighbours'
 shadow, which the reference lights (the fully shadowed pixels hold 21.6 % of the reference's light there, 8.4 % with
-the lookups on the surface). Not the default: alone it leaves the grazing patch 1.21× too bright (the lone yarn's
-brightness at grazing light, which the axis plane's wrong shadows had hidden); with the axial parallax and ξ closed
-at every view it lowers the yarn-scale error on five of the seven example scenes but moves the back-lit yarn's
-brightness out of ±5 % (BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the
-tube's surface"). Both backends draw it.
+the lookups on the surface; BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the
+tube's surface"). Alone, with the diagonal ξ, it left the grazing patch 1.21× too bright (the lone yarn's brightness
+at grazing light, which the axis plane's wrong shadows had hidden). Both backends draw it; the ablation
+``axis_shadows`` looks up on the axis plane.
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
-plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection, + ξ closed on
-the renderer, + flyaways (= the full model, the default); then the full model without the tables, with the paper's
-factored tables, without the detail, with the paper's ξ, with ξ closed at every view, with the axial parallax, with
-the yarn-level bounce, with ξ closed apart on single and multiple scattering, with two blocking yarns counted and
-with shadows looked up on the tube's surface.
+plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ
+closed on the renderer (at every view), + flyaways (= the full model, the default); every rung draws the surface
+lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
+detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
+bounce, with the lookups on the axis plane, with ξ closed apart on single and multiple scattering and with two
+blocking yarns counted.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -103,13 +113,13 @@ class Features:
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
     fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
     closed_xi: bool = True  # ξ closed on this renderer (correction/xi_closed) where the pack has it, else the paper's
-    view_xi: bool = False  # ξ closed at every view (correction/xi_view) where the pack has it, before closed_xi
+    view_xi: bool = True  # with closed_xi: ξ closed at every view (correction/xi_view) where the pack has it
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
-    parallax: bool = False  # the regular points' texture coordinate and tangent where the tube's seen surface lies
-    yarn_bounce: bool = False  # light the neighbouring yarns scatter onto a yarn under directional lights
+    parallax: bool = True  # the regular points' texture coordinate and tangent where the tube's seen surface lies
+    yarn_bounce: bool = True  # light the neighbouring yarns scatter onto a yarn under directional lights
     split_xi: bool = False  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms)
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
-    surface_shadows: bool = False  # regular points look their lights up on the tube surface seen, not the axis plane
+    surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -124,12 +134,12 @@ ABLATIONS = {
     "factored": Features(full_tables=False, closed_xi=False),
     "no_detail": Features(fiber_detail=False),
     "papers_xi": Features(closed_xi=False),
-    "view_xi": Features(view_xi=True),
-    "parallax": Features(parallax=True),
-    "yarn_bounce": Features(yarn_bounce=True),
+    "diagonal_xi": Features(view_xi=False),
+    "no_parallax": Features(parallax=False),
+    "no_bounce": Features(yarn_bounce=False),
+    "axis_shadows": Features(surface_shadows=False),
     "split_xi": Features(split_xi=True),
     "two_blockers": Features(two_blockers=True),
-    "surface_shadows": Features(surface_shadows=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -137,11 +147,12 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "full": "+ flyaways (full)", "no_tables": "full without ξ, Ψ^Fiber",
                    "factored": "full, the paper's rank-1 factored ξ, Ψ",
                    "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ",
-                   "view_xi": "full with ξ closed at every view", "parallax": "full with the axial parallax",
-                   "yarn_bounce": "full with the yarn-level bounce",
+                   "diagonal_xi": "full with ξ closed on the diagonal",
+                   "no_parallax": "full without the axial parallax",
+                   "no_bounce": "full without the yarn-level bounce",
+                   "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "split_xi": "full with ξ closed apart on single and multiple scattering",
-                   "two_blockers": "full with two blocking yarns counted",
-                   "surface_shadows": "full with shadows looked up on the tube's surface"}
+                   "two_blockers": "full with two blocking yarns counted"}
 
 
 def combined(name: str) -> Features:

@@ -35,17 +35,19 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    image moves by at most 0.4 % of its peak on the example scenes (BENCHMARKS.md, "Issue 15: the flyaway layer's
    shadow lookups"); with a reach of a yarn radius 64 % would share, but a hair on a hard shadow's edge then took
    the light of a sample up to a pixel away (15 % of the peak at one pixel of the grazing-light patch).
-   With ``Features.surface_shadows`` (an ablation) a regular point looks its lights up on the tube surface the camera
-   sees there (``tube_surface``: the strip point r √(1 − v²) toward the camera) rather than on the strip plane
-   through the axis, which lies up to a radius deeper: under a light from the fabric's side a receiver that deep
-   falls into its neighbours' shadows (on the grazing patch the axis plane shadows one leg of every stitch that the
-   reference lights).
+   A regular point looks its lights up on the tube surface the camera sees there (``Features.surface_shadows``, the
+   default; ``tube_surface``: the strip point r √(1 − v²) toward the camera) rather than on the strip plane through
+   the axis, which lies up to a radius deeper: under a light from the fabric's side a receiver that deep falls into
+   its neighbours' shadows (on the grazing patch the axis plane shadows one leg of every stitch that the reference
+   lights; the ablation ``axis_shadows`` looks up there). A flyaway point that shares a regular point's lookups
+   (above) then takes that surface lookup, nearer to where a hair over its yarn's body lies than its own strip plane
+   (with ``axis_shadows`` the two are the same receiver).
    With ``Features.interreflection`` each T̃_j becomes T̃_j / (1 − ρ (1 − T̃_j)), ρ the receiver's yarn hull albedo
    (``knitrun.render.interreflection``): the light the neighbours block and send on; and a directional light's V
    lets through the gap transmittance τ_Y of the blocker (``strip_shading.past_blockers``, in the kernels). With
-   ``Features.yarn_bounce`` (an ablation) the directional lights are looked up at the polyline vertices as well, and
-   the light the neighbouring yarns scatter onto each vertex (``knitrun.render.yarn_bounce``) is interpolated to the
-   regular points. With ``Features.two_blockers`` (an ablation) each directional light's map also draws the second
+   ``Features.yarn_bounce`` (the default) the directional lights are looked up at the polyline vertices as well,
+   and the light the neighbouring yarns scatter onto each vertex (``frame_bounce``, ``knitrun.render.yarn_bounce``)
+   is interpolated to the regular points. With ``Features.two_blockers`` (an ablation) each directional light's map also draws the second
    yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks, goes to the kernels as
    ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
@@ -56,7 +58,7 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    (``data_formats.curve_eval.yarn_frame``, the frame the reference sweeps its fibers in). The ply pattern is
    then where the reference has it, and moves along the yarn as the camera circles it, as a real yarn's does.
    The second layer's points are shaded like the front's (its own shadow lookups).
-   Axial parallax (``Features.parallax``, off by default): a strip is drawn through the centre line, but where the
+   Axial parallax (``Features.parallax``, the default): a strip is drawn through the centre line, but where the
    yarn tilts toward the camera by θ_o (sin θ_o = ω_o·t) the tube's surface seen at the strip point (v) belongs to
    the centre line further along, at s + δ, δ = r √(1 − v²) tan θ_o (the front surface point c(s) + r n projects
    r sin θ_o back along the yarn's image, which covers cos θ_o of a unit of arc length); with it the regular points
@@ -95,7 +97,7 @@ from knitrun.render.shadow_map import behind_map, build_shadow_map, shadow_visib
 from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent, vertex_tangents
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
                                           same_surface, shade_flyaway, shade_regular, shading_points)
-from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, vertex_bounce
+from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, tube_optics, vertex_bounce
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table
@@ -105,6 +107,7 @@ from knitrun.sim.simulate import RADIUS_TOLERANCE
 SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
 SHARE_REACH = 0.1  # pixels: a flyaway point this close to a regular point of its curve shares its shadow lookups
+BOUNCE_SPACING_RADII = 1.5  # yarn radii between the polyline points the yarn-level bounce is computed at
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
 
 
@@ -559,13 +562,12 @@ class Renderer:
         light_beyond = [np.ones((len(light_dir), len(s["weight"]) if features.two_blockers else 0)) for s in sets]
         # the yarn-level bounce under the directional lights (``yarn_bounce``) looks the lights up at the polyline
         # vertices too
-        bounce_on = features.yarn_bounce and features.interreflection and features.multiple_scattering and \
-            len(light_dir) > 0 and all(
-            look.hull_albedo is not None and look.hull_transmittance is not None for look in looks)
-        vertex_receivers = [(lines.points, np.repeat(bias_radius[lines.entry], np.diff(lines.offsets)))] \
-            if bounce_on else []
-        vertex_vis = np.ones((len(light_dir), len(lines.points)))
-        vertex_beyond = np.ones((len(light_dir), len(lines.points)))
+        bounce_on = bounce_drawn(features, looks, len(light_dir))
+        at_bounce = bounce_vertices(lines, looks) if bounce_on else np.zeros(0, np.int64)
+        vertex_receivers = [(lines.points[at_bounce], np.repeat(bias_radius[lines.entry], np.diff(lines.offsets))
+                             [at_bounce])] if bounce_on else []
+        vertex_vis = np.ones((len(light_dir), len(at_bounce)))
+        vertex_beyond = np.ones((len(light_dir), len(at_bounce)))
         for i, d in enumerate(light_dir):
             found = _visibility(lines, radius, d, size, 0.0, receivers + vertex_receivers, self.shadow_depth,
                                 features.two_blockers)
@@ -607,7 +609,8 @@ class Renderer:
         facts["ms_lights"] = int(len(ms_dir))
         bounce = [None] * len(layers)
         if bounce_on:
-            bounce = _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, vertex_beyond, layers, facts)
+            bounce = _yarn_bounce(lines, looks, camera, light_dir, light_e, at_bounce, vertex_vis, vertex_beyond,
+                                  layers, facts)
         lap("shadow")
 
         if self._compile_helper is not None:  # its kernels are in the cache by now, or soon: load them, not compile
@@ -699,11 +702,54 @@ def render(scene: Scene, packs: dict | None = None, features: Features = Feature
     return result
 
 
-def _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, vertex_beyond, layers, facts) -> list:
-    """The yarn-level bounce radiance (N, 3) of each layer's points under the directional lights
-    (``knitrun.render.yarn_bounce``), from the lights' visibility ``vertex_vis`` (L, P) at the polyline vertices
-    (and ``vertex_beyond``, the fraction at most one yarn blocks, ``Lights.beyond``);
-    ``facts["yarn_bounce"]`` gets the vertices' mean covered fraction of the sphere and mean bounce radiance."""
+def bounce_drawn(features: Features, looks, n_lights: int) -> bool:
+    """Whether a frame draws the yarn-level bounce (``knitrun.render.yarn_bounce``): asked for, with the yarn-level
+    light transport it belongs to, a directional light, and every yarn's pack holding ρ_Y and T_Y."""
+    return features.yarn_bounce and features.interreflection and features.multiple_scattering and n_lights > 0 and \
+        all(look.hull_albedo is not None and look.hull_transmittance is not None for look in looks)
+
+
+def _yarn_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond, layers, facts) -> list:
+    """The yarn-level bounce radiance (N, 3) of each layer's points (``frame_bounce`` interpolated along their
+    curves); ``facts["yarn_bounce"]`` gets the vertices' mean covered fraction of the sphere and mean bounce
+    radiance."""
+    vertex, covered = frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond)
+    if len(covered):
+        facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),
+                                "radiance": [round(float(x), 6) for x in vertex.mean(axis=0)]}
+    out = []
+    for layer in layers:
+        at = np.empty((len(layer["weight"]), 3))
+        bounce_at_points(np.ascontiguousarray(layer["segment"], np.int64),
+                         np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, at)
+        out.append(at)
+    return out
+
+
+def bounce_vertices(lines, looks) -> np.ndarray:
+    """Indices (sorted) of the polyline points the yarn-level bounce is computed at (``frame_bounce``): along each
+    curve every k-th point and its last, k the stride that spaces them about ``BOUNCE_SPACING_RADII`` yarn radii apart
+    by the curve's mean segment length (at least 1). Why: the bounce varies over the distance to the neighbouring
+    yarns (two radii and more), and its cost grows with the square of the points, since each sums over the
+    neighbours' segments (BENCHMARKS.md, "Issue 13: the default model of stop 49")."""
+    counts = np.diff(lines.offsets)
+    keep = []
+    for c in np.flatnonzero(counts):
+        lo, hi = int(lines.offsets[c]), int(lines.offsets[c + 1])
+        length = float(np.linalg.norm(np.diff(lines.points[lo:hi], axis=0), axis=1).sum())
+        spacing = BOUNCE_SPACING_RADII * looks[lines.entry[c]].radius
+        stride = max(1, int(spacing * (hi - lo - 1) / length)) if length > 0.0 else 1
+        keep.append(np.unique(np.append(np.arange(lo, hi, stride), hi - 1)))
+    return np.concatenate(keep).astype(np.int64) if keep else np.zeros(0, np.int64)
+
+
+def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond) -> tuple:
+    """(bounce radiance (P, 3), covered fraction of the sphere (P,)) at the frame's polyline vertices under the
+    directional lights (``yarn_bounce.vertex_bounce``): computed at the points ``at`` (``bounce_vertices``) on the
+    polylines through them, from the lights' visibility ``vertex_vis`` (L, len(at)) there (and ``vertex_beyond``,
+    the fraction at most one yarn blocks, ``Lights.beyond``), and interpolated between them by rest arc length.
+    Both backends draw it."""
+    full, lines = lines, _thinned(lines, at)
     entry = np.repeat(lines.entry, np.diff(lines.offsets))
     albedo = np.array([look.hull_albedo for look in looks], np.float64).reshape(-1, 3)[entry]
     transmit = np.array([look.hull_transmittance for look in looks], np.float64).reshape(-1, 3)[entry]
@@ -716,19 +762,31 @@ def _yarn_bounce(lines, looks, camera, light_dir, light_e, vertex_vis, vertex_be
     yarns = BounceYarns(lines.points, vertex_tangents(lines.points, lines.offsets),
                         np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets)), lines.offsets, lines.rest,
                         np.array([looks[k].radius for k in lines.entry], np.float64),
-                        np.clip(albedo - transmit, 0.0, 1.0), transmit, np.ascontiguousarray(view, np.float64))
+                        *tube_optics(albedo, transmit, gap[:, None]), np.ascontiguousarray(view, np.float64))
     direct = past_blockers(vertex_vis, vertex_beyond, gap[None, :])
     vertex, covered = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
-    if len(covered):
-        facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),
-                                "radiance": [round(float(x), 6) for x in vertex.mean(axis=0)]}
-    out = []
-    for layer in layers:
-        at = np.empty((len(layer["weight"]), 3))
-        bounce_at_points(np.ascontiguousarray(layer["segment"], np.int64),
-                         np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, at)
-        out.append(at)
-    return out
+    return _between(full.rest, at, vertex), _between(full.rest, at, covered[:, None])[:, 0]
+
+
+def _thinned(lines, at) -> _Polylines:
+    """``lines`` with only the points ``at`` (sorted indices that keep every curve's first and last point)."""
+    n_curves = len(lines.offsets) - 1
+    curve = np.repeat(np.arange(n_curves), np.diff(lines.offsets))
+    offsets = np.concatenate([[0], np.cumsum(np.bincount(curve[at], minlength=n_curves))]).astype(np.int64)
+    return dataclasses.replace(lines, points=lines.points[at], rest=lines.rest[at], offsets=offsets,
+                               normal=lines.normal[at])
+
+
+def _between(rest, at, values) -> np.ndarray:
+    """(P, C): ``values`` (len(at), C) known at the points ``at`` (``bounce_vertices``) interpolated linearly by rest
+    arc length ``rest`` (P,) to every point, each between the known points of its own curve."""
+    below = np.searchsorted(at, np.arange(len(rest)), side="right") - 1
+    above = np.minimum(below + 1, len(at) - 1)
+    a, b = at[below], at[above]
+    span = rest[b] - rest[a]
+    f = np.where((b > a) & (span > 0.0), (rest - rest[a]) / np.where(span > 0.0, span, 1.0), 0.0)
+    f = np.clip(f, 0.0, 1.0)[:, None]
+    return (1.0 - f) * values[below] + f * values[above]
 
 
 def _kernel_points(points, lines, looks) -> Points:

@@ -12,9 +12,9 @@ Model (derived here), per polyline vertex i of the yarn centre lines, at yarn le
 directional lights of irradiance E_L toward ω_L:
 
 * **What the neighbours cover.** A neighbouring segment j (another curve's, or this curve's with its midpoint more
-  than ``reach`` of arc length away) seen from the vertex x is a strip of width 2r along its axis: with h its axis's distance from x
-  (at least ``CONTACT_RADII``·r: tubes touch, they do not interpenetrate) and s_a < s_b its end points' positions
-  along the axis from the foot of the perpendicular,
+  than ``reach`` of arc length away) seen from the vertex x is a strip of width 2r along its axis: with h its axis's
+  distance from x (at least ``CONTACT_RADII``·r: tubes touch, they do not interpenetrate) and s_a < s_b its end
+  points' positions along the axis from the foot of the perpendicular,
 
       Ω_ij = (2r / h) · (s_b / √(h² + s_b²) − s_a / √(h² + s_a²))          (∫ 2r sin β / d² along the segment)
 
@@ -22,26 +22,33 @@ directional lights of irradiance E_L toward ω_L:
   cover, overlaps counted as for randomly placed occluders, f_i = 1 − exp(−Ω_i / 4π). Each segment's share is
   w_ij = Ω_ij · 4π f_i / Ω_i (so Σ_j w_ij = 4π f_i).
 * **A tube's phase.** A tube lit by a distant light of irradiance E at angle θ to its normal plane intercepts
-  E·2r·cos θ per unit length. It reflects R_Y = ρ_Y − T_Y of it back toward the light's side and transmits T_Y
-  forward (the pack's hull albedo and transmittance, ASSET_PACK.md §10). Each part is spread over the directions
-  in the tube's normal plane as a Lambertian cylinder spreads its light: seen at angle α (in the normal plane) from
-  the direction toward the light, the reflected part has radiance R_Y·E·cos θ/π² · g(α) and the transmitted part
-  T_Y·E·cos θ/π² · g(π − α), with
+  E·2r·cos θ per unit length. It scatters R_Y = ρ_Y − T_Y of it back toward the light's side and S_Y = T_Y − τ_Y
+  forward through itself (``tube_optics``; ρ_Y and T_Y the pack's hull albedo and transmittance, ASSET_PACK.md §10,
+  τ_Y its gap transmittance, ``yarn_look.gap_transmittance``). The rest of T_Y, τ_Y, is light that crossed between
+  the fibers unscattered: it goes on along the light's direction, where the receiving yarn's own direct term
+  already has it (``strip_shading.past_blockers`` lets τ_Y through a blocker), and toward the camera it is the
+  layer behind the strip (``pipeline``, ``render.layers``), so it is not spread again here. (Spreading all of T_Y
+  counted cotton's τ_Y ≈ 0.16 of its T_Y ≈ 0.46 twice: the white-yarn knit patches came out 10–18 % too bright
+  with the bounce, BENCHMARKS.md "Issue 13: the default model of stop 49".) Each part is spread over the
+  directions in the tube's normal plane as a Lambertian cylinder spreads its light: seen at angle α (in the normal
+  plane) from the direction toward the light, the back-scattered part has radiance R_Y·E·cos θ/π² · g(α) and the
+  forward part S_Y·E·cos θ/π² · g(π − α), with
 
       g(α) = (π/4) (sin α + (π − α) cos α),   α ∈ [0, π]                   (mean 1 over the circle; g(0) = π²/4)
 
-  so the tube's mean radiance over all directions is ρ_Y·E·cos θ/π²: in a uniform environment of radiance L it
-  intercepts 2π² r L and returns ρ_Y L, the hull albedo's definition. P(α) = R_Y g(α) + T_Y g(π − α) below.
+  so the tube's mean scattered radiance over all directions is (ρ_Y − τ_Y)·E·cos θ/π²: in a uniform environment
+  of radiance L it intercepts 2π² r L and scatters (ρ_Y − τ_Y) L, the hull albedo less what passes between its
+  fibers. P(α) = R_Y g(α) + S_Y g(π − α) below.
 * **Neighbour to receiver.** Segment j sends toward vertex i (direction d from j to i) the radiance
   L_ji = Σ_L E_L V_d cos θ_L P_j(α_jL) / π², α_jL the angle between ω_L and d in j's normal plane, V_d = V + (1 −
   V) τ_Y the light reaching j past the other yarns (``strip_shading.past_blockers``; the mean of j's two vertices).
 * **Receiver to camera.** Vertex i receives L_ji over w_ij from −d and sends toward the camera (ω_o, in its normal
   plane at angle α'_ij from −d) what a tube lit by an irradiance L_ji w_ij from −d sends there:
 
-      B_i = Σ_j w_ij L_ji cos θ'_ij P_i(α'_ij) / π² / (1 − ρ_Y f_i)          (RGB)
+      B_i = Σ_j w_ij L_ji cos θ'_ij P_i(α'_ij) / π² / (1 − ρ f_i)           (RGB)
 
   θ'_ij the angle of d to i's normal plane; the last factor adds the further bounces, self-similarly (the
-  neighbours are among neighbours too: L_n = ē + ρ_Y f L_n).
+  neighbours are among neighbours too: L_n = ē + ρ f L_n, ρ = R_Y + S_Y the scattered albedo).
 
 The shading points take B interpolated along their curve by rest arc length (``bounce_at_points``) and add it to
 their radiance before the fiber-level detail (``strip_shading.shade_regular``): a yarn-level term, not corrected by
@@ -71,7 +78,8 @@ INV_PI2 = 1.0 / (math.pi * math.pi)
 class BounceYarns(NamedTuple):
     """The polylines as the bounce kernel reads them: ``points`` (P, 3), ``tangent`` (P, 3) unit, ``curve`` (P,) int64
     curve of each vertex, ``offsets`` (C + 1,), ``rest`` (P,) rest arc length, ``radius`` (C,), ``reflect`` and
-    ``transmit`` (P, 3) the tube's R_Y and T_Y at each vertex (in its colour), ``toward_camera`` (P, 3) unit."""
+    ``transmit`` (P, 3) the tube's R_Y and S_Y at each vertex (in its colour, ``tube_optics``), ``toward_camera``
+    (P, 3) unit."""
 
     points: np.ndarray
     tangent: np.ndarray
@@ -82,6 +90,15 @@ class BounceYarns(NamedTuple):
     reflect: np.ndarray
     transmit: np.ndarray
     toward_camera: np.ndarray
+
+
+def tube_optics(albedo, transmittance, gap):
+    """(R_Y, S_Y): what a yarn tube scatters back toward a light's side, ρ_Y − T_Y, and forward through itself,
+    T_Y − τ_Y (module docstring, "A tube's phase"), each clipped to [0, 1]. ``albedo`` ρ_Y and ``transmittance`` T_Y
+    (…, 3) in the yarn's colour, ``gap`` τ_Y broadcastable to them: the light that crosses between the fibers
+    unscattered, which the bounce does not spread again."""
+    albedo, transmittance = np.asarray(albedo, np.float64), np.asarray(transmittance, np.float64)
+    return np.clip(albedo - transmittance, 0.0, 1.0), np.clip(transmittance - gap, 0.0, 1.0)
 
 
 class BounceLights(NamedTuple):
@@ -129,11 +146,12 @@ def segment_solid_angle(x, a, b, width, nearest):
 
 
 @njit(cache=True)
-def lambert_cylinder(alpha):
-    """g(α) = (π/4)(sin α + (π − α) cos α), α ∈ [0, π] clamped: the radiance of a Lambertian cylinder seen at α from its
-    light, over its mean (module docstring)."""
-    a = min(max(alpha, 0.0), math.pi)
-    return 0.25 * math.pi * (math.sin(a) + (math.pi - a) * math.cos(a))
+def lambert_pair(alpha):
+    """(g(α), g(π − α)), α ∈ [0, π]: the radiance of a Lambertian cylinder seen at α from its light over its mean,
+    g(α) = (π/4)(sin α + (π − α) cos α) (module docstring), and at π − α, the back and forward parts of a tube's
+    phase from one sine and cosine (sin(π − α) = sin α, cos(π − α) = −cos α)."""
+    sin_a, cos_a = math.sin(alpha), math.cos(alpha)
+    return 0.25 * math.pi * (sin_a + (math.pi - alpha) * cos_a), 0.25 * math.pi * (sin_a - alpha * cos_a)
 
 
 @njit(cache=True)
@@ -202,7 +220,7 @@ def _vertex_bounce(yarns, lights, ijk, dims, order, start, reach_radii, out, cov
                         cos_r, alpha_r = _across(ti0, ti1, ti2, -d0, -d1, -d2, v0, v1, v2)
                         if alpha_r < 0.0:
                             continue
-                        g_r, g_rf = lambert_cylinder(alpha_r), lambert_cylinder(math.pi - alpha_r)
+                        g_r, g_rf = lambert_pair(alpha_r)
                         for light in range(lights.direction.shape[0]):
                             l0, l1, l2 = (lights.direction[light, 0], lights.direction[light, 1],
                                           lights.direction[light, 2])
@@ -210,7 +228,7 @@ def _vertex_bounce(yarns, lights, ijk, dims, order, start, reach_radii, out, cov
                             if alpha_l < 0.0:
                                 continue
                             lit = 0.5 * (lights.direct[light, j] + lights.direct[light, j + 1]) * cos_l
-                            g_l, g_lf = lambert_cylinder(alpha_l), lambert_cylinder(math.pi - alpha_l)
+                            g_l, g_lf = lambert_pair(alpha_l)
                             for ch in range(3):
                                 sent = lights.irradiance[light, ch] * lit * (
                                     0.5 * (yarns.reflect[j, ch] + yarns.reflect[j + 1, ch]) * g_l

@@ -171,8 +171,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     n_cross and the gap transmittance from the pack's transmittance T_Y and the hull albedo ρ_Y for the directional
     lights' bounce, where it has them (module docstring); ``closed_xi``: ξ from the pack's
     ``correction/xi_closed`` (closed on the diagonal θ_o = −θ_i, schema ≥ 2.3; ASSET_PACK.md §6) instead of the
-    paper's, where the pack has it and ``full_tables`` (the closed ξ is a full table); ``view_xi``: from its
-    ``correction/xi_view`` (closed at every view, schema ≥ 2.4) before either; ``split_xi``: those closed apart on
+    paper's, where the pack has it and ``full_tables`` (the closed ξ is a full table); ``view_xi`` (with
+    ``closed_xi``: a closure at more views, not without it): from its ``correction/xi_view`` (closed at every view,
+    schema ≥ 2.4) before the diagonal's; ``split_xi``: those closed apart on
     single and multiple scattering (``correction/xi_{closed,view}_{ss,ms}``, schema ≥ 2.5) instead, where the pack has
     them (multiple scattering's in ``xi_full``/``xi_view``, single's in ``xi_single``/``xi_single_view``);
     ``YarnLook.xi_from`` says which ξ
@@ -191,7 +192,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     names = list(TABLE_NAMES) + ["textures/tangent", "textures/coverage"]
     if corrections:
         names += list(CORRECTION_TABLES) + ["correction/xi_residual", "shadowing/psi_residual"]
-    view_xi = corrections and view_xi and full_tables and VIEW_XI in stored
+    view_xi = corrections and closed_xi and view_xi and full_tables and VIEW_XI in stored
     closed_xi = corrections and closed_xi and full_tables and CLOSED_XI in stored and not view_xi
     split = (SPLIT_VIEW_XI if view_xi else SPLIT_XI) if corrections and split_xi and (view_xi or closed_xi) else {}
     split = split if all(n in stored for n in split.values()) else {}

@@ -30,12 +30,16 @@ is shaded twice, each weighted by its own coverage); the shadow maps are rasteri
 of a shadow map is the nearest projected polyline point. ``tests/test_gl_render.py`` holds the two renderers
 together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
 
-Two ablations read more than a fragment's own attributes: ``Features.surface_shadows`` looks the lights up on the
-tube surface seen (the fragment's position moved r √(1 − v²) toward the camera, ``pipeline.tube_surface``), and
-``Features.parallax`` walks the frame's polylines (a texture of points, rest arc lengths, vertex tangents and yarn
-frame normals, ``_polyline_textures``) from the fragment's segment as ``pipeline.parallax_shift`` does, first to the
-segment its sample lies on (a fragment's sample may lie past its own segment's end), then by the shift, at most
-``PARALLAX_STEPS`` segments each way.
+Three terms of the default model read more than a fragment's own attributes: ``Features.surface_shadows`` looks
+the lights up on the tube surface seen (the fragment's position moved r √(1 − v²) toward the camera,
+``pipeline.tube_surface``); ``Features.parallax`` walks the frame's polylines (a texture of points, rest arc
+lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from the fragment's segment as
+``pipeline.parallax_shift`` does, first to the segment its sample lies on (a fragment's sample may lie past its own
+segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; and ``Features.yarn_bounce``, the
+light the neighbouring yarns scatter onto each polyline point, is computed on the CPU (``pipeline.frame_bounce``,
+the lights' visibility at the points from the CPU twin's shadow maps: one more map per directional light and
+frame) and uploaded as a texture of the points (``_bounce_texture``), which a fragment interpolates along its
+segment by rest arc length as ``yarn_bounce.bounce_at_points`` does.
 
 The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
 textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
@@ -69,8 +73,8 @@ MAX_LIGHTS = 8  # directional lights a scene may have on this backend
 MAX_LOBES = 64  # SRBF lobes (the scene format's largest srbf_count)
 NO_YARN = 3.0e38  # depth of a shadow-map texel no yarn covers
 PCF_RADIUS = 1.5  # texels (shadow_map.shadow_visibility's default)
-ATLAS_UNITS = (24, 25, 26, 27, 28, 29)  # texture units of the light atlas, lobe atlas, cluster weights, flyaway
-# variants, and the axial parallax's polyline and curve bounds
+ATLAS_UNITS = (24, 25, 26, 27, 28, 29, 30)  # texture units of the light atlas, lobe atlas, cluster weights, flyaway
+# variants, the axial parallax's polyline and curve bounds, and the yarn-level bounce at the polyline points
 POLYLINE_ROW = 1024  # polyline points per row of the parallax's texture (regular.frag)
 PARALLAX_STEPS = 64  # segments the parallax walks at most each way (the CPU walks to the curve's end)
 # (a yarn entry's own textures take units 0, 1, … in the order of ``_upload_look``)
@@ -257,9 +261,6 @@ class GLRenderer:
         if features.two_blockers:
             raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
                               "counts two")
-        if features.yarn_bounce:
-            raise FormatError("the GL backend does not draw the yarn-level bounce (Features.yarn_bounce); the CPU "
-                              "renderer does")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
@@ -283,6 +284,7 @@ class GLRenderer:
         self.cluster_weights = _texture2d(self.ctx, ms_weights if ms_weights.size else np.zeros((1, 1)))
         self.light_dir = np.array([light.unit_direction for light in lights], np.float64).reshape(-1, 3)
         self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)
+        self.bounce = pipeline.bounce_drawn(features, self.cpu.looks, len(self.light_dir))
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1)
 
@@ -379,6 +381,7 @@ class GLRenderer:
         tangent = vertex_tangents(lines.points, lines.offsets)
         draws = self._upload_segments(lines, tangent)
         polyline = _polyline_textures(ctx, lines, tangent) if self.features.parallax else ()
+        bounce = self._bounce_texture(lines, camera, facts) if self.bounce else ()
         lap("load")
 
         radius = np.array([self.cpu.looks[k].radius for k in lines.entry])
@@ -411,6 +414,10 @@ class GLRenderer:
         for name, tex, unit in zip(("polyline", "curve_bounds"), polyline, ATLAS_UNITS[4:]):
             tex.use(location=unit)
             _set(self.regular, name, unit)
+        _set(self.regular, "yarn_bounce", int(self.bounce))
+        for tex in bounce:
+            tex.use(location=ATLAS_UNITS[6])
+            _set(self.regular, "bounce_tex", ATLAS_UNITS[6])
         fly_entries = [d for d in draws if "fly_tex0" in self.looks[d[0]][1]]
         for program in (self.regular, self.flyaway) if fly_entries else (self.regular,):
             self._camera_uniforms(program, camera, near, far)
@@ -453,7 +460,7 @@ class GLRenderer:
                 source.release()
             fly_radiance, fly_cover = resolved
             image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
-        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers, *polyline):
+        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers, *polyline, *bounce):
             obj.release()
         for _, arrays, _ in draws:
             for obj in arrays:
@@ -463,6 +470,27 @@ class GLRenderer:
         lap("resolve")
         facts["residuals"] = {look.name: look.residuals for look in self.cpu.looks}
         return pipeline.RenderResult(image, timings, facts)
+
+    def _bounce_texture(self, lines, camera, facts):
+        """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce``, on the CPU: the lights'
+        visibility there from the CPU twin's shadow maps) as a one-texture tuple for ``regular.frag``: point i at
+        (i mod POLYLINE_ROW, i // POLYLINE_ROW), (bounce RGB, rest arc length)."""
+        cpu = self.cpu
+        radius = np.array([cpu.looks[k].radius for k in lines.entry])
+        bias = np.array([look.radius for look in cpu.looks]) * pipeline.SHADOW_BIAS_RADII
+        at = pipeline.bounce_vertices(lines, cpu.looks)
+        receivers = [(lines.points[at], np.repeat(bias[lines.entry], np.diff(lines.offsets))[at])]
+        size = self.scene.render.shadow_map_size
+        vis = np.array([pipeline._visibility(lines, radius, d, size, 0.0, receivers, cpu.shadow_depth)[0]
+                        for d in self.light_dir])
+        vertex, covered = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at, vis,
+                                                np.ones_like(vis))
+        facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),
+                                "radiance": [round(float(x), 6) for x in vertex.mean(axis=0)]}
+        n = len(lines.points)
+        data = np.zeros((-(-n // POLYLINE_ROW) * POLYLINE_ROW, 4), np.float32)
+        data[:n, :3], data[:n, 3] = vertex, lines.rest
+        return (_texture2d(self.ctx, data.reshape(-1, POLYLINE_ROW, 4)),)
 
     def _upload_segments(self, lines, tangent):
         """One vertex array of segments with their neighbours (GL_LINES_ADJACENCY: previous point, the segment's two,

@@ -18,6 +18,18 @@ uniform int surface_shadows;     // Features.surface_shadows: lights looked up o
 uniform int parallax;
 uniform sampler2D polyline;
 uniform sampler2D curve_bounds;
+// the yarn-level bounce (Features.yarn_bounce; pipeline.frame_bounce, computed on the CPU): per polyline point one
+// texel (bounce RGB, rest arc length), POLYLINE_ROW points a row
+uniform int yarn_bounce;
+uniform sampler2D bounce_tex;
+
+// yarn_bounce.bounce_at_points: the bounce interpolated by rest arc length s along segment i (its first point)
+vec3 bounce_at(int i, float s) {
+    vec4 a = texelFetch(bounce_tex, ivec2(i % POLYLINE_ROW, i / POLYLINE_ROW), 0);
+    vec4 b = texelFetch(bounce_tex, ivec2((i + 1) % POLYLINE_ROW, (i + 1) / POLYLINE_ROW), 0);
+    float ds = b.w - a.w;
+    return mix(a.rgb, b.rgb, ds > 0.0 ? clamp((s - a.w) / ds, 0.0, 1.0) : 0.0);
+}
 
 vec4 polyline_at(int i, int k) {
     return texelFetch(polyline, ivec2(3 * (i % POLYLINE_ROW) + k, i / POLYLINE_ROW), 0);
@@ -73,6 +85,7 @@ void axial_parallax(inout StripPoint sp) {
 
 void main() {
     StripPoint sp = strip_point();
+    float bounce_s = sp.s;  // the bounce is read where the point lies, before the parallax (as on the CPU)
     if (parallax != 0 && sp.drawn)
         axial_parallax(sp);
     gl_FragDepth = clamp(fin.depth / far_plane, 0.0, 1.0);
@@ -133,6 +146,8 @@ void main() {
                   lit, false, total, back_direct, f_scatter);
         rgb += cluster_irradiance[c] * xi * (lit * D_B * back_direct + f_scatter) * cos(theta_c_f);
     }
+    if (yarn_bounce != 0)
+        rgb += bounce_at(fin.segment, bounce_s);
     rgb *= sample_mip(detail_tex, detail_levels, level, u, v).r;
     out_colour = vec4(alpha * rgb + (1.0 - alpha) * background, 1.0);
 }
