@@ -4,7 +4,7 @@ against its other fiber instance, ``benchmarks/bench_floors.py``); frame ms of e
 (the GL one with its set-up kept, the CPU one likewise). Targets: mean within 2 %, L1 at most a quarter of the floor.
 
     .venv/bin/python benchmarks/bench_gl_agreement.py --pack out/bench/cotton1_standard.h5 \\
-        --reference-dir out/bench/refs2 [--scenes a,b] [--ablation papers_xi | surface_shadows+parallax]
+        --reference-dir out/bench/refs2 [--scenes a,b] [--ablation papers_xi | axis_shadows+no_parallax]
 """
 
 import argparse

@@ -10,7 +10,7 @@ the frames, whose ``load`` is evaluating this frame's curves into polylines. Bef
 whole one-shot ``pipeline.render`` per frame (set-up included: ``load`` ~110 ms, the sky's fit 4 ms from its cache).
 
     .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3] [--light directional|sky16]
-        [--no-sweep] [--backend cpu|gl] [--ablation surface_shadows+parallax+view_xi]
+        [--no-sweep] [--backend cpu|gl] [--ablation diagonal_xi+no_parallax+no_bounce+axis_shadows]
 
 ``--ablation`` times another model than the default (an ablation or a combination a+b, ``ablations.combined``).
 

@@ -8,7 +8,7 @@ model: the mean luminance ratio, the ratio of each RGB channel's mean, and the y
 floor (``knitbake.compare.image_metrics.yarn_scale_metrics``).
 
     .venv/bin/python benchmarks/probe_colour.py --pack out/bench/cotton1_standard.h5 \\
-        [--scenes a,b] [--colors 1,1,1:0.9,0.25,0.2] [--models full,yarn_bounce] [--spp N]
+        [--scenes a,b] [--colors 1,1,1:0.9,0.25,0.2] [--models no_bounce,full] [--spp N]
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def main():
     parser.add_argument("--pack", required=True, help="the asset pack of cotton1")
     parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES), help="comma-separated example scene names")
     parser.add_argument("--colors", default="1,1,1:0.9,0.25,0.2", help="colours R,G,B separated by ':'")
-    parser.add_argument("--models", default="full,yarn_bounce",
+    parser.add_argument("--models", default="no_bounce,full",
                         help="names of knitrun.render.ablations, or combinations a+b")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     args = parser.parse_args()

@@ -3,7 +3,7 @@ the look): splits a patch's brightness error into the light between yarns and th
 
 The path tracer's diagnostic ``trace_reference(..., inter_yarn=False)`` ends a path where it would scatter off
 another yarn than the one its camera ray hit (``knitbake.trace.path_tracer``); the full reference less it is the
-inter-yarn light B_ref. The strip renderer's counterpart is the ablation ``yarn_bounce`` less the full model, B_model
+inter-yarn light B_ref. The strip renderer's counterpart is the full model less the ablation ``no_bounce``, B_model
 (``knitrun.render.yarn_bounce``). Per scene and colour, printed:
 
 * B_ref's share of the reference's light (RGB means' ratio; luminance-free, so a red yarn's green reads as such);
@@ -44,7 +44,7 @@ def main():
     parser.add_argument("--colors", default="1,1,1:0.9,0.25,0.2", help="colours R,G,B separated by ':'")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     args = parser.parse_args()
-    args.models = "full,yarn_bounce"
+    args.models = "no_bounce,full"
     _, names = checked_models_and_scenes(parser, args)
     colours = parse_colours(parser, args.colors)
     print("| scene | colour | inter-yarn share of the reference (RGB) | bounce / inter-yarn | yarn-scale correlation "
@@ -62,7 +62,7 @@ def main():
                               np.float64)[..., :3]
 
         full, own = traced(True), traced(False)
-        strips, bounced = drawn("full"), drawn("yarn_bounce")
+        strips, bounced = drawn("no_bounce"), drawn("full")
         between, bounce = full - own, bounced - strips
         share = " / ".join(f"{x:.3f}" for x in between.mean(axis=(0, 1)) / full.mean(axis=(0, 1)))
         a, b = yarn_filter(between, d).mean(-1).ravel(), yarn_filter(bounce, d).mean(-1).ravel()

@@ -3,13 +3,14 @@
 ``straight_yarn_directional`` (a straight cotton1 yarn along x, seen head-on, θ_o = 0) with its light turned so
 that θ_i = asin(ω_i·x) takes each value asked for (default 0°, 20°, 35°, 50°, 65°), the light's part normal to the
 yarn along that scene's (0, 0.5, 1). The diagonal ξ of a pack (``correction/xi_closed``) was measured only at
-θ_o = −θ_i, so at θ_o = 0 it is looked up at θ_d = −θ_i/2, a configuration it never saw; ``correction/xi_view``
-(``--ablations …,view_xi``) was closed at every (θ_i, θ_o). Each scene is path traced at ``--spp`` (flyaways
-included, as the example scene) and again with another fiber seed (the instance floor); printed per θ_i: the floor's
-mean ratio and yarn-scale rel L1, and each ablation's mean radiance ratio / yarn-scale rel L1 over the floor.
+θ_o = −θ_i, so at θ_o = 0 it is looked up at θ_d = −θ_i/2, a configuration it never saw (``--ablations
+diagonal_xi,…``); ``correction/xi_view`` (the full model's) was closed at every (θ_i, θ_o). Each scene is path traced
+at ``--spp`` (flyaways included, as the example scene) and again with another fiber seed (the instance floor);
+printed per θ_i: the floor's mean ratio and yarn-scale rel L1, and each ablation's mean radiance ratio / yarn-scale
+rel L1 over the floor.
 
     .venv/bin/python benchmarks/probe_light_angle.py --pack out/bench/cotton1_standard.h5 \\
-        [--angles 0,20,35,50,65] [--ablations full,view_xi] [--spp 16]
+        [--angles 0,20,35,50,65] [--ablations diagonal_xi,full] [--spp 16]
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pack", required=True, help="cotton1 asset pack")
     parser.add_argument("--angles", default="0,20,35,50,65", help="θ_i in degrees, comma-separated")
-    parser.add_argument("--ablations", default="full,view_xi")
+    parser.add_argument("--ablations", default="diagonal_xi,full")
     parser.add_argument("--spp", type=int, default=16)
     args = parser.parse_args()
     base = load_scene(SCENE)

@@ -14,7 +14,7 @@ model's ratio per class then says whether the lit parts or the shadowed parts ca
 references of ``bench_floors.py`` (``<scene>.exr``); about 10 s per scene and model on 2 cores.
 
     .venv/bin/python benchmarks/probe_shadow_classes.py --pack out/bench/cotton1_standard.h5 \\
-        --reference-dir out/bench/refs2 [--scenes knit_patch_grazing] [--models full,surface_shadows]
+        --reference-dir out/bench/refs2 [--scenes knit_patch_grazing] [--models axis_shadows,full]
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def main():
     parser.add_argument("--pack", required=True)
     parser.add_argument("--reference-dir", required=True)
     parser.add_argument("--scenes", default=SCENES)
-    parser.add_argument("--models", default="full,surface_shadows",
+    parser.add_argument("--models", default="axis_shadows,full",
                         help="ablations or combinations a+b (ablations.combined); a model with surface_shadows is "
                              "classed by its own lookups")
     args = parser.parse_args()

@@ -22,7 +22,7 @@ strips lose light to the reference.
     .venv/bin/python benchmarks/probe_tilt.py --pack out/bench/cotton1_standard.h5 [--tilts 0,30,50,70] [--spp 16] \\
         [--light turn|fixed] [--models plain_ds,no_tables,full]
     .venv/bin/python benchmarks/probe_tilt.py --bins-from out/compare43/simulated_patch_directional \\
-        [--models full,view_xi]
+        [--models diagonal_xi,full]
 """
 
 from __future__ import annotations
