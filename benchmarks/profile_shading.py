@@ -24,14 +24,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_render  # noqa: E402
 
+from data_formats.asset_pack import read_pack  # noqa: E402
 from data_formats.scene import load_scene  # noqa: E402
 from data_formats.yarn_curves import write_yarn_curves  # noqa: E402
 from knitrun.render import pipeline  # noqa: E402
 from knitrun.render.shading_inputs import Lobes, no_lights  # noqa: E402
 from knitrun.render.strip_shading import shade_regular  # noqa: E402
 from knitrun.shading.dual_scattering import D_B, D_F, _ds_batch  # noqa: E402
-from knitrun.shading.im_lookup import _im_batch, no_im_table  # noqa: E402
+from knitrun.shading.im_lookup import _im_batch, im_table_from, no_im_table  # noqa: E402
 from knitrun.sim.crane_stockinette import stockinette_curves  # noqa: E402
+
+IM_TABLE = "environment/I_M_TT_D"
 
 
 def captured_calls(pack, light, layers):
@@ -107,7 +110,10 @@ def main():
         start = time.perf_counter()
         _ds_batch(look.params, look.ds, theta_i, theta_o, phi, n_front, direct, D_F, D_B)
         print(f"  DS evaluation, {label}: {(time.perf_counter() - start) / m * 1e9:.0f} ns")
-    im = im if im is not None else no_im_table()
+    # the pack's whole table: a captured call holds the table sliced at its lobes' λ (``im_lookup.IMSlices``), which
+    # ``_im_batch`` does not take
+    pack = read_pack(args.pack, tables=[IM_TABLE])
+    im = im_table_from(pack.tables[IM_TABLE], pack.info[IM_TABLE].axes) if IM_TABLE in pack.tables else no_im_table()
     for lam in (6600.0, 10.0, 0.7):
         lams = np.full(m, lam)
         _im_batch(im, look.params, theta_o, theta_i, phi, lams)
