@@ -47,9 +47,9 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    lets through the gap transmittance τ_Y of the blocker (``strip_shading.past_blockers``, in the kernels). With
    ``Features.yarn_bounce`` (the default) the directional lights are looked up at the polyline vertices as well,
    and the light the neighbouring yarns scatter onto each vertex (``frame_bounce``, ``knitrun.render.yarn_bounce``)
-   is interpolated to the regular points. With ``Features.two_blockers`` (an ablation) each directional light's map also draws the second
-   yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks, goes to the kernels as
-   ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
+   is interpolated to the regular points. With ``Features.two_blockers`` (an ablation) each directional light's map
+   also draws the second yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks,
+   goes to the kernels as ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
    (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
    frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
@@ -715,15 +715,21 @@ def _yarn_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, verte
     radiance."""
     vertex, covered = frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond)
     if len(covered):
-        facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),
-                                "radiance": [round(float(x), 6) for x in vertex.mean(axis=0)]}
+        facts["yarn_bounce"] = bounce_facts(vertex, covered)
     out = []
     for layer in layers:
-        at = np.empty((len(layer["weight"]), 3))
+        values = np.empty((len(layer["weight"]), 3))
         bounce_at_points(np.ascontiguousarray(layer["segment"], np.int64),
-                         np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, at)
-        out.append(at)
+                         np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, values)
+        out.append(values)
     return out
+
+
+def bounce_facts(vertex, covered) -> dict:
+    """``RenderResult.facts["yarn_bounce"]``: the polyline points' mean covered fraction of the sphere and mean bounce
+    radiance (``frame_bounce``'s values; at least one point)."""
+    return {"covered_sphere": round(float(covered.mean()), 4),
+            "radiance": [round(float(x), 6) for x in vertex.mean(axis=0)]}
 
 
 def bounce_vertices(lines, looks) -> np.ndarray:
@@ -733,14 +739,15 @@ def bounce_vertices(lines, looks) -> np.ndarray:
     yarns (two radii and more), and its cost grows with the square of the points, since each sums over the
     neighbours' segments (BENCHMARKS.md, "Issue 13: the default model of stop 49")."""
     counts = np.diff(lines.offsets)
-    keep = []
-    for c in np.flatnonzero(counts):
-        lo, hi = int(lines.offsets[c]), int(lines.offsets[c + 1])
-        length = float(np.linalg.norm(np.diff(lines.points[lo:hi], axis=0), axis=1).sum())
-        spacing = BOUNCE_SPACING_RADII * looks[lines.entry[c]].radius
-        stride = max(1, int(spacing * (hi - lo - 1) / length)) if length > 0.0 else 1
-        keep.append(np.unique(np.append(np.arange(lo, hi, stride), hi - 1)))
-    return np.concatenate(keep).astype(np.int64) if keep else np.zeros(0, np.int64)
+    curve = np.repeat(np.arange(len(counts)), counts)
+    step = np.linalg.norm(np.diff(lines.points, axis=0), axis=1)
+    within = curve[1:] == curve[:-1]
+    length = np.bincount(curve[1:][within], step[within], minlength=len(counts))
+    spacing = BOUNCE_SPACING_RADII * np.array([looks[k].radius for k in lines.entry], np.float64)
+    per_step = np.divide(spacing * np.maximum(counts - 1, 0), length, out=np.zeros(len(counts)), where=length > 0.0)
+    stride = np.maximum(np.minimum(per_step, counts), 1.0).astype(np.int64)
+    local = np.arange(len(curve)) - lines.offsets[:-1][curve]
+    return np.flatnonzero((local % stride[curve] == 0) | (local == counts[curve] - 1)).astype(np.int64)
 
 
 def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond) -> tuple:

@@ -485,8 +485,7 @@ class GLRenderer:
                         for d in self.light_dir])
         vertex, covered = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at, vis,
                                                 np.ones_like(vis))
-        facts["yarn_bounce"] = {"covered_sphere": round(float(covered.mean()), 4),
-                                "radiance": [round(float(x), 6) for x in vertex.mean(axis=0)]}
+        facts["yarn_bounce"] = pipeline.bounce_facts(vertex, covered)
         n = len(lines.points)
         data = np.zeros((-(-n // POLYLINE_ROW) * POLYLINE_ROW, 4), np.float32)
         data[:n, :3], data[:n, 3] = vertex, lines.rest
