@@ -81,6 +81,27 @@ def test_the_closed_xi_reproduces_the_traced_radiance_where_the_papers_does_not(
     assert np.all(closed >= paper / closure.CLAMP - 1e-6) and np.all(closed <= paper * closure.CLAMP + 1e-6)
 
 
+def test_the_closure_draws_its_lone_yarn_without_the_surface_lookups(closed_pack, monkeypatch):
+    """The closure's renderer looks its light up on the strip plane whatever the renderer's default: on the lone
+    yarn's tube surface its own shadow map's strip shadows the tube's far side when the light runs within ~40° of the
+    yarn (``render_bins``; this pack's two θ bins, at ±45°, are just outside it), which ξ must not learn. The rest is
+    the full model without flyaways."""
+    import knitrun.render.pipeline as pipeline
+
+    asked = []
+
+    class Recording(pipeline.Renderer):
+        def __init__(self, scene, packs=None, features=Features(), *args, **kwargs):
+            asked.append(features)
+            super().__init__(scene, packs, features, *args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "Renderer", Recording)
+    with h5py.File(closed_pack) as f:
+        shape = f["correction/xi_view"].shape[:4]
+    assert np.all(np.isfinite(closure.render_bins(closed_pack, SPEC, shape, ROWS)))
+    assert asked == [Features(flyaways=False, surface_shadows=False)]
+
+
 def test_the_papers_xi_at_the_views_is_the_papers_on_the_diagonal_and_linear_in_theta_d():
     rng = np.random.default_rng(3)
     xi = rng.uniform(0.5, 2.0, (3, 4, 2, 3))

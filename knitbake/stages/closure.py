@@ -164,7 +164,11 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
     """S (N_v, N_θ, N_θ, N_φ, 3): the strip renderer's mean radiance per v bin of the correction stage's camera,
     for each bin centre (θ_i, θ_o, φ), of the yarn drawn from ``pack`` (full model without flyaways, ξ from the
     pack's ``correction/xi_view``; ``split``: from its ``correction/xi_view_ss`` and ``_ms``; ``single``: single
-    scattering alone, ``Features.multiple_scattering`` False)."""
+    scattering alone, ``Features.multiple_scattering`` False), its lights looked up on the strip plane
+    (``surface_shadows`` False): the lone yarn has no neighbour to shadow it, and on its tube's surface its own
+    shadow map's strip (through the axis, facing the light) puts the far side of the tube in shadow when the light
+    runs within ~40° of the yarn (8.7 % of the bins' radiance on average, 147 % at most, measured on the draft pack:
+    BENCHMARKS.md "Issue 13: the default model of stop 49"), which ξ must not learn."""
     from knitrun.render.ablations import Features
     from knitrun.render.pipeline import Renderer
 
@@ -173,7 +177,7 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
     with tempfile.TemporaryDirectory(prefix="knit-closure-") as tmp:
         scene = _scene(Path(tmp), spec, pack)
         renderer = Renderer(scene, features=Features(flyaways=False, view_xi=True, split_xi=split,
-                                                     multiple_scattering=not single))
+                                                     multiple_scattering=not single, surface_shadows=False))
         done = 0
         for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
             renderer.scene = _view(scene, spec, theta_i, theta_o, phi, rows)
