@@ -2,9 +2,9 @@
 
 Per example scene with directional lights: the front regular strips are rasterised at one sample per pixel
 (``strip_raster.rasterize_visibility``) and each covered pixel gets the yarn-level visibility V of its point toward
-every directional light (``shadow_map``: the scene's map size, PCF of a delta light, the renderer's 1.5-radius
-bias), looked up where the renderer looks it up: on the strip plane through the yarn's axis (the default) or on the
-tube surface the camera sees (``pipeline.tube_surface``, ``Features.surface_shadows``). Pixels fall into classes by
+every directional light (``shadow_map``: the scene's map size, PCF of a delta light, the renderer's bias,
+``pipeline.receiver_bias``), looked up where the renderer looks it up: on the tube surface the camera sees (the
+default, ``pipeline.tube_surface``) or on the strip plane through the yarn's axis (``axis_shadows``). Pixels fall into classes by
 V (summed over the lights, divided by their count): lit (V > 0.95), partly lit, shadowed (V < 0.05), and no front
 strip. Printed per class: its share of the pixels, its share of the reference's light (luminance), and each
 model's light over the reference's there.
@@ -52,14 +52,13 @@ def pixel_visibility(scene, renderer, surface: bool) -> np.ndarray:
     radius = np.array([renderer.looks[k].radius for k in lines.entry])
     vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, 1)
     points = shading_points(vis, camera)
-    receivers = pipeline.tube_surface(points, renderer.looks) if surface else points["position"]
-    bias = np.array([look.radius for look in renderer.looks])[points["yarn"]] * pipeline.SHADOW_BIAS_RADII
+    receivers = pipeline.strip_receivers(points, renderer.looks, surface)
     lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
-    v = np.zeros(len(receivers))
+    v = np.zeros(len(receivers.position))
     for light in lights:
         sm = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius, light.unit_direction,
                               scene.render.shadow_map_size, lines.points.min(axis=0), lines.points.max(axis=0))
-        v += shadow_visibility(sm, receivers, bias, 0.0)
+        v += shadow_visibility(sm, receivers.position, pipeline.receiver_bias(receivers, light.unit_direction), 0.0)
     v /= max(len(lights), 1)
     start = points["start"]
     count = np.diff(start)

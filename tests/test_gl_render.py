@@ -124,6 +124,19 @@ def test_shadows_on_the_tube_surface_agree_and_move_the_image(tmp_path, pack):
     assert gl.mean() > 1.2 * plane.mean()
 
 
+def test_a_lone_yarn_lit_along_its_length_is_not_shadowed_by_its_own_strip(tmp_path, pack):
+    """The CPU test's lone yarn lit from behind 56° toward its axis (``tests/test_render.py``): the GL lookups on
+    the tube's surface keep their margin from the yarn's own strip as the CPU's do (``own_strip_depth`` in
+    ``shadow.glsl``), so the image is the axis plane's, and the CPU's."""
+    along = SUN.replace("direction = [0.3, 0.6, 1.0]", "direction = [1.0, 0.3, -0.6]")
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=along, name="along")
+    gl, cpu = _both(path, pack, Features(flyaways=False))
+    plane = _both(path, pack, Features(flyaways=False, surface_shadows=False))[0]
+    assert gl.max() > 0.0
+    assert _yarn_l1(gl, plane) < 1e-5
+    assert _yarn_l1(gl, cpu) < 2e-3
+
+
 def test_the_axial_parallax_agrees_and_moves_the_image(tmp_path, pack):
     """``Features.parallax`` on a straight yarn tilted 27° toward an orthographic camera, where each point is read
     r √(1 − v²) tan θ_o further along its curve: the GL walk along the polyline agrees with the CPU's as the image

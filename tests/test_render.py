@@ -359,6 +359,19 @@ def test_surface_shadows_light_the_front_of_a_yarn_whose_axis_plane_a_touching_n
     np.testing.assert_allclose(surface[row_b, cols], axis_plane[row_b, cols], rtol=1e-6, atol=1e-9)
 
 
+def test_a_lone_yarn_lit_along_its_length_is_not_shadowed_by_its_own_strip(tmp_path, pack):
+    """A lone yarn with nothing to shadow it, lit from behind, the light 56° from its normal plane toward its axis:
+    the tube surface the camera sees is the side away from the light, and past 48° it fell behind its own strip
+    (the strip faces the light and tilts in depth). Looked up on the tube's surface, the image is the axis plane's
+    (``pipeline.receiver_bias``)."""
+    along = SUN.replace("direction = [0.3, 0.6, 1.0]", "direction = [1.0, 0.3, -0.6]")
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=along, name="along")
+    axis_plane = _render(path, pack, features=Features(surface_shadows=False)).image
+    surface = _render(path, pack).image
+    assert axis_plane.max() > 0.0
+    np.testing.assert_allclose(surface, axis_plane, rtol=1e-6, atol=1e-9)
+
+
 def test_pack_errors_are_one_line(tmp_path, pack):
     path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     with pytest.raises(ValueError, match=r"yarns\[0\] \(cotton1\) has no asset pack"):

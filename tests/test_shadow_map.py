@@ -5,7 +5,8 @@ import numba
 import numpy as np
 import pytest
 
-from knitrun.render.shadow_map import behind_map, build_shadow_map, shadow_visibility
+from knitrun.render.shadow_map import (OWN_STRIP_MAX, behind_map, build_shadow_map, own_strip_depth,
+                                       shadow_visibility)
 
 R = 0.1  # yarn radius
 BIAS = 1.5 * R
@@ -83,6 +84,44 @@ def test_no_self_shadowing_with_the_bias():
     surface = np.stack([np.full(16, 0.4), R * np.sin(phi), R * np.cos(phi)], axis=1)  # around the tube
     assert np.all(shadow_visibility(sm, [[0.4, 0.0, 0.0]], BIAS, 0.0) == 1.0)
     assert np.all(shadow_visibility(sm, surface, BIAS, 0.05) == 1.0)
+
+
+def test_own_strip_depth_is_the_distance_to_the_strip_through_the_axis_that_faces_the_light():
+    """Light across the yarn: a receiver Δ off the axis on the far side lies Δ behind the strip, one on the near side
+    or along the axis 0; light at θ from the yarn's normal plane: Δ/cos θ behind (the plane tilts); near the axis: the
+    cap; an offset along the tangent moves nothing; finite along the axis and for a zero tangent."""
+    t, d = np.array([[1.0, 0.0, 0.0]]), UP
+    assert own_strip_depth([[0.0, -0.1, 0.0]], t, d)[0] == pytest.approx(0.1)
+    assert own_strip_depth([[0.0, 0.1, 0.0]], t, d)[0] == 0.0
+    assert own_strip_depth([[0.0, 0.0, 0.1]], t, d)[0] == pytest.approx(0.0, abs=1e-15)
+    theta = np.radians(50.0)
+    tilted = np.array([np.sin(theta), np.cos(theta), 0.0])
+    assert own_strip_depth([[0.0, -0.1, 0.0]], t, tilted)[0] == pytest.approx(0.1 / np.cos(theta))
+    assert own_strip_depth([[0.3, -0.1, 0.0]], 2.0 * t, tilted)[0] == pytest.approx(0.1 / np.cos(theta))
+    near_axis = np.array([np.cos(1e-3), np.sin(1e-3), 0.0])
+    assert own_strip_depth([[0.0, -0.1, 0.0]], t, near_axis)[0] == pytest.approx(OWN_STRIP_MAX * 0.1)
+    assert own_strip_depth([[0.0, 0.1, 0.0]], t, near_axis)[0] == 0.0
+    assert np.all(np.isfinite(own_strip_depth([[0.0, -0.1, 0.0], [0.0, 0.0, 0.0]], [t[0], [0.0, 0.0, 0.0]], t[0])))
+    assert own_strip_depth(np.zeros((0, 3)), np.zeros((0, 3)), d).shape == (0,)
+
+
+@pytest.mark.parametrize("degrees", [0.0, 30.0, 50.0, 60.0, 70.0])
+def test_no_self_shadowing_on_the_tube_surface_as_the_light_turns_along_the_yarn(degrees):
+    """Receivers around the tube (Δ = r off the axis), the light turned by θ from the yarn's normal plane toward its
+    axis: with the bias grown by ``own_strip_depth`` none is shadowed by the yarn's own strip; with the bias alone
+    the far side is, once r/cos θ passes 1.5 r (θ > 48°)."""
+    theta = np.radians(degrees)
+    d = np.array([np.sin(theta), np.cos(theta), 0.0])
+    sm = shadow_map([0.0], direction=d)
+    phi = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    offset = np.stack([np.zeros(32), R * np.sin(phi), R * np.cos(phi)], axis=1)
+    tangent = np.tile([1.0, 0.0, 0.0], (32, 1))
+    surface = np.array([0.4, 0.0, 0.0]) + offset
+    grown = BIAS + own_strip_depth(offset, tangent, d)
+    assert np.all(shadow_visibility(sm, surface, grown, 0.0) == 1.0)
+    assert np.all(shadow_visibility(sm, surface, grown, 0.05) == 1.0)
+    alone = shadow_visibility(sm, surface, BIAS, 0.0)
+    assert np.all(alone == 1.0) if degrees < 45.0 else np.any(alone < 0.5)
 
 
 def test_penumbra_widens_with_distance_from_the_blocker():

@@ -28,7 +28,8 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
 4. ``shadow``: per directional light a yarn-level shadow map of ``render.shadow_map_size``² texels, filtered by PCF
    (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
    angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by 1.5 yarn
-   radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job).
+   radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job),
+   a regular point's beyond its own yarn's strip toward each light (``Receivers``, ``receiver_bias``).
    A flyaway point with a regular point of its curve in its pixel within ``SHARE_REACH`` = 0.1 pixel (``strip_shading.
    same_surface``: the same MSAA sample of the same strip plane) takes that point's visibilities instead of its own
    lookups (``facts["flyaway_points_shared"]``): 47 % of the covered flyaway points of ``bench_render``'s patch. The
@@ -93,7 +94,7 @@ from knitrun.render.compile_ahead import start_compile_ahead
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
-from knitrun.render.shadow_map import behind_map, build_shadow_map, shadow_visibility
+from knitrun.render.shadow_map import behind_map, build_shadow_map, own_strip_depth, shadow_visibility
 from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent, vertex_tangents
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
                                           same_surface, shade_flyaway, shade_regular, shading_points)
@@ -364,21 +365,66 @@ def _environment(scene: Scene, use_cache: bool):
                       scene.render.seed, use_cache)
 
 
+class Receivers(NamedTuple):
+    """A set of shadow-map receivers (module docstring, step 4): world ``position`` (N, 3) and ``bias`` (N,) scene
+    units. Receivers off their yarn's axis also carry their ``offset`` (N, 3) from the axis and the yarn's
+    ``tangent`` (N, 3) there; toward each light their bias grows by how far they lie behind their own yarn's strip
+    (``receiver_bias``)."""
+
+    position: np.ndarray
+    bias: np.ndarray
+    offset: np.ndarray | None = None
+    tangent: np.ndarray | None = None
+
+
+def strip_receivers(points, looks, surface: bool) -> Receivers:
+    """The receivers of regular ``points``, biased by ``SHADOW_BIAS_RADII`` yarn radii: on the tube surface the camera
+    sees there (``tube_surface``) or, ``surface`` False, the strip points themselves. Both lie off the yarn's axis: a
+    strip point v r along the strip's half-width direction b = normalize(ω_o × t) (``strip_raster``; taken here at
+    the point's own ω_o and t), the surface r √(1 − v²) further toward the camera."""
+    radius = np.array([look.radius for look in looks], np.float64)[points["yarn"]]
+    view_dir, tangent = points["view_dir"], points["tangent"]
+    half_width = np.cross(view_dir, tangent)
+    length = np.linalg.norm(half_width, axis=1, keepdims=True)
+    half_width = np.divide(half_width, length, out=np.zeros_like(half_width), where=length > 0.0)
+    lateral = (radius * np.clip(np.asarray(points["v"], np.float64), -1.0, 1.0))[:, None] * half_width
+    position = tube_surface(points, looks) if surface else points["position"]
+    return Receivers(position, SHADOW_BIAS_RADII * radius, lateral + (position - points["position"]), tangent)
+
+
+def axis_receivers(lines, looks, at) -> Receivers:
+    """The receivers at polyline points ``at`` (on their yarns' axes), biased by ``SHADOW_BIAS_RADII`` yarn radii."""
+    radius = np.array([look.radius for look in looks], np.float64)
+    return Receivers(lines.points[at], SHADOW_BIAS_RADII * np.repeat(radius[lines.entry], np.diff(lines.offsets))[at])
+
+
+def receiver_bias(receivers: Receivers, direction) -> np.ndarray:
+    """The bias (N,) of ``receivers`` in a map toward unit ``direction``: a receiver off its yarn's axis keeps its
+    margin from its own yarn's strip (``shadow_map.own_strip_depth``), which tilts toward it as the light turns
+    along the yarn; without that the far side of a yarn lit along its length fell into its own strip's shadow
+    (BENCHMARKS.md, "Issue 13: the surface lookups' own strip")."""
+    if receivers.offset is None or len(receivers.bias) == 0:
+        return receivers.bias
+    return receivers.bias + own_strip_depth(receivers.offset, receivers.tangent, direction)
+
+
 def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers, depth_maps, two_layers=False):
-    """Yarn-level visibility of each receiver set (position, bias) toward ``direction``; the shadow map's depth is
-    drawn into ``depth_maps[size]`` (kept there for the next map of that size). With ``two_layers``, (visibility,
-    the fraction at most one yarn blocks) of each set, from the map's second layer (``shadow_map.behind_map``)."""
+    """Yarn-level visibility of each set of ``Receivers`` toward ``direction``; the shadow map's depth is drawn into
+    ``depth_maps[size]`` (kept there for the next map of that size). With ``two_layers``, (visibility, the fraction
+    at most one yarn blocks) of each set, from the map's second layer (``shadow_map.behind_map``)."""
     if len(lines.entry) == 0:
-        return [(np.ones(len(p)),) * 2 if two_layers else np.ones(len(p)) for p, _ in receivers]
+        return [(np.ones(len(r.position)),) * 2 if two_layers else np.ones(len(r.position)) for r in receivers]
     sm = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius_of_curve, direction, size,
                           lines.points.min(axis=0), lines.points.max(axis=0),
                           out=None if two_layers else depth_maps.get(size), layers=2 if two_layers else 1)
+    unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+    biases = [receiver_bias(r, unit) for r in receivers]
     if not two_layers:
         depth_maps[size] = sm.depth
-        return [shadow_visibility(sm, p, bias, angular_radius) for p, bias in receivers]
+        return [shadow_visibility(sm, r.position, bias, angular_radius) for r, bias in zip(receivers, biases)]
     behind = behind_map(sm)
-    return [(shadow_visibility(sm, p, bias, angular_radius), shadow_visibility(behind, p, bias, angular_radius))
-            for p, bias in receivers]
+    return [(shadow_visibility(sm, r.position, bias, angular_radius),
+             shadow_visibility(behind, r.position, bias, angular_radius)) for r, bias in zip(receivers, biases)]
 
 
 class Renderer:
@@ -549,10 +595,9 @@ class Renderer:
             where.append(np.flatnonzero(covered & (partner < 0)))
             facts["flyaway_points_shared"] = int(len(shared))
         bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
-        seen = [tube_surface(s, looks) if features.surface_shadows else s["position"] for s in layers] + \
-            [s["position"] for s in sets[len(layers):]]
-        receivers = [(p[at], bias_radius[s["yarn"][at]] if len(s["yarn"]) else np.zeros(0))
-                     for p, s, at in zip(seen, sets, where)]
+        receivers = [strip_receivers(s, looks, features.surface_shadows) for s in layers] + \
+            [Receivers(s["position"][at], bias_radius[s["yarn"][at]] if len(s["yarn"]) else np.zeros(0))
+             for s, at in zip(sets[len(layers):], where[len(layers):])]
         directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)
         light_e = np.array([light.irradiance for light in directional], np.float64).reshape(-1, 3)
@@ -564,8 +609,7 @@ class Renderer:
         # vertices too
         bounce_on = bounce_drawn(features, looks, len(light_dir))
         at_bounce = bounce_vertices(lines, looks) if bounce_on else np.zeros(0, np.int64)
-        vertex_receivers = [(lines.points[at_bounce], np.repeat(bias_radius[lines.entry], np.diff(lines.offsets))
-                             [at_bounce])] if bounce_on else []
+        vertex_receivers = [axis_receivers(lines, looks, at_bounce)] if bounce_on else []
         vertex_vis = np.ones((len(light_dir), len(at_bounce)))
         vertex_beyond = np.ones((len(light_dir), len(at_bounce)))
         for i, d in enumerate(light_dir):

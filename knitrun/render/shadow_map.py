@@ -14,9 +14,11 @@ Units and conventions:
   (h = ortho_height, τ = h / size the texel size); row 0 is the top (+up). Its centre, where the depth was taken, is
   x = −h/2 + (j + ½)τ, y = h/2 − (i + ½)τ. Continuous texel coordinates of view point (x, y): u = x/τ + size/2
   (columns), w = size/2 − y/τ (rows); texel centres at integer + ½.
-* A receiver at view depth z is occluded by a texel of depth d when d < z − bias. With bias 1.5·radius a yarn never
-  shadows its own surface (the strip passes through the axis; the far side lies at axis + radius): yarn-level
-  shadows are between yarns, self-shadowing is fiber-level (``ASSET_PACK.md`` §7).
+* A receiver at view depth z is occluded by a texel of depth d when d < z − bias. With bias 1.5·radius a receiver on
+  a yarn's axis is never shadowed by its own yarn: yarn-level shadows are between yarns, self-shadowing is
+  fiber-level (``ASSET_PACK.md`` §7). A receiver off the axis (on the tube's surface) lies ``own_strip_depth``
+  behind its own yarn's strip, which faces the light and so tilts as the light turns toward the yarn's axis: its
+  bias grows by that much (``knitrun.render.pipeline``), so its margin from its own strip stays 1.5·radius.
 * ``behind`` (with ``layers`` = 2): the depth of the second yarn along each texel's ray, the nearest strip more
   than the first one's radius behind it (``strip_raster.rasterize_behind``, depth peeling), +inf where there is
   none; the same PCSS on it (``behind_map``) gives the fraction of the light that at most one yarn blocks.
@@ -47,6 +49,32 @@ from knitrun.render.strip_raster import rasterize_behind, rasterize_depth, raste
 
 MAX_FILTER_TEXELS = 32.0  # cap on the blocker-search and PCF half-widths
 MAX_TAPS = 8  # taps per axis of each filter grid
+OWN_STRIP_MAX = 6.0  # ``own_strip_depth``'s cap, in units of the offset's length
+
+
+def own_strip_depth(offset, tangent, direction) -> np.ndarray:
+    """How far (N,) scene units toward the light a receiver ``offset`` (N, 3) off its yarn's axis (unit ``tangent``
+    (N, 3) there, normalised here) lies behind its own yarn's strip in a map toward unit ``direction`` d (3,); 0 where the strip lies
+    beyond it. The map draws the yarn as the strip through its axis that contains the tangent and faces the light:
+    the plane of normal n = (d − (d·t) t)/√(1 − (d·t)²), whose distance along d from the receiver is
+    s = −(o·n)/(d·n) = −(o·d − (o·t)(d·t))/(1 − (d·t)²). For an offset o ⊥ t of length Δ, s ≤ Δ/cos θ (θ the
+    light's angle from the yarn's normal plane): Δ with the light across the yarn, without bound as the light turns
+    along it (the strip tilts in depth). Growing a receiver's bias by s hides no other yarn where its own is
+    straight: from a point on the tube the ray toward the light stays inside the tube until 2s (it crosses the
+    strip halfway), so another yarn's strip lies beyond 2s + r. Where the yarn bends within Δ tan θ of the receiver
+    its strip is not there, so s is capped at ``OWN_STRIP_MAX``·|o| (6: the light within 9.6° of the yarn's axis;
+    the bake's θ grids end at 78.75°, 1/cos θ = 5.1). Exactly along the axis the strip is edge-on: s = 0."""
+    offset = np.asarray(offset, np.float64).reshape(-1, 3)
+    tangent = np.asarray(tangent, np.float64).reshape(-1, 3)
+    length = np.linalg.norm(tangent, axis=1, keepdims=True)
+    tangent = np.divide(tangent, length, out=np.zeros_like(tangent), where=length > 0.0)
+    d = np.asarray(direction, np.float64).reshape(3)
+    c = tangent @ d
+    along = np.einsum("ij,ij->i", offset, tangent)
+    toward = -(offset @ d - along * c)
+    cap = OWN_STRIP_MAX * np.sqrt(np.einsum("ij,ij->i", offset, offset))
+    s = np.divide(toward, 1.0 - c * c, out=np.where(toward > 0.0, cap, 0.0), where=1.0 - c * c > 1e-12)
+    return np.clip(s, 0.0, cap)
 
 
 @dataclass

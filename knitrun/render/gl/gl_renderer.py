@@ -63,7 +63,7 @@ from knitrun.render import pipeline
 from knitrun.render.ablations import Features
 from knitrun.render.camera import Camera, scene_camera
 from knitrun.render.ms_lights import ms_cells
-from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS
+from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS, OWN_STRIP_MAX
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, vertex_tangents
 from knitrun.shading import fiber_bcsdf as fb
 
@@ -138,6 +138,7 @@ def gl_constants() -> str:
         f"const float NO_YARN = {NO_YARN!r};",
         f"const float PCF_RADIUS = {PCF_RADIUS!r};",
         f"const float PARALLAX_MAX_SIN = {pipeline.PARALLAX_MAX_SIN!r};",
+        f"const float OWN_STRIP_MAX = {OWN_STRIP_MAX!r};",
         f"const int PARALLAX_STEPS = {PARALLAX_STEPS};",
         f"const int POLYLINE_ROW = {POLYLINE_ROW};",
         f"#define MAX_LIGHTS {MAX_LIGHTS}",
@@ -477,9 +478,8 @@ class GLRenderer:
         (i mod POLYLINE_ROW, i // POLYLINE_ROW), (bounce RGB, rest arc length)."""
         cpu = self.cpu
         radius = np.array([cpu.looks[k].radius for k in lines.entry])
-        bias = np.array([look.radius for look in cpu.looks]) * pipeline.SHADOW_BIAS_RADII
         at = pipeline.bounce_vertices(lines, cpu.looks)
-        receivers = [(lines.points[at], np.repeat(bias[lines.entry], np.diff(lines.offsets))[at])]
+        receivers = [pipeline.axis_receivers(lines, cpu.looks, at)]
         size = self.scene.render.shadow_map_size
         vis = np.array([pipeline._visibility(lines, radius, d, size, 0.0, receivers, cpu.shadow_depth)[0]
                         for d in self.light_dir])

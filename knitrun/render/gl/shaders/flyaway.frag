@@ -123,7 +123,7 @@ void main() {
              * cos(theta_i_f);
     }
     for (int j = 0; j < n_lobes; ++j) {
-        float vis = lobe_visibility(j, sp.position);
+        float vis = lobe_visibility(j, sp.position, shadow_bias);
         if (vis <= 0.0) continue;
         vec3 w = lobe_dir[j];
         float phi_f = azimuth_difference(tf, sp.wo, w);

@@ -86,6 +86,7 @@ void axial_parallax(inout StripPoint sp) {
 void main() {
     StripPoint sp = strip_point();
     float bounce_s = sp.s;  // the bounce is read where the point lies, before the parallax (as on the CPU)
+    vec3 raster_t = sp.t;  // and the lights' bias takes the rasterizer's tangent (pipeline.surface_receivers)
     if (parallax != 0 && sp.drawn)
         axial_parallax(sp);
     gl_FragDepth = clamp(fin.depth / far_plane, 0.0, 1.0);
@@ -104,13 +105,19 @@ void main() {
     float theta_o = clamped_asin(dot(t, wo));
     float theta_o_f = clamped_asin(dot(tf, wo));
     // where the lights are looked up: the strip point, or the tube surface seen there (pipeline.tube_surface)
-    vec3 receiver = surface_shadows != 0 ? sp.position + radius * sqrt(max(1.0 - v * v, 0.0)) * wo : sp.position;
+    // biased per light by how far it lies behind its own strip (pipeline.strip_receivers, pipeline.receiver_bias):
+    // its offset from the axis, v r along the strip's half-width direction and the surface's height
+    vec3 surface = surface_shadows != 0 ? radius * sqrt(max(1.0 - v * v, 0.0)) * wo : vec3(0.0);
+    vec3 half_width = cross(wo, raster_t);
+    vec3 offset = surface + (length(half_width) > 0.0 ? radius * v * normalize(half_width) : vec3(0.0));
+    vec3 receiver = sp.position + surface;
     Params p = yarn_params();
     vec3 rgb = vec3(0.0), xi, psi, total, back_direct, f_scatter;
     for (int l = 0; l < n_lights; ++l) {
         vec3 w = light_dir[l];
         corrections(v, t, n, b, theta_o, w, xi, psi);
-        float vis = pcss(light_atlas, light_map[l], receiver, shadow_bias, PCF_RADIUS);
+        float vis = pcss(light_atlas, light_map[l], receiver, shadow_bias + own_strip_depth(offset, raster_t, w),
+                         PCF_RADIUS);
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), clamped_asin(dot(tf, w)), theta_o_f, phi_f,
                   n_occluded + (1.0 - vis) * n_cross_rest, past_blockers(vis) * fiber_lit(psi), true, total, back_direct,
@@ -119,7 +126,7 @@ void main() {
     }
     float lobe_vis[MAX_LOBES];
     for (int j = 0; j < n_lobes; ++j) {
-        float vis = lobe_visibility(j, receiver);
+        float vis = lobe_visibility(j, receiver, shadow_bias + own_strip_depth(offset, raster_t, lobe_dir[j]));
         lobe_vis[j] = vis;
         if (vis <= 0.0) continue;
         vec3 w = lobe_dir[j];

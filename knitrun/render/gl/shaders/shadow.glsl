@@ -59,3 +59,13 @@ float pcss(sampler2D atlas, ShadowMapInfo m, vec3 position, float bias, float pc
         }
     return clamp(lit / float(n * n), 0.0, 1.0);
 }
+
+// shadow_map.own_strip_depth: how far toward the light d a receiver o off its yarn's axis (tangent t, unit) lies behind
+// the strip the map draws its yarn as; 0 where the strip lies beyond it; capped at OWN_STRIP_MAX |o|
+float own_strip_depth(vec3 o, vec3 t, vec3 d) {
+    float c = dot(t, d);
+    float toward = -(dot(o, d) - dot(o, t) * c);
+    float cap = OWN_STRIP_MAX * length(o);
+    float den = 1.0 - c * c;
+    return clamp(den > 1e-12 ? toward / den : (toward > 0.0 ? cap : 0.0), 0.0, cap);
+}

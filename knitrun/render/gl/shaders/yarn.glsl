@@ -47,9 +47,10 @@ float past_blockers(float vis) {
     return vis + (1.0 - vis) * gap;
 }
 
-// T̃_j: lobe j's PCSS visibility raised by the yarn-level inter-reflection (interreflection.interreflected_visibility)
-float lobe_visibility(int j, vec3 position) {
-    float vis = pcss(lobe_atlas, lobe_map[j], position, shadow_bias, PCF_RADIUS);
+// T̃_j: lobe j's PCSS visibility at a receiver of that bias, raised by the yarn-level inter-reflection
+// (interreflection.interreflected_visibility)
+float lobe_visibility(int j, vec3 position, float bias) {
+    float vis = pcss(lobe_atlas, lobe_map[j], position, bias, PCF_RADIUS);
     if (yarn_albedo > 0.0) {
         float den = 1.0 - yarn_albedo * (1.0 - vis);
         vis = den > 0.0 ? vis / den : 1.0;
