@@ -99,9 +99,10 @@ QUALITY = {
 # curves, not tubes; correction 6, interreflection 3: the oblique strip cameras start their rays outside the yarn;
 # interreflection 4: the yarn's transmittance T_Y as well; correction 7: Ψ_* kept (correction/radiance);
 # closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view; 3: and apart on single and multiple scattering;
-# interreflection 5: ρ_Y and T_Y against the colour (interreflection/*_by_colour)
+# interreflection 5: ρ_Y and T_Y against the colour (interreflection/*_by_colour); closure 4: the renderer it closes
+# on no longer shadows the lone yarn by its own strip (shadow_map.own_strip_depth)
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
-                 "interreflection": 5, "textures": 2, "flyaway": 2, "closure": 3}
+                 "interreflection": 5, "textures": 2, "flyaway": 2, "closure": 4}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64

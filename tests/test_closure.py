@@ -12,6 +12,7 @@ import pytest
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
 from knitbake.stages import closure
+from knitrun.render import ablations
 from knitrun.render.ablations import Features
 from knitrun.render.pipeline import Renderer
 from tests.helpers import TINY
@@ -67,6 +68,58 @@ def _miss(pack, xi_view, folder):
     return float(np.sqrt(np.mean((rendered[measured] / target[measured] - 1.0) ** 2)))
 
 
+def test_the_residual_the_pack_reports_is_the_residual_of_its_own_xi(closed_pack):
+    """``closure_residual_rms`` and ``_max`` are those of the table the pack holds, drawn again: the closure stores the
+    ξ its last render drew (until closure version 4 it put the bins below the signal in that render back to the
+    paper's ξ, and the standard pack's stored ξ drew 0.54 RMS where it reported 0.23)."""
+    with h5py.File(closed_pack) as f:
+        target, err = f["correction/radiance_view"][()], f["correction/radiance_view_stderr"][()]
+        attrs = dict(f["correction/xi_view"].attrs)
+    rendered = closure.render_bins(closed_pack, SPEC, target.shape[:4], ROWS)
+    used = np.all((target > closure.SIGNAL * target.max()) & (err <= closure.MAX_RELATIVE_ERROR * target), axis=-1,
+                  keepdims=True) & (rendered > closure.SIGNAL * rendered.max())
+    miss = np.abs(rendered[used] / target[used] - 1.0)
+    assert miss.size >= 4, "too few closed bins for the test to mean anything"
+    assert np.sqrt(np.mean(miss ** 2)) == pytest.approx(attrs["closure_residual_rms"], rel=1e-3, abs=1e-6)
+    assert miss.max() == pytest.approx(attrs["closure_residual_max"], rel=1e-3, abs=1e-6)
+
+
+def test_the_closure_stores_the_xi_its_last_render_drew(monkeypatch):
+    """A bin the fixed point moved that falls below the signal in the last render keeps its moved ξ (the table
+    stored is the one the residual was measured on), with its error from Ψ_*; a bin never measured keeps the paper's.
+    Synthetic renderer: S = ξ · base, base the traced radiance halved, but bin (0, 0, 0, 0) dark in the last render."""
+    from knitbake.stages.stage_result import StageResult
+
+    paper_tab = np.full((2, 2, 1, 3), 1.5)
+    target = np.full((2, 2, 2, 1, 3), 0.2)
+    target[1, 1, 1, 0] = 0.0  # never measured
+    monkeypatch.setattr(closure, "trace_view_radiance", lambda *a, **k: (target, 0.01 * target))
+    drawn, calls = [], []
+
+    def write_pack_to(path, xi, split=None):
+        drawn.append(xi.copy())
+
+    def render_bins(pack, spec, shape, rows, progress=None, split=False, single=False):
+        calls.append(1)
+        out = drawn[-1] * 0.5 * target
+        if len(calls) == 3:  # the last render (iterations = 2)
+            out[0, 0, 0, 0] = 0.0
+        return out
+
+    monkeypatch.setattr(closure, "render_bins", render_bins)
+    inputs = {"correction": StageResult({"correction/xi": paper_tab, "correction/radiance": target[:, [1, 0], [0, 1]]},
+                                        {"correction/xi": 0.1 * paper_tab,
+                                         "correction/radiance": 0.01 * target[:, [1, 0], [0, 1]]})}
+    tables, errors, counts, left = closure.close_correction(SPEC, inputs, write_pack_to, ROWS, 2, 1, 1, 0,
+                                                            split=False)
+    stored = tables["correction/xi_view"]
+    assert np.array_equal(stored, drawn[-1])
+    assert np.allclose(stored[0, 0, 0, 0], 2.0) and np.allclose(stored[1, 1, 1, 0], 1.5)  # S = Ψ_* at ξ = 2
+    assert np.allclose(errors["correction/xi_view"][0, 0, 0, 0], 0.01 * 2.0)
+    assert np.allclose(errors["correction/xi_view"][1, 1, 1, 0], 0.1 * 1.5)
+    assert counts["bins_closed"] == 7 and left["correction/xi_view"]["closure_residual_rms"] == pytest.approx(0.0)
+
+
 def test_the_closed_xi_reproduces_the_traced_radiance_where_the_papers_does_not(closed_pack, tmp_path):
     with h5py.File(closed_pack) as f:
         paper, closed = closure.papers_xi_at_views(f["correction/xi"][()]), f["correction/xi_view"][()]
@@ -81,11 +134,11 @@ def test_the_closed_xi_reproduces_the_traced_radiance_where_the_papers_does_not(
     assert np.all(closed >= paper / closure.CLAMP - 1e-6) and np.all(closed <= paper * closure.CLAMP + 1e-6)
 
 
-def test_the_closure_draws_its_lone_yarn_without_the_surface_lookups(closed_pack, monkeypatch):
-    """The closure's renderer looks its light up on the strip plane whatever the renderer's default: on the lone
-    yarn's tube surface its own shadow map's strip shadows the tube's far side when the light runs within ~40° of the
-    yarn (``render_bins``; this pack's two θ bins, at ±45°, are just outside it), which ξ must not learn. The rest is
-    the full model without flyaways."""
+def test_the_closure_draws_its_lone_yarn_unshadowed_by_its_own_strip(closed_pack, monkeypatch):
+    """The closure's renderer draws the full model without flyaways. The lone yarn's bins are the same looked up on
+    the tube's surface as on the strip plane; without the tilt of its own strip (``pipeline.receiver_bias`` =
+    the bias alone) they are the same again only where no light runs more than 48° from the yarn's normal plane:
+    on a grid of four θ bins the two middle ones (±22.5°), not the outer ones (±67.5°)."""
     import knitrun.render.pipeline as pipeline
 
     asked = []
@@ -95,11 +148,26 @@ def test_the_closure_draws_its_lone_yarn_without_the_surface_lookups(closed_pack
             asked.append(features)
             super().__init__(scene, packs, features, *args, **kwargs)
 
-    monkeypatch.setattr(pipeline, "Renderer", Recording)
     with h5py.File(closed_pack) as f:
         shape = f["correction/xi_view"].shape[:4]
-    assert np.all(np.isfinite(closure.render_bins(closed_pack, SPEC, shape, ROWS)))
-    assert asked == [Features(flyaways=False, surface_shadows=False)]
+    with monkeypatch.context() as m:
+        m.setattr(pipeline, "Renderer", Recording)
+        assert np.all(np.isfinite(closure.render_bins(closed_pack, SPEC, shape, ROWS)))
+    assert asked == [Features(flyaways=False)]
+
+    def bins(own_strip=True, **features):
+        with monkeypatch.context() as m:
+            m.setattr(ablations, "Features", lambda **kw: Features(**{**kw, **features}))
+            if not own_strip:
+                m.setattr(pipeline, "receiver_bias", lambda receivers, direction: receivers.bias)
+            return closure.render_bins(closed_pack, SPEC, (shape[0], 4, 4, shape[3]), ROWS)
+
+    surface = bins()
+    np.testing.assert_allclose(bins(surface_shadows=False), surface, rtol=1e-9, atol=1e-12)
+    tilted = bins(own_strip=False)
+    np.testing.assert_allclose(tilted[:, 1:3], surface[:, 1:3], rtol=1e-9, atol=1e-12)
+    outer, lit = surface[:, [0, 3]], surface[:, [0, 3]] > 1e-3 * surface.max()
+    assert np.abs(tilted[:, [0, 3]][lit] / outer[lit] - 1.0).max() > 0.3  # shadowed by its own strip
 
 
 def test_the_papers_xi_at_the_views_is_the_papers_on_the_diagonal_and_linear_in_theta_d():

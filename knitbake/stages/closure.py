@@ -32,7 +32,7 @@ without flyaways, MSAA 4) draw every bin, S(v, θ_i, θ_o, φ) its mean radiance
 ``MAX_RELATIVE_ERROR`` of it, in every channel) and S exceeds ``SIGNAL`` × its largest value; other bins (grazing
 views and lights and the strip's edges, where few fibers are hit) keep the starting value. A last render measures
 what is left: the closure residual |S/Ψ_* − 1| over those bins (attributes ``closure_residual_max`` and
-``closure_residual_rms`` of ``correction/xi_view``).
+``closure_residual_rms`` of ``correction/xi_view``), and the table stored is the one it drew.
 
 The diagonal θ_o = −θ_i of the result is stored as well, ``correction/xi_closed`` (v, θ_d, φ), the ξ of a renderer
 that looks ξ up at θ_d alone (knit's default ξ; until closure version 2 this stage closed that diagonal only):
@@ -164,11 +164,10 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
     """S (N_v, N_θ, N_θ, N_φ, 3): the strip renderer's mean radiance per v bin of the correction stage's camera,
     for each bin centre (θ_i, θ_o, φ), of the yarn drawn from ``pack`` (full model without flyaways, ξ from the
     pack's ``correction/xi_view``; ``split``: from its ``correction/xi_view_ss`` and ``_ms``; ``single``: single
-    scattering alone, ``Features.multiple_scattering`` False), its lights looked up on the strip plane
-    (``surface_shadows`` False): the lone yarn has no neighbour to shadow it, and on its tube's surface its own
-    shadow map's strip (through the axis, facing the light) puts the far side of the tube in shadow when the light
-    runs within ~40° of the yarn (8.7 % of the bins' radiance on average, 147 % at most, measured on the draft pack:
-    BENCHMARKS.md "Issue 13: the default model of stop 49"), which ξ must not learn."""
+    scattering alone, ``Features.multiple_scattering`` False). The lone yarn has no neighbour to shadow it; its own
+    strip in the shadow maps does not either (``shadow_map.own_strip_depth``: up to θ_i = 80.4°). Until closure
+    version 4 it did, with the light more than ~48° from the yarn's normal plane, and ξ learnt it (the standard
+    pack's bins at θ_i = ±78.75° moved by 27–29 % on average: BENCHMARKS.md, "Issue 13: a yarn's own strip")."""
     from knitrun.render.ablations import Features
     from knitrun.render.pipeline import Renderer
 
@@ -177,7 +176,7 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
     with tempfile.TemporaryDirectory(prefix="knit-closure-") as tmp:
         scene = _scene(Path(tmp), spec, pack)
         renderer = Renderer(scene, features=Features(flyaways=False, view_xi=True, split_xi=split,
-                                                     multiple_scattering=not single, surface_shadows=False))
+                                                     multiple_scattering=not single))
         done = 0
         for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
             renderer.scene = _view(scene, spec, theta_i, theta_o, phi, rows)
@@ -236,6 +235,7 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
 
     xi = paper.copy()
     used_total = measured(target, target_err)
+    moved = np.zeros(paper.shape, bool)  # the bins some update has moved from the paper's ξ
     with tempfile.TemporaryDirectory(prefix="knit-closure-pack-") as tmp:
         pack = Path(tmp) / "inputs.h5"
         step = passes(batches)
@@ -247,9 +247,12 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
                 break
             ratio = np.where(used, target / np.where(used, rendered, 1.0), 1.0)
             xi = np.clip(xi * ratio, paper / CLAMP, paper * CLAMP)
-        closed = np.where(used, xi, paper)
-        relative = np.where(used, target_err / np.where(used, target, 1.0), paper_err / np.maximum(paper, 1e-300))
-        counts = {"iterations": iterations, "bins_closed": int(used.all(axis=-1).sum()),
+            moved |= used
+        # the table the last render drew, whose residual is measured (until closure version 4 the bins that fell
+        # below the signal in the last render went back to the paper's ξ, which moved their neighbours' lookups)
+        closed = xi
+        relative = np.where(moved, target_err / np.where(moved, target, 1.0), paper_err / np.maximum(paper, 1e-300))
+        counts = {"iterations": iterations, "bins_closed": int(moved.all(axis=-1).sum()),
                   "bins": int(np.prod(shape)), "batches": batches, "paths_per_pixel": spp}
         left = {"correction/xi_view": _residual(rendered, target, used),
                 "correction/xi_closed": _residual(diagonal_of(rendered), diagonal_of(target), diagonal_of(used))}
@@ -265,6 +268,7 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
         tables["correction/radiance_view_ss"], errors["correction/radiance_view_ss"] = single, single_err
         parts = {"ss": (single, single_err), "ms": (target - single, np.hypot(target_err, single_err))}
         apart = {name: closed.copy() for name in parts}
+        moved_parts = {name: np.zeros(closed.shape, bool) for name in parts}
         measured_parts = {name: measured(*value) for name, value in parts.items()}
         step = passes(split_from + batches)
         for it in range(iterations + 1):
@@ -279,11 +283,12 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
                 ok = used_parts[name]
                 ratio = np.where(ok, want / np.where(ok, drawn_parts[name], 1.0), 1.0)
                 apart[name] = np.clip(apart[name] * ratio, paper / CLAMP, paper * CLAMP)
+                moved_parts[name] |= ok
     for name, (want, want_err) in parts.items():
-        ok = used_parts[name]
-        counts[f"bins_closed_{name}"] = int(ok.all(axis=-1).sum())
-        value = np.where(ok, apart[name], closed)
-        error = value * np.where(ok, want_err / np.where(ok, np.abs(want), 1.0), relative)
+        ok, moved = used_parts[name], moved_parts[name]
+        counts[f"bins_closed_{name}"] = int(moved.all(axis=-1).sum())
+        value = apart[name]  # the tables the last render drew, as for the totals
+        error = value * np.where(moved, want_err / np.where(moved, np.abs(want), 1.0), relative)
         tables[f"correction/xi_view_{name}"], errors[f"correction/xi_view_{name}"] = value, error
         tables[f"correction/xi_closed_{name}"] = diagonal_of(value)
         errors[f"correction/xi_closed_{name}"] = diagonal_of(error)
