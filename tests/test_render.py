@@ -21,7 +21,7 @@ from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render,
-                                     tube_surface)
+                                     strip_receivers, tube_surface)
 from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, resolve_behind, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
@@ -330,10 +330,30 @@ def test_the_tube_surface_is_the_strip_point_moved_toward_the_camera_by_the_tube
     points = {"weight": np.ones(4), "position": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
                                                           [0.0, 0.0, 2.0]]),
               "view_dir": np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]),
-              "v": np.array([0.0, 0.6, -1.0, 1.0], np.float32), "yarn": np.array([0, 1, 0, 1], np.int32)}
+              "v": np.array([0.0, 0.6, -1.0, 1.0], np.float32), "yarn": np.array([0, 1, 0, 1], np.int32),
+              "tangent": np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0]])}
     looks = [SimpleNamespace(radius=0.03), SimpleNamespace(radius=0.05)]
     expect = points["position"] + np.array([0.03, 0.05 * 0.8, 0.0, 0.0])[:, None] * points["view_dir"]
     np.testing.assert_allclose(tube_surface(points, looks), expect, atol=1e-9)
+
+
+def test_receivers_carry_their_offset_from_the_yarn_axis():
+    """``strip_receivers``: a strip point lies v r along b = normalize(ω_o × t) from the axis, the tube surface
+    r √(1 − v²) further toward the camera; both biased by 1.5 r; a point looking along its yarn (ω_o × t = 0) has
+    no lateral part."""
+    points = {"weight": np.ones(3), "position": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+              "view_dir": np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [1.0, 0.0, 0.0]]),
+              "v": np.array([0.5, 0.6, -1.0], np.float32), "yarn": np.array([0, 1, 0], np.int32),
+              "tangent": np.array([[1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 0.0, 0.0]])}
+    looks = [SimpleNamespace(radius=0.03), SimpleNamespace(radius=0.05)]
+    strip, surface = strip_receivers(points, looks, False), strip_receivers(points, looks, True)
+    lateral = np.array([[0.0, 0.015, 0.0], [0.0, 0.05 * 0.6 * 0.8, -0.05 * 0.6 * 0.6], [0.0, 0.0, 0.0]])
+    height = np.array([0.03 * np.sqrt(0.75), 0.05 * 0.8, 0.0])[:, None] * points["view_dir"]
+    np.testing.assert_allclose(strip.offset, lateral, atol=1e-9)
+    np.testing.assert_allclose(surface.offset, lateral + height, atol=1e-9)
+    np.testing.assert_allclose(strip.position, points["position"], atol=0)
+    np.testing.assert_allclose(surface.position, points["position"] + height, atol=1e-9)
+    np.testing.assert_allclose(surface.bias, [0.045, 0.075, 0.045])
 
 
 def test_surface_shadows_light_the_front_of_a_yarn_whose_axis_plane_a_touching_neighbour_shadows(tmp_path, pack):

@@ -228,11 +228,7 @@ def tube_surface(points, looks):
     toward the camera along its view ray by r √(1 − v²) (r the yarn radius), where a tube of radius r about the
     strip's axis meets the ray; the strip point itself at the edges (v = ±1). ``Features.surface_shadows`` looks
     the lights up there (module docstring, step 4)."""
-    if len(points["weight"]) == 0:
-        return points["position"]
-    radius = np.array([look.radius for look in looks], np.float64)[points["yarn"]]
-    v = np.clip(np.asarray(points["v"], np.float64), -1.0, 1.0)
-    return points["position"] + (radius * np.sqrt(1.0 - v * v))[:, None] * points["view_dir"]
+    return strip_receivers(points, looks, True).position
 
 
 @njit(cache=True, inline='always')
@@ -383,13 +379,31 @@ def strip_receivers(points, looks, surface: bool) -> Receivers:
     strip point v r along the strip's half-width direction b = normalize(ω_o × t) (``strip_raster``; taken here at
     the point's own ω_o and t), the surface r √(1 − v²) further toward the camera."""
     radius = np.array([look.radius for look in looks], np.float64)[points["yarn"]]
-    view_dir, tangent = points["view_dir"], points["tangent"]
-    half_width = np.cross(view_dir, tangent)
-    length = np.linalg.norm(half_width, axis=1, keepdims=True)
-    half_width = np.divide(half_width, length, out=np.zeros_like(half_width), where=length > 0.0)
-    lateral = (radius * np.clip(np.asarray(points["v"], np.float64), -1.0, 1.0))[:, None] * half_width
-    position = tube_surface(points, looks) if surface else points["position"]
-    return Receivers(position, SHADOW_BIAS_RADII * radius, lateral + (position - points["position"]), tangent)
+    position = np.ascontiguousarray(points["position"], np.float64)
+    tangent = np.ascontiguousarray(points["tangent"], np.float64)
+    out_position, offset = np.empty_like(position), np.empty_like(position)
+    _strip_receivers(position, np.ascontiguousarray(points["view_dir"], np.float64), tangent,
+                     np.ascontiguousarray(points["v"], np.float64), radius, surface, out_position, offset)
+    return Receivers(out_position, SHADOW_BIAS_RADII * radius, offset, tangent)
+
+
+@njit(parallel=True, cache=True)
+def _strip_receivers(position, view_dir, tangent, v, radius, surface, out_position, out_offset):
+    """``strip_receivers`` per point (each point writes its own rows): its position and its offset from the axis."""
+    for k in prange(position.shape[0]):
+        vk = min(max(v[k], -1.0), 1.0)
+        height = radius[k] * math.sqrt(1.0 - vk * vk) if surface else 0.0
+        w0, w1, w2 = view_dir[k, 0], view_dir[k, 1], view_dir[k, 2]
+        t0, t1, t2 = tangent[k, 0], tangent[k, 1], tangent[k, 2]
+        b0, b1, b2 = w1 * t2 - w2 * t1, w2 * t0 - w0 * t2, w0 * t1 - w1 * t0
+        norm = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+        lateral = radius[k] * vk / norm if norm > 0.0 else 0.0
+        out_position[k, 0] = position[k, 0] + height * w0
+        out_position[k, 1] = position[k, 1] + height * w1
+        out_position[k, 2] = position[k, 2] + height * w2
+        out_offset[k, 0] = lateral * b0 + height * w0
+        out_offset[k, 1] = lateral * b1 + height * w1
+        out_offset[k, 2] = lateral * b2 + height * w2
 
 
 def axis_receivers(lines, looks, at) -> Receivers:

@@ -53,10 +53,11 @@ OWN_STRIP_MAX = 6.0  # ``own_strip_depth``'s cap, in units of the offset's lengt
 
 
 def own_strip_depth(offset, tangent, direction) -> np.ndarray:
-    """How far (N,) scene units toward the light a receiver ``offset`` (N, 3) off its yarn's axis (unit ``tangent``
-    (N, 3) there, normalised here) lies behind its own yarn's strip in a map toward unit ``direction`` d (3,); 0 where the strip lies
-    beyond it. The map draws the yarn as the strip through its axis that contains the tangent and faces the light:
-    the plane of normal n = (d − (d·t) t)/√(1 − (d·t)²), whose distance along d from the receiver is
+    """How far (N,) scene units toward the light a receiver ``offset`` (N, 3) off its yarn's axis (``tangent`` (N, 3)
+    there, normalised here) lies behind its own yarn's strip in a map toward unit ``direction`` d (3,); 0 where the
+    strip lies beyond it, and where an input is not finite or the tangent zero. The map draws the yarn as the strip
+    through its axis that contains the tangent and faces the light: the plane of normal
+    n = (d − (d·t) t)/√(1 − (d·t)²), whose distance along d from the receiver is
     s = −(o·n)/(d·n) = −(o·d − (o·t)(d·t))/(1 − (d·t)²). For an offset o ⊥ t of length Δ, s ≤ Δ/cos θ (θ the
     light's angle from the yarn's normal plane): Δ with the light across the yarn, without bound as the light turns
     along it (the strip tilts in depth). Growing a receiver's bias by s hides no other yarn where its own is
@@ -64,17 +65,31 @@ def own_strip_depth(offset, tangent, direction) -> np.ndarray:
     strip halfway), so another yarn's strip lies beyond 2s + r. Where the yarn bends within Δ tan θ of the receiver
     its strip is not there, so s is capped at ``OWN_STRIP_MAX``·|o| (6: the light within 9.6° of the yarn's axis;
     the bake's θ grids end at 78.75°, 1/cos θ = 5.1). Exactly along the axis the strip is edge-on: s = 0."""
-    offset = np.asarray(offset, np.float64).reshape(-1, 3)
-    tangent = np.asarray(tangent, np.float64).reshape(-1, 3)
-    length = np.linalg.norm(tangent, axis=1, keepdims=True)
-    tangent = np.divide(tangent, length, out=np.zeros_like(tangent), where=length > 0.0)
+    offset = np.ascontiguousarray(offset, np.float64).reshape(-1, 3)
+    tangent = np.ascontiguousarray(tangent, np.float64).reshape(-1, 3)
     d = np.asarray(direction, np.float64).reshape(3)
-    c = tangent @ d
-    along = np.einsum("ij,ij->i", offset, tangent)
-    toward = -(offset @ d - along * c)
-    cap = OWN_STRIP_MAX * np.sqrt(np.einsum("ij,ij->i", offset, offset))
-    s = np.divide(toward, 1.0 - c * c, out=np.where(toward > 0.0, cap, 0.0), where=1.0 - c * c > 1e-12)
-    return np.clip(s, 0.0, cap)
+    out = np.empty(len(offset))
+    _own_strip_depth(offset, tangent, d[0], d[1], d[2], out)
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _own_strip_depth(offset, tangent, d0, d1, d2, out):
+    """``own_strip_depth`` per receiver (each writes its own entry); 0 where it is not finite."""
+    for k in prange(offset.shape[0]):
+        t0, t1, t2 = tangent[k, 0], tangent[k, 1], tangent[k, 2]
+        length = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        if not length > 0.0:
+            out[k] = 0.0
+            continue
+        t0, t1, t2 = t0 / length, t1 / length, t2 / length
+        o0, o1, o2 = offset[k, 0], offset[k, 1], offset[k, 2]
+        c = t0 * d0 + t1 * d1 + t2 * d2
+        toward = -(o0 * d0 + o1 * d1 + o2 * d2 - (o0 * t0 + o1 * t1 + o2 * t2) * c)
+        cap = OWN_STRIP_MAX * math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+        den = 1.0 - c * c
+        s = toward / den if den > 1e-12 else (cap if toward > 0.0 else 0.0)
+        out[k] = min(max(s, 0.0), cap) if math.isfinite(s) and math.isfinite(cap) else 0.0
 
 
 @dataclass
