@@ -100,7 +100,8 @@ QUALITY = {
 # interreflection 4: the yarn's transmittance T_Y as well; correction 7: Ψ_* kept (correction/radiance);
 # closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view; 3: and apart on single and multiple scattering;
 # interreflection 5: ρ_Y and T_Y against the colour (interreflection/*_by_colour); closure 4: the renderer it closes
-# on no longer shadows the lone yarn by its own strip (shadow_map.own_strip_depth)
+# on no longer shadows the lone yarn by its own strip (shadow_map.own_strip_depth), the ξ stored is the one drawn last,
+# CLAMP 4 → 8
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
                  "interreflection": 5, "textures": 2, "flyaway": 2, "closure": 4}
 

@@ -83,7 +83,10 @@ from knitrun.shading.table_lookup import axis_cell
 CLOSURE_INPUTS = ("dual_scattering", "correction", "shadowing", "textures")
 SIGNAL = 1e-3  # a bin takes part when Ψ_* and S both exceed this fraction of their largest value
 MAX_RELATIVE_ERROR = 0.25  # ... and Ψ_*'s standard error is at most this fraction of it (every channel)
-CLAMP = 4.0  # the closed ξ stays within this factor of the paper's either way
+# the closed ξ stays within this factor of the paper's either way: at 4 (until closure version 4) a fifth of the
+# standard pack's bins with the light 78.75° from the yarn's normal plane sat at ξ/4 with the renderer still 1.5–3×
+# the path tracer there (BENCHMARKS.md, "Issue 13: a yarn's own strip", item 5)
+CLAMP = 8.0
 MSAA = 4
 
 
