@@ -416,7 +416,7 @@ def receiver_bias(receivers: Receivers, direction) -> np.ndarray:
     """The bias (N,) of ``receivers`` in a map toward unit ``direction``: a receiver off its yarn's axis keeps its
     margin from its own yarn's strip (``shadow_map.own_strip_depth``), which tilts toward it as the light turns
     along the yarn; without that the far side of a yarn lit along its length fell into its own strip's shadow
-    (BENCHMARKS.md, "Issue 13: the surface lookups' own strip")."""
+    (BENCHMARKS.md, "Issue 13: a yarn's own strip, and the closure's stored ξ")."""
     if receivers.offset is None or len(receivers.bias) == 0:
         return receivers.bias
     return receivers.bias + own_strip_depth(receivers.offset, receivers.tangent, direction)
