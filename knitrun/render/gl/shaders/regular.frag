@@ -86,7 +86,7 @@ void axial_parallax(inout StripPoint sp) {
 void main() {
     StripPoint sp = strip_point();
     float bounce_s = sp.s;  // the bounce is read where the point lies, before the parallax (as on the CPU)
-    vec3 raster_t = sp.t;  // and the lights' bias takes the rasterizer's tangent (pipeline.surface_receivers)
+    vec3 raster_t = sp.t;  // and the lights' bias takes the rasterizer's tangent (pipeline.strip_receivers)
     if (parallax != 0 && sp.drawn)
         axial_parallax(sp);
     gl_FragDepth = clamp(fin.depth / far_plane, 0.0, 1.0);
