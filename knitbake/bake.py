@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from data_formats.asset_pack import write_pack
+from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.atomic import atomic_path
 from data_formats.cache_folders import cache_root
 from data_formats.errors import FormatError
@@ -103,7 +104,7 @@ QUALITY = {
 # on no longer shadows the lone yarn by its own strip (shadow_map.own_strip_depth), the ξ stored is the one drawn last,
 # CLAMP 4 → 8
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
-                 "interreflection": 5, "textures": 2, "flyaway": 2, "closure": 4}
+                 "interreflection": 5, "textures": 2, "flyaway": 2, "closure": CLOSURE_STAGE_VERSION}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64

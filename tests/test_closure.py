@@ -9,6 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
+from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
 from knitbake.stages import closure
@@ -40,6 +41,26 @@ def test_the_closure_is_cached_like_every_stage(closed_pack, monkeypatch):
     assert all(row["cached"] for row in again.values())
     with h5py.File(closed_pack) as a, h5py.File(closed_pack.parent / "again.h5") as b:
         assert np.array_equal(a["correction/xi_view"][()], b["correction/xi_view"][()])
+
+
+def test_a_pack_closed_by_an_older_closure_is_drawn_with_a_warning(closed_pack, tmp_path):
+    """Every closure table carries the stage version that baked it; the renderer warns, naming the pack, when the
+    closed ξ it reads has an older one or none (a pack closed before version 4), and not otherwise."""
+    with h5py.File(closed_pack) as f:
+        assert all(f[f"correction/{n}"].attrs["closure_version"] == CLOSURE_STAGE_VERSION
+                   for n in ("xi_view", "xi_closed", "radiance_view", "xi_view_ss", "xi_closed_ms"))
+    old = tmp_path / "old.h5"
+    shutil.copy(closed_pack, old)
+    with h5py.File(old, "r+") as f:
+        del f["correction/xi_view"].attrs["closure_version"]
+    (tmp_path / "new").mkdir()
+    (tmp_path / "old").mkdir()
+    bare = Features(flyaways=False)  # the pack has no flyaway textures
+    assert Renderer(closure._scene(tmp_path / "new", SPEC, closed_pack), features=bare).warnings == []
+    warned = Renderer(closure._scene(tmp_path / "old", SPEC, old), features=bare).warnings
+    assert len(warned) == 1 and str(old) in warned[0] and "closure stage version < 4" in warned[0]
+    diagonal = Features(flyaways=False, view_xi=False)  # it reads xi_closed, whose version is this one
+    assert Renderer(closure._scene(tmp_path / "old", SPEC, old), features=diagonal).warnings == []
 
 
 def test_without_the_split_the_closure_bakes_the_one_xi_alone_and_the_same(closed_pack, monkeypatch):

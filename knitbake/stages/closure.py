@@ -70,6 +70,7 @@ from pathlib import Path
 
 import numpy as np
 
+from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.conventions import PHI_RANGE, THETA_RANGE, cell_centres
 from data_formats.scene import Camera as SceneCamera
 from data_formats.scene import DirectionalLight, scene_from_dict
@@ -317,7 +318,7 @@ def bake_closure_stage(spec, settings, seed, progress=None, inputs=None, write_p
                                                     seed, progress, settings["split"])
     kind = (f"standard error of the path-traced radiance Ψ_* over {settings['batches']} independent batches (fiber "
             f"geometry, paths and pixel jitter reseeded), carried into the closed ξ")
-    attrs = {name: {"error_kind": kind} for name in tables}
+    attrs = {name: {"error_kind": kind, "closure_version": CLOSURE_STAGE_VERSION} for name in tables}
     for name, residual in left.items():
         attrs[name].update(residual)
     return StageResult(tables, errors, attrs, counts)

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from data_formats.asset_pack import read_pack
+from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.conventions import CM_PER_UNIT, LUMINANCE
 from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
@@ -196,6 +197,13 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     closed_xi = corrections and closed_xi and full_tables and CLOSED_XI in stored and not view_xi
     split = (SPLIT_VIEW_XI if view_xi else SPLIT_XI) if corrections and split_xi and (view_xi or closed_xi) else {}
     split = split if all(n in stored for n in split.values()) else {}
+    # the closure stage version of the closed ξ read (0: closed before version 4, which did not record it)
+    closed_by = (list(split.values()) or [VIEW_XI if view_xi else CLOSED_XI]) if view_xi or closed_xi else []
+    version = min((int(stored[n].attrs.get("closure_version", 0)) for n in closed_by), default=CLOSURE_STAGE_VERSION)
+    if version < CLOSURE_STAGE_VERSION:
+        warnings.append(f"{pack_path}: its ξ was closed by closure stage version {version or '< 4'}, on an older "
+                        f"renderer than this one (version {CLOSURE_STAGE_VERSION}, ASSET_PACK.md §6): re-bake the "
+                        f"pack (knitbake bake reuses its other stages)")
     if split:
         names += list(split.values())
     elif view_xi:
