@@ -14,11 +14,11 @@ from ..conventions import HALF_PI, LENGTH_UNITS, PHI_RANGE, THETA_RANGE
 
 FORMAT_NAME = "knit-asset-pack"
 SCHEMA_VERSION = "2.6"
+SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 # the closure stage version whose closed ξ (correction/xi_view, xi_closed) closes on knit's current renderer; each
 # closed table carries the version that baked it (attribute closure_version, ASSET_PACK.md §6) and knit's renderer
 # warns about an older one (a pack closed before version 4 has none)
 CLOSURE_STAGE_VERSION = 4
-SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
 COMPRESS_BYTES = 1 << 16  # datasets at least this large are stored gzip(4)+shuffle
