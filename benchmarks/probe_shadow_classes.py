@@ -4,9 +4,9 @@ Per example scene with directional lights: the front regular strips are rasteris
 (``strip_raster.rasterize_visibility``) and each covered pixel gets the yarn-level visibility V of its point toward
 every directional light (``shadow_map``: the scene's map size, PCF of a delta light, the renderer's bias,
 ``pipeline.receiver_bias``), looked up where the renderer looks it up: on the tube surface the camera sees (the
-default, ``pipeline.tube_surface``) or on the strip plane through the yarn's axis (``axis_shadows``). Pixels fall into classes by
-V (summed over the lights, divided by their count): lit (V > 0.95), partly lit, shadowed (V < 0.05), and no front
-strip. Printed per class: its share of the pixels, its share of the reference's light (luminance), and each
+default, ``pipeline.strip_receivers``) or on the strip plane through the yarn's axis (``axis_shadows``). Pixels fall
+into classes by V (summed over the lights, divided by their count): lit (V > 0.95), partly lit, shadowed (V < 0.05),
+and no front strip. Printed per class: its share of the pixels, its share of the reference's light (luminance), and each
 model's light over the reference's there.
 
 A shadow placed where the reference is lit shows as a shadowed class that holds much of the reference's light; a

@@ -21,7 +21,7 @@ from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render,
-                                     strip_receivers, tube_surface)
+                                     strip_receivers)
 from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, resolve_behind, shade_regular, variant_of
 from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
@@ -322,19 +322,6 @@ def test_the_axial_parallax_leaves_a_yarn_across_the_view_and_moves_a_tilted_ben
     arc = np.stack([0.25 * np.cos(t), 0.05 * np.sin(t), 0.2 * np.sin(t)], axis=1)  # rises toward the camera
     bent = write_scene(tmp_path, [arc], camera=FRONT, lights=SUN, name="bent")
     assert np.abs(_render(bent, pack).image - _render(bent, pack, features=off).image).max() > 1e-3
-
-
-def test_the_tube_surface_is_the_strip_point_moved_toward_the_camera_by_the_tubes_height():
-    """``tube_surface``: r √(1 − v²) along the view ray from the strip point, r of the point's yarn entry; the strip
-    point itself at the edges."""
-    points = {"weight": np.ones(4), "position": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
-                                                          [0.0, 0.0, 2.0]]),
-              "view_dir": np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]),
-              "v": np.array([0.0, 0.6, -1.0, 1.0], np.float32), "yarn": np.array([0, 1, 0, 1], np.int32),
-              "tangent": np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0]])}
-    looks = [SimpleNamespace(radius=0.03), SimpleNamespace(radius=0.05)]
-    expect = points["position"] + np.array([0.03, 0.05 * 0.8, 0.0, 0.0])[:, None] * points["view_dir"]
-    np.testing.assert_allclose(tube_surface(points, looks), expect, atol=1e-9)
 
 
 def test_receivers_carry_their_offset_from_the_yarn_axis():

@@ -79,7 +79,7 @@ layer, and the frame takes half again as long (BENCHMARKS.md "Issue 13: the yarn
 blocking yarns").
 
 ``surface_shadows`` looks the lights up on the tube surface the camera sees at a regular point (the strip point moved
-r √(1 − v²) toward the camera, ``pipeline.tube_surface``) instead of on the strip plane through the yarn's axis, up
+r √(1 − v²) toward the camera, ``pipeline.strip_receivers``) instead of on the strip plane through the yarn's axis, up
 to a radius deeper: under the grazing patch's light the axis plane puts one leg of every stitch in its neighbours'
 shadow, which the reference lights (the fully shadowed pixels hold 21.6 % of the reference's light there, 8.4 % with
 the lookups on the surface; BENCHMARKS.md, "Issue 13: the error every stitch repeats, and shadows looked up on the

@@ -37,7 +37,7 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    shadow lookups"); with a reach of a yarn radius 64 % would share, but a hair on a hard shadow's edge then took
    the light of a sample up to a pixel away (15 % of the peak at one pixel of the grazing-light patch).
    A regular point looks its lights up on the tube surface the camera sees there (``Features.surface_shadows``, the
-   default; ``tube_surface``: the strip point r √(1 − v²) toward the camera) rather than on the strip plane through
+   default; ``strip_receivers``: the strip point r √(1 − v²) toward the camera) rather than on the strip plane through
    the axis, which lies up to a radius deeper: under a light from the fabric's side a receiver that deep falls into
    its neighbours' shadows (on the grazing patch the axis plane shadows one leg of every stitch that the reference
    lights; the ablation ``axis_shadows`` looks up there). A flyaway point that shares a regular point's lookups
@@ -223,14 +223,6 @@ def parallax_shift(points, lines, looks):
     return out
 
 
-def tube_surface(points, looks):
-    """(N, 3) world positions of the tube surface the camera sees at regular ``points``: the strip point moved
-    toward the camera along its view ray by r √(1 − v²) (r the yarn radius), where a tube of radius r about the
-    strip's axis meets the ray; the strip point itself at the edges (v = ±1). ``Features.surface_shadows`` looks
-    the lights up there (module docstring, step 4)."""
-    return strip_receivers(points, looks, True).position
-
-
 @njit(cache=True, inline='always')
 def _open_tangent(xyz, lo, hi, j):
     """``strip_raster.vertex_tangent`` of vertex j of the open curve whose vertices are lo … hi."""
@@ -375,7 +367,9 @@ class Receivers(NamedTuple):
 
 def strip_receivers(points, looks, surface: bool) -> Receivers:
     """The receivers of regular ``points``, biased by ``SHADOW_BIAS_RADII`` yarn radii: on the tube surface the camera
-    sees there (``tube_surface``) or, ``surface`` False, the strip points themselves. Both lie off the yarn's axis: a
+    sees there (the strip point moved toward the camera along its view ray by r √(1 − v²), where a tube of radius r
+    about the strip's axis meets the ray; the strip point itself at the edges v = ±1) or, ``surface`` False, the strip
+    points themselves. Both lie off the yarn's axis: a
     strip point v r along the strip's half-width direction b = normalize(ω_o × t) (``strip_raster``; taken here at
     the point's own ω_o and t), the surface r √(1 − v²) further toward the camera."""
     radius = np.array([look.radius for look in looks], np.float64)[points["yarn"]]

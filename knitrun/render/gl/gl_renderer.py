@@ -32,7 +32,7 @@ together (per pixel on axis-aligned orthographic scenes, else at the yarn scale)
 
 Three terms of the default model read more than a fragment's own attributes: ``Features.surface_shadows`` looks
 the lights up on the tube surface seen (the fragment's position moved r √(1 − v²) toward the camera,
-``pipeline.tube_surface``); ``Features.parallax`` walks the frame's polylines (a texture of points, rest arc
+``pipeline.strip_receivers``); ``Features.parallax`` walks the frame's polylines (a texture of points, rest arc
 lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from the fragment's segment as
 ``pipeline.parallax_shift`` does, first to the segment its sample lies on (a fragment's sample may lie past its own
 segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; and ``Features.yarn_bounce``, the

@@ -104,7 +104,7 @@ void main() {
     float spread2 = tangent_spread(tex, cov);
     float theta_o = clamped_asin(dot(t, wo));
     float theta_o_f = clamped_asin(dot(tf, wo));
-    // where the lights are looked up: the strip point, or the tube surface seen there (pipeline.tube_surface)
+    // where the lights are looked up: the strip point, or the tube surface seen there (pipeline.strip_receivers)
     // biased per light by how far it lies behind its own strip (pipeline.strip_receivers, pipeline.receiver_bias):
     // its offset from the axis, v r along the strip's half-width direction and the surface's height
     vec3 surface = surface_shadows != 0 ? radius * sqrt(max(1.0 - v * v, 0.0)) * wo : vec3(0.0);
