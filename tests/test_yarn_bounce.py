@@ -49,18 +49,22 @@ def _g(alpha):
 
 def test_lambert_pair_is_a_normalised_phase_at_alpha_and_its_supplement():
     """g averages 1 over the circle (the tube's mean radiance is ρ E cos θ/π²), peaks at π²/4 toward the light, is 0
-    opposite and π/4 at right angles; the kernel's pair is (g(α), g(π − α))."""
+    opposite and π/4 at right angles; the kernel's pair is (g(α), g(π − α)) from cos α."""
     alpha = np.linspace(0.0, math.pi, 100001)
-    pairs = np.array([lambert_pair(a) for a in alpha])
+    pairs = np.array([lambert_pair(math.cos(a)) for a in alpha])  # the kernel takes cos α
     g = pairs[:, 0]
     assert np.trapezoid(g, alpha) / math.pi == pytest.approx(1.0, rel=1e-9)
-    assert lambert_pair(0.0)[0] == pytest.approx(math.pi ** 2 / 4) and lambert_pair(math.pi)[1] == pytest.approx(
+    assert lambert_pair(1.0)[0] == pytest.approx(math.pi ** 2 / 4) and lambert_pair(-1.0)[1] == pytest.approx(
         math.pi ** 2 / 4)
-    assert lambert_pair(math.pi)[0] == pytest.approx(0.0, abs=1e-15)
-    assert lambert_pair(0.5 * math.pi)[0] == pytest.approx(math.pi / 4)
+    assert lambert_pair(-1.0)[0] == pytest.approx(0.0, abs=1e-15)
+    assert lambert_pair(0.0)[0] == pytest.approx(math.pi / 4)
     assert np.all(pairs >= -1e-15)
-    np.testing.assert_allclose(g, [_g(a) for a in alpha], rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(pairs[:, 1], [_g(math.pi - a) for a in alpha], rtol=1e-12, atol=1e-14)
+    exact = np.arccos(np.cos(alpha))  # the angle the cosine carries (cos loses α's last digits near 0 and π)
+    # to 1e-12 of the peak π²/4: near α = π, g ~ α³ is a difference of two near-equal terms, where √(1 − cos²α)
+    # and sin α part in their last digits
+    np.testing.assert_allclose(g, [_g(a) for a in exact], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(pairs[:, 1], [_g(math.pi - a) for a in exact], rtol=1e-12, atol=1e-12)
+    assert lambert_pair(1.0 + 1e-12) == lambert_pair(1.0)  # a cosine rounded past ±1 is clamped
 
 
 def _yarns(curves, radius, reflect, transmit, camera):
@@ -144,6 +148,24 @@ def test_no_neighbour_no_dark_neighbour_no_bounce_and_linear_in_the_light():
     bounce, covered = vertex_bounce(_yarns([hairpin], r, reflect, transmit, camera),
                                     BounceLights(light, e, np.ones((1, 402))))
     assert covered[100] > 0.0 and np.all(bounce[100] > 0.0)
+
+
+def test_a_long_neighbouring_segment_counts_by_its_midpoint_wherever_its_ends_lie():
+    """The grid finds a sender by its midpoint, the point the reach is measured to: a neighbour drawn as one long
+    segment whose ends lie several grid cells away (the cell is the reach) still covers the vertex it passes, by the
+    strip's solid angle. (Until stop 51 segments were binned by their first point, and such a neighbour was missed.)"""
+    r = 0.03
+    reach = 8.0 * r
+    receiver = _line(0.0, np.linspace(-0.1, 0.1, 3))  # along z through the origin
+    long_leg = np.array([[-3 * reach, 0.1, 0.0], [3 * reach, 0.1, 0.0]])  # midpoint 0.1 from the receiver's middle
+    camera = np.array([0.0, 100.0, 0.0])
+    reflect, transmit = np.array([0.3, 0.3, 0.3]), np.array([0.4, 0.4, 0.4])
+    yarns = _yarns([receiver, long_leg], r, reflect, transmit, camera)
+    light, e = np.array([[0.0, 1.0, 0.0]]), np.array([[1.0, 1.0, 1.0]])
+    bounce, covered = vertex_bounce(yarns, BounceLights(light, e, np.ones((1, 5))))
+    omega = segment_solid_angle(yarns.points[1], long_leg[0], long_leg[1], 2 * r, CONTACT_RADII * r)
+    assert covered[1] == pytest.approx(-math.expm1(-omega / (4 * math.pi)), rel=1e-12) and covered[1] > 0.01
+    assert np.all(bounce[1] > 0.0)
 
 
 def test_the_bounce_brightens_crossing_yarns_and_is_on_by_default(tmp_path, pack):

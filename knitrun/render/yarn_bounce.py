@@ -57,8 +57,12 @@ in the entry's colour (``yarn_look.hull_colour``: read off the pack's curves aga
 yarn's times the colour for a pack without them); a pack without ρ_Y and T_Y has no bounce. The environment takes none
 here: its lobes' inter-reflection carries that light.
 
-Neighbours are found on a uniform grid of cell ``reach`` (a counting sort of the vertices by cell); each vertex's
-sums are its own (``prange`` over vertices, no shared output).
+Implementation: what a pair needs that does not depend on the receiver (the segment's axis and length, mean
+tangent, the light projected on its normal plane and what it sends, E V_d cos θ_L R_Y and … S_Y) is computed once
+per segment (``_senders``); the segments are sorted by the cell of their midpoint on a uniform grid of cell
+``reach`` (a counting sort), so a vertex finds every segment whose midpoint lies within reach in its own and the
+26 neighbouring cells; each vertex's sums are its own (``prange`` over vertices, no shared output). Angles enter
+the phase by their cosines (``lambert_pair``: one arc cosine per phase).
 """
 
 from __future__ import annotations
@@ -117,15 +121,76 @@ def vertex_bounce(yarns: BounceYarns, lights: BounceLights, reach_radii: float =
     out, covered = np.zeros((n, 3)), np.zeros(n)
     if n < 2 or len(yarns.radius) == 0 or len(lights.direction) == 0:
         return out, covered
-    cell = float(reach_radii * yarns.radius.max())
-    ijk = np.floor((yarns.points - yarns.points.min(axis=0)) / cell).astype(np.int64)
-    dims = ijk.max(axis=0) + 1
+    senders = _senders(yarns, lights, float(reach_radii * yarns.radius.max()))
+    if len(senders.length):
+        _vertex_bounce(yarns, senders, float(reach_radii), out, covered)
+    return out, covered
+
+
+class _Senders(NamedTuple):
+    """The polyline segments j → j + 1 (within one curve) as senders, sorted by the cell of their midpoint on a grid
+    of cell ``cell`` (S segments; ``cell_start`` (cells + 1,) the first segment of each cell by key (i·ny + j)·nz + k,
+    ``dims`` (3,) the grid's cells per axis, ``origin`` (3,) its corner). Per segment: ``start`` (S, 3) its first
+    point, ``axis`` (S, 3) unit and ``length``, ``mid`` (S, 3), ``tangent`` (S, 3) the mean of its vertices' tangents
+    (normalised; zero where they cancel), ``curve``, ``rest_mid`` its midpoint's rest arc length, ``radius``; per
+    light L, ``toward_light`` (S, L, 3) the light's direction projected on the segment's normal plane, unit (zero
+    where the light runs along it), and what the segment sends toward a direction at angle α from it in that plane
+    over the phase factors: ``back`` (S, L, 3) E V_d cos θ_L R_Y and ``forward`` E V_d cos θ_L S_Y (module docstring,
+    "Neighbour to receiver"; the radiance is back·g(α) + forward·g(π − α)). Everything a pair needs that does not
+    depend on the pair, computed once per segment instead of once per receiving vertex."""
+
+    start: np.ndarray
+    axis: np.ndarray
+    length: np.ndarray
+    mid: np.ndarray
+    tangent: np.ndarray
+    curve: np.ndarray
+    rest_mid: np.ndarray
+    radius: np.ndarray
+    toward_light: np.ndarray
+    back: np.ndarray
+    forward: np.ndarray
+    cell_start: np.ndarray
+    dims: np.ndarray
+    origin: np.ndarray
+    cell: float
+
+
+def _senders(yarns: BounceYarns, lights: BounceLights, cell: float) -> _Senders:
+    """The segments of ``yarns`` as ``_Senders`` under ``lights``, on a grid of cell ``cell``."""
+    j = np.flatnonzero(yarns.curve[:-1] == yarns.curve[1:]).astype(np.int64)  # segment j → j + 1 within a curve
+    a, b = yarns.points[j], yarns.points[j + 1]
+    length = np.linalg.norm(b - a, axis=1)
+    axis = (b - a) / np.where(length > 0.0, length, 1.0)[:, None]
+    mid = 0.5 * (a + b)
+    tangent = yarns.tangent[j] + yarns.tangent[j + 1]
+    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
+    tangent = np.where(norm > 0.0, tangent / np.where(norm > 0.0, norm, 1.0), tangent)
+    light = np.asarray(lights.direction, np.float64)  # (L, 3)
+    along = tangent @ light.T  # (S, L)
+    across = light[None, :, :] - along[:, :, None] * tangent[:, None, :]  # (S, L, 3)
+    cos_l = np.linalg.norm(across, axis=2)  # cos θ_L: the light's part normal to the segment
+    lit = cos_l > 1e-12
+    toward_light = np.where(lit[:, :, None], across / np.where(lit, cos_l, 1.0)[:, :, None], 0.0)
+    direct = 0.5 * (lights.direct[:, j] + lights.direct[:, j + 1]).T  # (S, L) V_d, the mean of the two vertices
+    power = np.where(lit, direct * cos_l, 0.0)[:, :, None] * np.asarray(lights.irradiance, np.float64)[None]
+    back = power * (0.5 * (yarns.reflect[j] + yarns.reflect[j + 1]))[:, None, :]
+    forward = power * (0.5 * (yarns.transmit[j] + yarns.transmit[j + 1]))[:, None, :]
+    origin = mid.min(axis=0) if len(j) else np.zeros(3)
+    ijk = np.floor((mid - origin) / cell).astype(np.int64)
+    dims = ijk.max(axis=0) + 1 if len(j) else np.ones(3, np.int64)
     key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
     order = np.argsort(key, kind="stable")
-    start = np.zeros(int(dims.prod()) + 1, np.int64)
-    np.cumsum(np.bincount(key, minlength=int(dims.prod())), out=start[1:])
-    _vertex_bounce(yarns, lights, ijk, dims, order, start, float(reach_radii), out, covered)
-    return out, covered
+    cell_start = np.zeros(int(dims.prod()) + 1, np.int64)
+    np.cumsum(np.bincount(key, minlength=int(dims.prod())), out=cell_start[1:])
+    curve = yarns.curve[j]
+
+    def c(x):
+        return np.ascontiguousarray(x[order])
+
+    return _Senders(c(a), c(axis), c(length), c(mid), c(tangent), c(curve).astype(np.int64),
+                    c(0.5 * (yarns.rest[j] + yarns.rest[j + 1])), c(yarns.radius[curve]), c(toward_light), c(back),
+                    c(forward), cell_start, dims.astype(np.int64), origin, float(cell))
 
 
 @njit(cache=True)
@@ -136,118 +201,117 @@ def segment_solid_angle(x, a, b, width, nearest):
     length = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     if length <= 0.0:
         return 0.0
-    u0, u1, u2 = u0 / length, u1 / length, u2 / length
-    d0, d1, d2 = a[0] - x[0], a[1] - x[1], a[2] - x[2]
-    s_a = d0 * u0 + d1 * u1 + d2 * u2
-    p0, p1, p2 = d0 - s_a * u0, d1 - s_a * u1, d2 - s_a * u2
+    return _strip_solid_angle(x[0] - a[0], x[1] - a[1], x[2] - a[2], u0 / length, u1 / length, u2 / length, length,
+                              width, nearest)
+
+
+@njit(cache=True)
+def _strip_solid_angle(x0, x1, x2, u0, u1, u2, length, width, nearest):
+    """``segment_solid_angle`` from x − a (x0, x1, x2), the unit axis u and the length."""
+    s_a = -(x0 * u0 + x1 * u1 + x2 * u2)
+    p0, p1, p2 = -x0 - s_a * u0, -x1 - s_a * u1, -x2 - s_a * u2
     h = max(math.sqrt(p0 * p0 + p1 * p1 + p2 * p2), nearest)
     s_b = s_a + length
     return width / h * (s_b / math.sqrt(h * h + s_b * s_b) - s_a / math.sqrt(h * h + s_a * s_a))
 
 
 @njit(cache=True)
-def lambert_pair(alpha):
-    """(g(α), g(π − α)), α ∈ [0, π]: the radiance of a Lambertian cylinder seen at α from its light over its mean,
-    g(α) = (π/4)(sin α + (π − α) cos α) (module docstring), and at π − α, the back and forward parts of a tube's
-    phase from one sine and cosine (sin(π − α) = sin α, cos(π − α) = −cos α)."""
-    sin_a, cos_a = math.sin(alpha), math.cos(alpha)
-    return 0.25 * math.pi * (sin_a + (math.pi - alpha) * cos_a), 0.25 * math.pi * (sin_a - alpha * cos_a)
+def lambert_pair(cos_alpha):
+    """(g(α), g(π − α)) from cos α, α ∈ [0, π]: the radiance of a Lambertian cylinder seen at α from its light over
+    its mean, g(α) = (π/4)(sin α + (π − α) cos α) (module docstring), and at π − α, the back and forward parts of a
+    tube's phase from one arc cosine (sin(π − α) = sin α, cos(π − α) = −cos α)."""
+    c = min(max(cos_alpha, -1.0), 1.0)
+    alpha, sin_a = math.acos(c), math.sqrt(1.0 - c * c)
+    return 0.25 * math.pi * (sin_a + (math.pi - alpha) * c), 0.25 * math.pi * (sin_a - alpha * c)
 
 
 @njit(cache=True)
-def _across(t0, t1, t2, d0, d1, d2, w0, w1, w2):
-    """(cos θ of d to the normal plane of t, the angle between d and w projected into that plane; −1 when either
-    projection vanishes)."""
+def _cos_across(t0, t1, t2, d0, d1, d2, w0, w1, w2):
+    """(|d projected on the normal plane of t|, the cosine of the angle between that projection and ``w``, a unit
+    vector in the plane; 2 when the projection vanishes: no angle)."""
     c = d0 * t0 + d1 * t1 + d2 * t2
     a0, a1, a2 = d0 - c * t0, d1 - c * t1, d2 - c * t2
-    e = w0 * t0 + w1 * t1 + w2 * t2
-    b0, b1, b2 = w0 - e * t0, w1 - e * t1, w2 - e * t2
-    na, nb = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-    if na < 1e-12 or nb < 1e-12:
-        return na, -1.0
-    cos_angle = min(max((a0 * b0 + a1 * b1 + a2 * b2) / (na * nb), -1.0), 1.0)
-    return na, math.acos(cos_angle)
+    na = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    if na < 1e-12:
+        return na, 2.0
+    return na, (a0 * w0 + a1 * w1 + a2 * w2) / na
 
 
 @njit(parallel=True, cache=True)
-def _vertex_bounce(yarns, lights, ijk, dims, order, start, reach_radii, out, covered):
-    points, tangent, curve, offsets, rest = yarns.points, yarns.tangent, yarns.curve, yarns.offsets, yarns.rest
+def _vertex_bounce(yarns, senders, reach_radii, out, covered):
+    points, tangent, curve = yarns.points, yarns.tangent, yarns.curve
+    dims, cell = senders.dims, senders.cell
     for i in prange(points.shape[0]):
         c = curve[i]
         reach = reach_radii * yarns.radius[c]
+        x0, x1, x2 = points[i, 0], points[i, 1], points[i, 2]
         ti0, ti1, ti2 = tangent[i, 0], tangent[i, 1], tangent[i, 2]
+        # the view projected on the receiver's normal plane, unit (the receiver's phase angle is measured from it)
         v0, v1, v2 = yarns.toward_camera[i, 0], yarns.toward_camera[i, 1], yarns.toward_camera[i, 2]
+        e = v0 * ti0 + v1 * ti1 + v2 * ti2
+        v0, v1, v2 = v0 - e * ti0, v1 - e * ti1, v2 - e * ti2
+        nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        seen = nv >= 1e-12  # a view along the yarn: no phase angle, the vertex sends nothing toward the camera
+        if seen:
+            v0, v1, v2 = v0 / nv, v1 / nv, v2 / nv
+        r0, r1, r2 = yarns.reflect[i, 0], yarns.reflect[i, 1], yarns.reflect[i, 2]
+        f0, f1, f2 = yarns.transmit[i, 0], yarns.transmit[i, 1], yarns.transmit[i, 2]
+        gi = int(math.floor((x0 - senders.origin[0]) / cell))
+        gj = int(math.floor((x1 - senders.origin[1]) / cell))
+        gk = int(math.floor((x2 - senders.origin[2]) / cell))
         total, s0, s1, s2 = 0.0, 0.0, 0.0, 0.0
-        for di in range(-1, 2):
-            ci = ijk[i, 0] + di
-            if ci < 0 or ci >= dims[0]:
-                continue
-            for dj in range(-1, 2):
-                cj = ijk[i, 1] + dj
-                if cj < 0 or cj >= dims[1]:
-                    continue
-                for dk in range(-1, 2):
-                    ck = ijk[i, 2] + dk
-                    if ck < 0 or ck >= dims[2]:
-                        continue
+        for ci in range(max(gi - 1, 0), min(gi + 2, dims[0])):
+            for cj in range(max(gj - 1, 0), min(gj + 2, dims[1])):
+                for ck in range(max(gk - 1, 0), min(gk + 2, dims[2])):
                     key = (ci * dims[1] + cj) * dims[2] + ck
-                    for m in range(start[key], start[key + 1]):
-                        j = order[m]  # segment j → j + 1, if it is one
-                        cn = curve[j]
-                        if j + 1 >= offsets[cn + 1]:
-                            continue
-                        if cn == c and abs(0.5 * (rest[j] + rest[j + 1]) - rest[i]) < reach:
+                    for m in range(senders.cell_start[key], senders.cell_start[key + 1]):
+                        cn = senders.curve[m]
+                        if cn == c and abs(senders.rest_mid[m] - yarns.rest[i]) < reach:
                             continue  # this yarn itself, locally: the baked tables' part
-                        d0 = points[i, 0] - 0.5 * (points[j, 0] + points[j + 1, 0])  # from the neighbour to i
-                        d1 = points[i, 1] - 0.5 * (points[j, 1] + points[j + 1, 1])
-                        d2 = points[i, 2] - 0.5 * (points[j, 2] + points[j + 1, 2])
+                        d0 = x0 - senders.mid[m, 0]  # from the neighbour to i
+                        d1 = x1 - senders.mid[m, 1]
+                        d2 = x2 - senders.mid[m, 2]
                         dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                        if dist > reach or dist <= 0.0:
+                        if dist > reach or dist <= 0.0 or senders.length[m] <= 0.0:
                             continue
-                        rn = yarns.radius[cn]
-                        w = segment_solid_angle(points[i], points[j], points[j + 1], 2.0 * rn, CONTACT_RADII * rn)
+                        rn = senders.radius[m]
+                        w = _strip_solid_angle(x0 - senders.start[m, 0], x1 - senders.start[m, 1],
+                                               x2 - senders.start[m, 2], senders.axis[m, 0], senders.axis[m, 1],
+                                               senders.axis[m, 2], senders.length[m], 2.0 * rn, CONTACT_RADII * rn)
                         if not w > 0.0:
                             continue
                         total += w
-                        d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
-                        tj0 = tangent[j, 0] + tangent[j + 1, 0]
-                        tj1 = tangent[j, 1] + tangent[j + 1, 1]
-                        tj2 = tangent[j, 2] + tangent[j + 1, 2]
-                        norm = math.sqrt(tj0 * tj0 + tj1 * tj1 + tj2 * tj2)
-                        if norm > 0.0:
-                            tj0, tj1, tj2 = tj0 / norm, tj1 / norm, tj2 / norm
-                        # the receiver: light from −d, seen from the view
-                        cos_r, alpha_r = _across(ti0, ti1, ti2, -d0, -d1, -d2, v0, v1, v2)
-                        if alpha_r < 0.0:
+                        if not seen:
                             continue
-                        g_r, g_rf = lambert_pair(alpha_r)
-                        for light in range(lights.direction.shape[0]):
-                            l0, l1, l2 = (lights.direction[light, 0], lights.direction[light, 1],
-                                          lights.direction[light, 2])
-                            cos_l, alpha_l = _across(tj0, tj1, tj2, l0, l1, l2, d0, d1, d2)
-                            if alpha_l < 0.0:
+                        d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
+                        # the receiver: light from −d, seen from the view
+                        cos_r, cos_alpha_r = _cos_across(ti0, ti1, ti2, -d0, -d1, -d2, v0, v1, v2)
+                        if cos_alpha_r > 1.5:
+                            continue
+                        g_r, g_rf = lambert_pair(cos_alpha_r)
+                        tj0, tj1, tj2 = senders.tangent[m, 0], senders.tangent[m, 1], senders.tangent[m, 2]
+                        for light in range(senders.back.shape[1]):
+                            _, cos_alpha_l = _cos_across(tj0, tj1, tj2, d0, d1, d2, senders.toward_light[m, light, 0],
+                                                         senders.toward_light[m, light, 1],
+                                                         senders.toward_light[m, light, 2])
+                            if cos_alpha_l > 1.5:
                                 continue
-                            lit = 0.5 * (lights.direct[light, j] + lights.direct[light, j + 1]) * cos_l
-                            g_l, g_lf = lambert_pair(alpha_l)
-                            for ch in range(3):
-                                sent = lights.irradiance[light, ch] * lit * (
-                                    0.5 * (yarns.reflect[j, ch] + yarns.reflect[j + 1, ch]) * g_l
-                                    + 0.5 * (yarns.transmit[j, ch] + yarns.transmit[j + 1, ch]) * g_lf)
-                                back = w * sent * cos_r * (yarns.reflect[i, ch] * g_r + yarns.transmit[i, ch] * g_rf)
-                                if ch == 0:
-                                    s0 += back
-                                elif ch == 1:
-                                    s1 += back
-                                else:
-                                    s2 += back
+                            g_l, g_lf = lambert_pair(cos_alpha_l)
+                            k = w * cos_r
+                            s0 += k * (senders.back[m, light, 0] * g_l + senders.forward[m, light, 0] * g_lf) * (
+                                r0 * g_r + f0 * g_rf)
+                            s1 += k * (senders.back[m, light, 1] * g_l + senders.forward[m, light, 1] * g_lf) * (
+                                r1 * g_r + f1 * g_rf)
+                            s2 += k * (senders.back[m, light, 2] * g_l + senders.forward[m, light, 2] * g_lf) * (
+                                r2 * g_r + f2 * g_rf)
         if total <= 0.0:
             continue
         f = -math.expm1(-total / (4.0 * math.pi))
         covered[i] = f
         share = 4.0 * math.pi * f / total * INV_PI2 * INV_PI2
-        for ch, s in ((0, s0), (1, s1), (2, s2)):
-            rho = min(max(yarns.reflect[i, ch] + yarns.transmit[i, ch], 0.0), 1.0)
-            out[i, ch] = s * share / max(1.0 - rho * f, 1e-6)
+        out[i, 0] = s0 * share / max(1.0 - min(max(r0 + f0, 0.0), 1.0) * f, 1e-6)
+        out[i, 1] = s1 * share / max(1.0 - min(max(r1 + f1, 0.0), 1.0) * f, 1e-6)
+        out[i, 2] = s2 * share / max(1.0 - min(max(r2 + f2, 0.0), 1.0) * f, 1e-6)
 
 
 @njit(parallel=True, cache=True)
