@@ -12,7 +12,10 @@ an ablation or a combination "a+b" of them (``ablations.combined``).
 
 ``--reference-dir`` reuses references rendered earlier: ``DIR/<scene>.exr`` and its floors ``<scene>_instance.exr``,
 ``<scene>_mc.exr`` (``benchmarks/bench_floors.py --out DIR`` writes all three, with the JSON summaries that give
-the reference's cost); otherwise the reference and its floors are path traced at ``--spp``.
+the reference's cost); otherwise the reference and its floors are path traced at ``--spp``. Further fiber instances
+there, ``DIR/<scene>_fiber<seed>.exr`` (``benchmarks/bench_instances.py --out DIR``), are used with
+``--instances`` (all of them, or ``--instances N``: the first N by seed): a second table gives each model against the
+ensemble of the reference, its instance floor and those draws (``knitbake.compare.report``, "the ensemble").
 """
 
 import argparse
@@ -43,23 +46,33 @@ def main():
     parser.add_argument("--scenes", default=",".join(SCENES), help="comma-separated example scene names")
     parser.add_argument("--models", default=",".join(ABLATION_ORDER),
                         help="comma-separated ablations or combinations a+b (default: every ablation)")
+    parser.add_argument("--instances", nargs="?", type=int, const=-1, default=0,
+                        help="compare against the ensemble of the further fiber instances in --reference-dir too "
+                             "(all of them, or the first N)")
     args = parser.parse_args()
     models, _ = checked_models_and_scenes(parser, args)
+    if args.instances and not args.reference_dir:
+        parser.error("--instances reads the further instances from --reference-dir")
+    ensembles = []
     root = Path(__file__).resolve().parent.parent / "examples" / "scenes"
     print("| scene | model | mean ratio | yarn-scale rel L1 (d) | (2d) | ratio to instance floor (d) | yarn FLIP | "
           "pixel FLIP | strip ms | speed-up |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes.split(","):
-        ref, floors = None, {}
+        ref, floors, more = None, {}, []
         if args.reference_dir:
             folder = Path(args.reference_dir)
             if (folder / f"{name}.exr").is_file():
                 ref = folder / f"{name}.exr"
                 floors = {k: folder / f"{name}{s}.exr" for k, s in FLOOR_FILES.items()
                           if (folder / f"{name}{s}.exr").is_file()}
+                more = sorted(folder.glob(f"{name}_fiber*.exr"), key=lambda f: int(f.stem.rsplit("fiber", 1)[1]))
+                more = more[:args.instances] if args.instances > 0 else more if args.instances else []
         summary = compare_scene(root / f"{name}.toml", Path(args.out) / name, reference=ref,
                                 spp=None if ref else args.spp, packs={"cotton1": args.pack}, floor_references=floors,
-                                ablations=models)
+                                ablations=models, instances=more or None)
+        if "ensemble" in summary:
+            ensembles.append((name, summary))
         inst = summary["floors"].get("instance")
         rows = [(FLOOR_LABELS[k], r, None) for k, r in summary["floors"].items()] + \
             [(ABLATION_LABELS.get(k, k), r, r["to_instance_floor"]) for k, r in summary["ablations"].items()]
@@ -70,6 +83,17 @@ def main():
             ms = f"{row['ms']:.0f}" if "ms" in row else "—"
             print(f"| {name} | {label} | {y['mean_ratio']:.3f} | {y['rel_l1']:.3f} | {y['rel_l1_2x']:.3f} | "
                   f"{_fmt(ratio, '.2f')} | {y['flip']:.4f} | {row['flip']:.4f} | {ms} | {speed} |", flush=True)
+    if ensembles:
+        print("\n| scene | instances | their means' sd | ensemble floor (rel L1, leave one out) | model | mean ratio "
+              "(ensemble) | yarn-scale rel L1 | ratio to ensemble floor |")
+        print("|---|---|---|---|---|---|---|---|")
+        for name, summary in ensembles:
+            e = summary["ensemble"]
+            for k, row in summary["ablations"].items():
+                r = row["ensemble"]
+                print(f"| {name} | {e['instances']} | {e['mean_sd']:.3f} | {e['rel_l1']:.3f} | "
+                      f"{ABLATION_LABELS.get(k, k)} | {r['mean_ratio']:.3f} ± {r['mean_ratio'] * e['mean_se']:.3f} | "
+                      f"{r['rel_l1']:.3f} | {_fmt(r['to_floor'], '.2f')} |")
 
 
 if __name__ == "__main__":

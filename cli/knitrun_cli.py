@@ -461,6 +461,11 @@ def view(scene_path, pack_values, samples_per_segment, exposure, screenshot):
               help="With --reference: the same fibers with another sampling seed (knitbake reference --seed S+1 "
                    "--fiber-seed S).")
 @click.option("--no-floors", is_flag=True, help="Do not path trace the two floor references (a third of the time).")
+@click.option("--instance", "instances", type=SuffixPath(".exr"), multiple=True,
+              help="With --reference: a further fiber instance of it (knitbake reference --seed K --fiber-seed K, the "
+                   "reference's spp). Repeatable; with the reference and its instance floor at least three: the "
+                   "report adds each model against their ensemble (mean radiance over the draws' mean, with their "
+                   "spread).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Trace the reference and its floors at once on an embedded Dask cluster of this many worker "
                    "processes (the same images). The speed-ups then divide the tasks' summed times, each task on "
@@ -469,7 +474,7 @@ def view(scene_path, pack_values, samples_per_segment, exposure, screenshot):
               help="Trace them on this Dask scheduler instead (or $KNIT_DASK_SCHEDULER).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def compare(scene_path, out_dir, reference, spp, pack_values, exposure, instance_floor, mc_floor, no_floors,
-            workers, scheduler, as_json):
+            instances, workers, scheduler, as_json):
     """Compare the strip renderer (full model and its ablations) with the reference path tracer, next to the
     reference's own floors (another fiber instance; another sampling seed), per pixel and at the yarn scale.
 
@@ -483,8 +488,11 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, instance
     if reference is None and (instance_floor or mc_floor):
         raise FormatError("--instance-floor and --mc-floor go with --reference (without it the floors are traced)")
     floor_files = {k: v for k, v in (("instance", instance_floor), ("monte_carlo", mc_floor)) if v}
+    if instances and (reference is None or 1 + bool(instance_floor) + len(instances) < 3):
+        raise FormatError("--instance goes with --reference, and the reference, --instance-floor and the --instance "
+                          "files must make at least 3 fiber instances")
     run = dict(reference=reference, spp=spp, packs=_pack_overrides(pack_values), exposure=exposure,
-               floors=not no_floors, floor_references=floor_files,
+               floors=not no_floors, floor_references=floor_files, instances=list(instances) or None,
                progress=lambda message: click.echo(message, err=True))
     if workers or scheduler or os.environ.get("KNIT_DASK_SCHEDULER"):
         from knitbake.scale_out import dask_client
@@ -504,4 +512,13 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, instance
         floor = f" ({row['to_instance_floor']['rel_l1']:.2f}x the floor)" if row["to_instance_floor"] else ""
         click.echo(f"{ABLATION_LABELS[name]:30s} yarn-scale rel L1 {row['yarn']['rel_l1']:.3f}{floor}  mean ratio "
                    f"{row['yarn']['mean_ratio']:.3f}  FLIP {row['flip']:.4f}  {row['ms']:.0f} ms{speed}")
+    if "ensemble" in summary:
+        e = summary["ensemble"]
+        click.echo(f"against {e['instances']} fiber instances (their means spread {100 * e['mean_sd']:.1f} %; "
+                   f"ensemble floor {e['rel_l1']:.3f}):")
+        for name, row in summary["ablations"].items():
+            r = row["ensemble"]
+            floor = f" ({r['to_floor']:.2f}x the ensemble floor)" if r["to_floor"] is not None else ""
+            click.echo(f"{ABLATION_LABELS[name]:30s} mean ratio {r['mean_ratio']:.3f}  yarn-scale rel L1 "
+                       f"{r['rel_l1']:.3f}{floor}")
     click.echo(f"report: {Path(out_dir) / 'report.md'}")

@@ -1,5 +1,6 @@
-"""Image metrics and `knitrun compare`: FLIP/RMSE/relMSE and the yarn-scale metrics behave as metrics; the report
-folder is complete, floors included; and (slow) the full model keeps the straight yarn's brightness."""
+"""Image metrics and `knitrun compare`: FLIP/RMSE/relMSE and the yarn-scale metrics behave as metrics, the ensemble
+of fiber instances gives its draws' statistics; the report folder is complete, floors and ensemble included; and
+(slow) the full model keeps the straight yarn's brightness."""
 
 import json
 import math
@@ -12,10 +13,13 @@ import pytest
 from click.testing import CliRunner
 
 from cli.knitrun_cli import main as knitrun
+from data_formats.conventions import LUMINANCE
+from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
-from knitbake.compare.image_metrics import compare_images, flip_error, radiance_ratio, yarn_filter, yarn_scale_metrics
+from knitbake.compare.image_metrics import (compare_images, ensemble_floor, ensemble_metrics, flip_error,
+                                            radiance_ratio, yarn_filter, yarn_scale_metrics)
 from knitbake.trace.reference import trace_reference
 from knitrun.render.pipeline import render
 from tests.helpers import FRONT, SUN, straight, write_scene
@@ -79,6 +83,36 @@ def test_radiance_ratio_skips_dark_tiles_and_finds_the_worst():
     assert r["mean_ratio"] == pytest.approx(1 - 0.5 * 200 / 800)
 
 
+def test_ensemble_mean_ratio_and_spread_are_those_of_the_draws_means():
+    """Draws that are the same image scaled by 0.9, 1.0 and 1.1: their means spread by 0.1 (sd over the mean), the
+    ensemble's mean is the unscaled image's, and a test image 1.2× it has mean ratio 1.2; their leave-one-out rel L1
+    is what the scaling gives (draw k against the mean of the other two)."""
+    base = np.random.default_rng(1).uniform(0.1, 1.0, (40, 60, 3)).astype(np.float32)
+    draws = [base * f for f in (0.9, 1.0, 1.1)]
+    floor = ensemble_floor(draws, 4.0)
+    assert floor["instances"] == 3 and floor["mean_sd"] == pytest.approx(0.1, rel=1e-5)
+    assert floor["mean_se"] == pytest.approx(0.1 / math.sqrt(3), rel=1e-5)
+    # draw 0.9 against (1.0 + 1.1)/2 = 1.05: |0.9 − 1.05|/1.05; draw 1.0 against 1.0: 0; draw 1.1 against 0.95
+    assert floor["rel_l1_each"] == pytest.approx([0.15 / 1.05, 0.0, 0.15 / 0.95], rel=1e-5, abs=1e-7)
+    row = ensemble_metrics(base * 1.2, draws, 4.0)
+    assert row["mean_ratio"] == pytest.approx(1.2, rel=1e-5)
+    assert row["rel_l1"] == pytest.approx(np.mean([0.15 / 1.05, 0.2, 0.25 / 0.95]), rel=1e-5)
+    assert row["to_floor"] == pytest.approx(row["rel_l1"] / floor["rel_l1"])
+    with pytest.raises(ValueError, match="at least 3"):
+        ensemble_floor(draws[:2], 4.0)
+
+
+def test_ensemble_the_draws_expectation_beats_one_draw():
+    """Draws = one image plus independent fine-grained noise (a fiber instance's own deviations, finer than the yarn
+    scale but not wholly averaged away by it): the noiseless image, what every draw scatters about, is closer to the
+    others than any draw is (ratio to the ensemble floor < 1), and a 10 % brighter one is farther."""
+    rng = np.random.default_rng(2)
+    base = np.full((64, 64, 3), 0.5, np.float32)
+    draws = [base + rng.normal(0.0, 0.2, base.shape).astype(np.float32) for _ in range(6)]
+    assert ensemble_metrics(base, draws, 3.0)["to_floor"] < 0.6
+    assert ensemble_metrics(1.1 * base, draws, 3.0)["to_floor"] > ensemble_metrics(base, draws, 3.0)["to_floor"]
+
+
 def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     scene = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     out = tmp_path / "report"
@@ -113,14 +147,26 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     with h5py.File(old, "r+") as f:
         for name in ("xi_closed", "xi_view", "radiance_view"):
             del f[f"correction/{name}"], f[f"correction/{name}_stderr"]
+    # with a third draw the report adds the ensemble (here the Monte Carlo floor stands in for a further fiber
+    # instance: the plumbing is what is tested; ``test_ensemble_*`` test the statistics)
     again = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"),
                                          "--instance-floor", str(out / "floor_instance.exr"),
+                                         "--instance", str(out / "floor_monte_carlo.exr"),
                                          "--pack", f"cotton1={old}", "-o", str(tmp_path / "r2"), "--json"])
     assert again.exit_code == 0, again.output
     given = json.loads(again.stdout)
     assert set(given["floors"]) == {"instance"}
     assert given["ablations"]["full"]["xi"] == {"cotton1": "the paper's (the pack has no correction/xi_closed)"}
     assert "ξ of the full model: cotton1: the paper's (the pack has no" in (tmp_path / "r2" / "report.md").read_text()
+    draws = [read_exr(out / f) for f in ("reference.exr", "floor_instance.exr", "floor_monte_carlo.exr")]
+    assert given["ensemble"]["instances"] == 3 and given["ensemble"]["files"] == [str(out / "floor_monte_carlo.exr")]
+    strip = read_exr(tmp_path / "r2" / "strip_full.exr")
+    assert given["ablations"]["full"]["ensemble"]["mean_ratio"] == pytest.approx(
+        (strip @ LUMINANCE).mean() / np.mean([(d @ LUMINANCE).mean() for d in draws]), rel=1e-5)
+    assert "## Against 3 fiber instances" in (tmp_path / "r2" / "report.md").read_text()
+    lone = CliRunner().invoke(knitrun, ["compare", str(scene), "--instance", str(out / "floor_monte_carlo.exr"),
+                                        "-o", str(tmp_path / "r4")])
+    assert lone.exit_code != 0 and "at least 3 fiber instances" in lone.output
     for key in ("rel_l1", "rel_l1_2x", "flip", "mean_ratio"):  # the same floor, read instead of traced
         assert given["floors"]["instance"]["yarn"][key] == pytest.approx(floors["instance"]["yarn"][key])
     bad = CliRunner().invoke(knitrun, ["compare", str(scene), "--reference", str(out / "reference.exr"), "--spp", "4",

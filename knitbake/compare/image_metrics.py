@@ -18,6 +18,16 @@ edges extended), and at 2d:
 * mean radiance ratio: mean luminance of test over ref (``data_formats.conventions.LUMINANCE``), over the image and
   per tile of ``TILE_DIAMETERS`` · d pixels; tiles where the reference's mean luminance is below ``SIGNAL`` of its
   brightest tile's are skipped; the worst tile is the one whose ratio is farthest from 1 (in log).
+
+Against an ensemble of K ≥ 3 fiber instances I_1 … I_K of the reference (``ensemble_metrics``; a strip image models
+what the yarn looks like on average over its fibers, which one instance shows only with its own draw's deviations):
+
+* mean radiance ratio: mean luminance of test over the instances' mean, with the instances' spread — the standard
+  deviation of their means over that mean (what one reference's mean may be off by) and its standard error
+  sd/√K (what the ensemble's may);
+* rel L1 at the yarn scale, leave one out: the mean over k of rel L1(F(test), F(mean of the instances but k)); the
+  same for instance k itself in place of the test is the **ensemble floor** (``ensemble_floor``), and the test's
+  ratio to it reads like the ratio to the instance floor: 1 is as close to the other draws as a draw is.
 """
 
 from __future__ import annotations
@@ -119,3 +129,38 @@ def yarn_scale_metrics(test, reference, diameter_px: float, exposure_stops: floa
         if not suffix:
             out["flip"], _ = flip_error(ft.astype(np.float32), fr.astype(np.float32), exposure_stops)
     return {**out, **radiance_ratio(test, reference, max(1, int(round(TILE_DIAMETERS * diameter_px))))}
+
+
+def _luminance_mean(img) -> float:
+    return float((np.asarray(img, np.float64) @ LUMINANCE).mean())
+
+
+def ensemble_floor(instances, diameter_px: float) -> dict:
+    """The ensemble of fiber instances (a list of K ≥ 3 (H, W, 3) images, module docstring): ``instances`` K, the
+    mean luminance ``mean``, ``mean_sd`` the instances' means' standard deviation over it and ``mean_se`` = sd/√K,
+    ``rel_l1`` the leave-one-out yarn-scale rel L1 of an instance against the others' mean (averaged over k) and
+    ``rel_l1_each`` per instance."""
+    if len(instances) < 3:
+        raise ValueError(f"an ensemble needs at least 3 fiber instances, got {len(instances)}")
+    filtered = [yarn_filter(_checked(img, instances[0])[0], diameter_px) for img in instances]
+    total, k = sum(filtered), len(filtered)
+    each = [_rel_l1(f, (total - f) / (k - 1)) for f in filtered]
+    means = np.array([_luminance_mean(img) for img in instances])
+    mean = float(means.mean())
+    sd = float(means.std(ddof=1) / mean) if mean > 0 else math.nan
+    return {"instances": k, "mean": mean, "mean_sd": sd, "mean_se": sd / math.sqrt(k),
+            "rel_l1": float(np.mean(each)), "rel_l1_each": [float(x) for x in each]}
+
+
+def ensemble_metrics(test, instances, diameter_px: float, floor: dict | None = None) -> dict:
+    """``test`` against an ensemble of K ≥ 3 fiber instances (module docstring): ``mean_ratio`` (its mean luminance
+    over the instances'), ``rel_l1`` (leave-one-out, at the yarn scale) and ``to_floor``, rel_l1 over the ensemble
+    floor's (``floor``: ``ensemble_floor(instances, diameter_px)``, computed when not given)."""
+    floor = floor or ensemble_floor(instances, diameter_px)
+    test = _checked(test, instances[0])[0]
+    filtered = [yarn_filter(img, diameter_px) for img in instances]
+    total, k = sum(filtered), len(filtered)
+    ft = yarn_filter(test, diameter_px)
+    rel_l1 = float(np.mean([_rel_l1(ft, (total - f) / (k - 1)) for f in filtered]))
+    return {"mean_ratio": _luminance_mean(test) / floor["mean"] if floor["mean"] > 0 else math.nan,
+            "rel_l1": rel_l1, "to_floor": rel_l1 / floor["rel_l1"] if floor["rel_l1"] > 0 else None}

@@ -19,6 +19,12 @@ seed, and the **Monte Carlo floor**, the same fibers traced with another samplin
 Errors are measured per pixel and at the yarn scale (``image_metrics.yarn_scale_metrics``: images box-filtered to
 the yarn's projected diameter, ``yarn_diameter_px``), and the yarn-scale errors also as a ratio to the instance
 floor's at the same scale: a model at ratio 1 is as close to the reference as another fiber instance is.
+
+One instance's mean radiance is itself a draw: over eight draws of the back-lit straight yarn it varies by 5.4 % (its
+flyaways), as much as the ±5 % a model's mean is held to. Given further fiber instances (``instances``), the report
+adds the **ensemble** (``image_metrics.ensemble_metrics``): each model's mean radiance over the mean of all K
+instances (the reference, the instance floor and the further ones), with the instances' own spread, and its
+leave-one-out yarn-scale rel L1 over the ensemble floor.
 """
 
 from __future__ import annotations
@@ -32,7 +38,8 @@ from data_formats.atomic import atomic_path
 from data_formats.errors import FormatError
 from data_formats.images import read_exr, write_exr, write_png
 from data_formats.scene import load_scene
-from knitbake.compare.image_metrics import compare_images, flip_error, yarn_filter, yarn_scale_metrics
+from knitbake.compare.image_metrics import (compare_images, ensemble_floor, ensemble_metrics, flip_error, yarn_filter,
+                                            yarn_scale_metrics)
 from knitbake.trace.reference import read_summary, reference_seconds, trace_reference
 from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER, ABLATIONS, combined
 from knitrun.render.camera import pixel_size, scene_camera
@@ -93,7 +100,7 @@ def _reference_image(scene, path, spp, seed, fiber_seed, say, what, future=None)
 
 
 def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exposure=0.0, ablations=ABLATION_ORDER,
-                  floors=True, floor_references=None, progress=None, client=None) -> dict:
+                  floors=True, floor_references=None, progress=None, client=None, instances=None) -> dict:
     """Compare the strip renderer with the reference on ``scene_path``; write the report into ``out_dir``; return the
     summary.
 
@@ -101,10 +108,12 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     reference` writes beside it, else unknown); ``spp``: samples per pixel of what is path traced (default: the
     scene's); ``packs``: yarn → pack overrides for the strip renderer; ``ablations``: the models drawn, each an
     ablation or a combination "a+b" (``knitrun.render.ablations.combined``). ``floor_references``: floor name
-    (``FLOORS``) → an EXR of that floor image, rendered at the reference's spp with the seeds ``FLOORS`` gives; a floor not given
-    is path traced when ``floors`` is true and the reference is traced here too (a given reference's seeds are not
-    known), else not reported. ``client``: a Dask client (``knitbake.scale_out.dask_client``) that traces the
-    reference and the floors at once, as tasks (the same images)."""
+    (``FLOORS``) → an EXR of that floor image, rendered at the reference's spp with the seeds ``FLOORS`` gives; a
+    floor not given is path traced when ``floors`` is true and the reference is traced here too (a given
+    reference's seeds are not known), else not reported. ``client``: a Dask client (``knitbake.scale_out.dask_client``) that traces the
+    reference and the floors at once, as tasks (the same images). ``instances``: EXRs of further fiber instances of
+    the reference (other fiber seeds, the reference's spp; ``benchmarks/bench_instances.py``): with the reference
+    and the instance floor at least three, the report adds the ensemble (module docstring)."""
     scene = load_scene(scene_path)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -126,7 +135,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     write_exr(out / "reference.exr", ref)
     write_png(out / "reference.png", ref, exposure)
     diameter = yarn_diameter_px(scene)
-    floor_rows, floor_facts = {}, {}
+    floor_rows, floor_facts, floor_images = {}, {}, {}
     for name, ((d_sample, d_fiber), _) in FLOORS.items():
         given = (floor_references or {}).get(name)
         if given is None and not (floors and reference is None):
@@ -136,8 +145,14 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         write_exr(out / f"floor_{name}.exr", image)
         write_png(out / f"floor_{name}.png", image, exposure)
         floor_rows[name], _ = _metrics(image, ref, diameter, exposure)
+        floor_images[name] = image
         floor_facts[name] = facts
     instance = floor_rows.get("instance")
+    ensemble, draws = None, []
+    if instances:
+        draws = [ref] + ([floor_images["instance"]] if instance is not None else []) + \
+            [_reference_image(scene, path, spp, None, None, say, "instance")[0] for path in instances]
+        ensemble = {**ensemble_floor(draws, diameter), "files": [str(path) for path in instances]}
 
     render(scene, packs, ABLATIONS["full"])  # pays the kernels' compile or cache load once
     rows, full = {}, None
@@ -155,6 +170,8 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         rows[name] = {**metrics, "to_instance_floor": _to_floor(metrics, instance), "ms": seconds * 1e3,
                       "ms_per_pass": {k: v * 1e3 for k, v in result.timings.items()},
                       "speedup": None if ref_seconds is None else ref_seconds / seconds, "xi": result.facts["xi"]}
+        if ensemble is not None:
+            rows[name]["ensemble"] = ensemble_metrics(result.image, draws, diameter, ensemble)
     if full is not None:
         _, yarn_map = flip_error(yarn_filter(full, diameter).astype(np.float32),
                                  yarn_filter(ref, diameter).astype(np.float32), exposure, magma=True)
@@ -167,7 +184,8 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
                "exposure_stops": exposure, "flip_mode": next(iter(rows.values()))["flip_mode"] if rows else None,
                "floors": {k: {**_without_mode(row), "what": FLOORS[k][1], "image": floor_facts[k]}
                           for k, row in floor_rows.items()},
-               "ablations": {k: _without_mode(row) for k, row in rows.items()}}
+               "ablations": {k: _without_mode(row) for k, row in rows.items()},
+               **({"ensemble": ensemble} if ensemble is not None else {})}
     with atomic_path(out / "report.json") as tmp:
         Path(tmp).write_text(json.dumps(summary, indent=2))
     with atomic_path(out / "report.md") as tmp:
@@ -218,6 +236,8 @@ def _markdown(summary) -> str:
                if name != "full" and any("the pack has no" in how for how in (row.get("xi") or {}).values())]
     if lacking:
         lines += ["", "Rows drawn without the tables they ask for: " + ". ".join(lacking) + "."]
+    if summary.get("ensemble"):
+        lines += _ensemble_markdown(summary)
     lines += ["", "## Every metric", "",
               "Yarn scale (d = the projected yarn diameter): rel L1, relMSE and FLIP of the box-filtered images; mean "
               "and worst-tile radiance ratios over tiles of 2d px where the reference has signal.", "",
@@ -235,3 +255,22 @@ def _markdown(summary) -> str:
         lines.append(f"**{ABLATION_LABELS.get(name, name)}**: ![strip](strip_{name}.png) ![FLIP](flip_{name}.png)")
         lines.append("")
     return "\n".join(lines)
+
+
+def _ensemble_markdown(summary) -> list:
+    """The report's section on the ensemble of fiber instances (module docstring)."""
+    e = summary["ensemble"]
+    lines = ["", f"## Against {e['instances']} fiber instances", "",
+             f"The reference, its instance floor and {len(e['files'])} further draws of the fibers. Their mean "
+             f"radiances spread by {100 * e['mean_sd']:.1f} % (sd; the ensemble's mean: ±{100 * e['mean_se']:.1f} %). "
+             f"Ensemble floor: an instance's yarn-scale rel L1 against the mean of the others, "
+             f"{e['rel_l1']:.3f} (each: {', '.join(f'{x:.3f}' for x in e['rel_l1_each'])}).", "",
+             "| model | mean radiance ratio (ensemble) | yarn-scale rel L1 (leave one out) | ratio to ensemble floor |",
+             "|---|---|---|---|"]
+    for name, row in summary["ablations"].items():
+        r = row.get("ensemble")
+        if r:
+            spread = r["mean_ratio"] * e["mean_se"]
+            lines.append(f"| {ABLATION_LABELS.get(name, name)} | {r['mean_ratio']:.3f} ± {spread:.3f} | "
+                         f"{r['rel_l1']:.3f} | {_fmt(r['to_floor'], '.2f')} |")
+    return lines

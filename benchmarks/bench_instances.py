@@ -1,0 +1,64 @@
+"""More fiber instances of each example scene's reference, for the ensemble part of the ruler (``knitrun compare
+--instance``, ``benchmarks/bench_compare.py --instances``).
+
+One path-traced reference is one draw of the yarn's fibers; its mean radiance alone varies from draw to draw by
+several per cent (the back-lit straight yarn: 5.4 % over eight draws, its flyaways), as much as a model's error may.
+This traces ``--count`` further draws per scene, fiber seed and sampling seed S + 2 … S + 1 + count (S the scene's
+seed; S and S + 1 are the reference and its instance floor, ``knitbake.compare.report.FLOORS``), at the scene's spp
+(or ``--spp``), into ``DIR/<scene>_fiber<seed>.exr`` with their JSON summaries, and prints each draw's mean radiance
+over the reference's and the spread of the means.
+
+    .venv/bin/python benchmarks/bench_instances.py --out out/bench/refs2 [--count 6] [--scenes a,b] [--spp N]
+"""
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from data_formats.images import read_exr
+from data_formats.scene import load_scene
+from knitbake.trace.reference import trace_reference, write_reference
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
+          "knit_patch_sky", "knit_patch_grazing", "simulated_patch_directional")
+
+
+def instance_path(folder, scene_name: str, seed: int) -> Path:
+    """Where draw ``seed`` of a scene's fibers is kept: ``folder/<scene>_fiber<seed>.exr``."""
+    return Path(folder) / f"{scene_name}_fiber{seed}.exr"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", required=True, help="folder of the references (bench_floors.py --out)")
+    parser.add_argument("--count", type=int, default=6)
+    parser.add_argument("--scenes", default=",".join(SCENES))
+    parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the scene's)")
+    args = parser.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    print("| scene | spp | draws | mean of each draw over the reference's | spread (sd) | seconds |")
+    print("|---|---|---|---|---|---|")
+    for name in args.scenes.split(","):
+        scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
+        spp, seed = args.spp or scene.render.spp, scene.render.seed
+        t0 = time.perf_counter()
+        means = []
+        for k in range(seed + 2, seed + 2 + args.count):
+            path = instance_path(out, name, k)
+            if not path.is_file():
+                image, facts = trace_reference(scene, spp, k, scene.render.max_depth, fiber_seed=k)
+                write_reference(path, image, {"scene": name, **facts})
+            means.append(float(read_exr(path).mean()))
+        ref = out / f"{name}.exr"
+        base = float(read_exr(ref).mean()) if ref.is_file() else float(np.mean(means))
+        ratios = np.array(means) / base
+        print(f"| {name} | {spp} | {args.count} | {', '.join(f'{r:.3f}' for r in ratios)} | "
+              f"{ratios.std(ddof=1):.3f} | {time.perf_counter() - t0:.0f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
