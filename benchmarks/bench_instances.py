@@ -4,8 +4,8 @@
 One path-traced reference is one draw of the yarn's fibers; its mean radiance alone varies from draw to draw by
 several per cent (the back-lit straight yarn: 5.4 % over eight draws, its flyaways), as much as a model's error may.
 This traces ``--count`` further draws per scene, fiber seed and sampling seed S + 2 … S + 1 + count (S the scene's
-seed; S and S + 1 are the reference and its instance floor, ``knitbake.compare.report.FLOORS``), at the scene's spp
-(or ``--spp``), into ``DIR/<scene>_fiber<seed>.exr`` with their JSON summaries, and prints each draw's mean radiance
+seed; S and S + 1 are the reference and its instance floor, ``knitbake.compare.report.FLOORS``), at the reference's
+spp (its JSON summary in DIR; else the scene's; or ``--spp``), into ``DIR/<scene>_fiber<seed>.exr`` with their JSON summaries, and prints each draw's mean radiance
 over the reference's and the spread of the means.
 
     .venv/bin/python benchmarks/bench_instances.py --out out/bench/refs2 [--count 6] [--scenes a,b] [--spp N]
@@ -19,7 +19,7 @@ import numpy as np
 
 from data_formats.images import read_exr
 from data_formats.scene import load_scene
-from knitbake.trace.reference import trace_reference, write_reference
+from knitbake.trace.reference import read_summary, trace_reference, write_reference
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
@@ -36,7 +36,8 @@ def main():
     parser.add_argument("--out", required=True, help="folder of the references (bench_floors.py --out)")
     parser.add_argument("--count", type=int, default=6)
     parser.add_argument("--scenes", default=",".join(SCENES))
-    parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the scene's)")
+    parser.add_argument("--spp", type=int, default=None,
+                        help="samples per pixel (default: the reference's in --out, else the scene's)")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -44,7 +45,9 @@ def main():
     print("|---|---|---|---|---|---|")
     for name in args.scenes.split(","):
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
-        spp, seed = args.spp or scene.render.spp, scene.render.seed
+        ref = out / f"{name}.exr"
+        summary = read_summary(ref) if ref.is_file() else None
+        spp, seed = args.spp or (summary or {}).get("spp") or scene.render.spp, scene.render.seed
         t0 = time.perf_counter()
         means = []
         for k in range(seed + 2, seed + 2 + args.count):
@@ -53,7 +56,6 @@ def main():
                 image, facts = trace_reference(scene, spp, k, scene.render.max_depth, fiber_seed=k)
                 write_reference(path, image, {"scene": name, **facts})
             means.append(float(read_exr(path).mean()))
-        ref = out / f"{name}.exr"
         base = float(read_exr(ref).mean()) if ref.is_file() else float(np.mean(means))
         ratios = np.array(means) / base
         print(f"| {name} | {spp} | {args.count} | {', '.join(f'{r:.3f}' for r in ratios)} | "

@@ -102,9 +102,9 @@ QUALITY = {
 # closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view; 3: and apart on single and multiple scattering;
 # interreflection 5: ρ_Y and T_Y against the colour (interreflection/*_by_colour); closure 4: the renderer it closes
 # on no longer shadows the lone yarn by its own strip (shadow_map.own_strip_depth), the ξ stored is the one drawn last,
-# CLAMP 4 → 8
+# CLAMP 4 → 8; flyaway 3: the draw of flyaways nearest the yarn's coverage profile (textures.nearest_flyaway_draw)
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
-                 "interreflection": 5, "textures": 2, "flyaway": 2, "closure": CLOSURE_STAGE_VERSION}
+                 "interreflection": 5, "textures": 2, "flyaway": 3, "closure": CLOSURE_STAGE_VERSION}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64

@@ -149,6 +149,24 @@ def test_any_window_shows_the_same_periodic_yarn():
     np.testing.assert_allclose(a, b[long.info["successor"]], atol=1e-12 * spec.radius)
 
 
+def test_a_flyaway_seed_draws_other_flyaways_on_the_same_regular_fibers():
+    """``flyaway_seed`` (the texture stage's draws): the regular fibers are those of the seed, bit for bit; the
+    flyaways are another draw, the same for the same flyaway seed; None keeps the flyaways of the seed's own stream
+    (what the reference path tracer draws)."""
+    spec = load_preset("cotton1")
+    base = generate_fibers(spec, length=2 * spec.geometry.ply_pitch, seed=5)
+    draws = [generate_fibers(spec, length=2 * spec.geometry.ply_pitch, seed=5, flyaway_seed=j) for j in (0, 1, 1)]
+    regular = base.select(base.kind == KIND_REGULAR)
+    for fibers in draws:
+        np.testing.assert_array_equal(fibers.select(fibers.kind == KIND_REGULAR).points, regular.points)
+    flyaway = [f.select(f.kind != KIND_REGULAR).points for f in [base] + draws]
+    assert flyaway[0].shape != flyaway[1].shape or not np.array_equal(flyaway[0], flyaway[1])
+    assert flyaway[1].shape != flyaway[2].shape or not np.array_equal(flyaway[1], flyaway[2])
+    np.testing.assert_array_equal(flyaway[2], flyaway[3])
+    again = generate_fibers(spec, length=2 * spec.geometry.ply_pitch, seed=5, flyaway_seed=None)
+    np.testing.assert_array_equal(again.points, base.points)
+
+
 def test_regular_fibers_stay_inside_the_yarn_radius():
     spec = load_preset("rayon1")
     fibers = generate_fibers(spec, length=4 * spec.geometry.ply_pitch, seed=1, flyaways=False)

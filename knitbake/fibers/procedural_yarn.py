@@ -38,6 +38,7 @@ from knitbake.fibers.fiber_set import KIND_HAIR, KIND_LOOP, KIND_REGULAR, FiberS
 
 SEGMENTS_PER_TURN = 24  # default sampling: segments per full turn of a fiber around the yarn axis
 FLYAWAY_POINTS = 17  # points per loop or hair polyline
+FLYAWAY_STREAM = 0x666C79  # the flyaways' own random stream: SeedSequence([seed, FLYAWAY_STREAM, flyaway_seed])
 # peak bytes of generate_fibers per item, bounds of what tracemalloc measured on cotton1 (48 B per regular point;
 # 5.4 KiB per hair, 3.0 KiB per loop): checked against the memory budget before anything is allocated
 REGULAR_POINT_BYTES = 64
@@ -171,13 +172,16 @@ def _ply_frame(ply, z, n_plies, ply_dist, ply_rate):
 
 
 def generate_fibers(spec: YarnSpec, length: float | None = None, z_start: float = 0.0, seed: int = 0,
-                    segments_per_period: int | None = None, flyaways: bool = True) -> FiberSet:
+                    segments_per_period: int | None = None, flyaways: bool = True,
+                    flyaway_seed: int | None = None) -> FiberSet:
     """Fibers of a straight yarn along +z from ``z_start`` over ``length`` (default: one period = ply pitch).
 
     Regular fibers are sampled at ``segments_per_period`` uniform steps per period (default: SEGMENTS_PER_TURN
     per turn of the faster of the ply and fiber twists, at least 32). Flyaways are added when ``flyaways`` is true.
     The same seed gives the same yarn in every window: a window [z_start, z_start + length] shows the regular
-    fibers of the infinite periodic yarn; flyaways are drawn for the window itself.
+    fibers of the infinite periodic yarn; flyaways are drawn for the window itself. ``flyaway_seed``: draw the
+    flyaways from a stream of their own, (``seed``, ``flyaway_seed``), the regular fibers unchanged (another draw
+    of the same yarn's flyaways, ``knitbake.stages.textures``); None: from the regular fibers' stream, after them.
     """
     g = spec.geometry
     period = g.ply_pitch
@@ -226,6 +230,8 @@ def generate_fibers(spec: YarnSpec, length: float | None = None, z_start: float 
     frame = dict(n_plies=g.plies, ply_dist=g.ply_distance, ply_rate=ply_rate)
     n_loops = n_hairs = 0
     if flyaways:
+        if flyaway_seed is not None:
+            rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, FLYAWAY_STREAM, flyaway_seed])))
         loops, loop_ply = _loops(spec, rng, length, z[0], period, member, shape, frame)
         hairs, hair_ply = _hairs(spec, rng, length, z[0], frame)
         n_loops, n_hairs = len(loops), len(hairs)
