@@ -84,12 +84,14 @@ def test_a_pinhole_view_agrees_at_the_yarn_scale(tmp_path, pack):
 
 
 def test_a_bent_yarn_is_split_into_triangles_as_the_cpu_splits_it(tmp_path, pack):
-    """A tight arc makes every strip quad a trapezoid, whose attributes depend on the diagonal it is split along:
-    split along the other one (a+ b−), this arc measured 0.0125 at the yarn scale and 3.7 % per pixel."""
+    """A tight arc makes every strip quad a trapezoid, whose attributes depend on the diagonal it is split along.
+    The regular strips alone (the hair layer's own sampling differences blur it: with it, 0.0081 against 0.0265):
+    split as the CPU splits, this arc measures 0.0052 at the yarn scale; along the other diagonal (a+ b−) 0.0116
+    (stop 51, the test pack's flyaways of stop 51; before, with them, 0.0125 along the other diagonal)."""
     camera = ORTHO.replace("width = 64", "width = 160").replace("height = 48", "height = 120")
     a = np.linspace(0.0, 1.5 * np.pi, 25)
     arc = np.stack([0.15 * np.cos(a), 0.15 * np.sin(a), np.zeros_like(a)], axis=1)
-    gl, cpu = _both(write_scene(tmp_path, [arc], camera=camera, lights=SUN), pack)
+    gl, cpu = _both(write_scene(tmp_path, [arc], camera=camera, lights=SUN), pack, Features(flyaways=False))
     assert abs(gl.mean() / cpu.mean() - 1) < 3e-3
     assert _yarn_l1(gl, cpu) < 8e-3
 
