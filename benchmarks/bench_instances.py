@@ -1,12 +1,12 @@
 """More fiber instances of each example scene's reference, for the ensemble part of the ruler (``knitrun compare
 --instance``, ``benchmarks/bench_compare.py --instances``).
 
-One path-traced reference is one draw of the yarn's fibers; its mean radiance alone varies from draw to draw by
-several per cent (the back-lit straight yarn: 5.4 % over eight draws, its flyaways), as much as a model's error may.
-This traces ``--count`` further draws per scene, fiber seed and sampling seed S + 2 … S + 1 + count (S the scene's
-seed; S and S + 1 are the reference and its instance floor, ``knitbake.compare.report.FLOORS``), at the reference's
-spp (its JSON summary in DIR; else the scene's; or ``--spp``), into ``DIR/<scene>_fiber<seed>.exr`` with their JSON summaries, and prints each draw's mean radiance
-over the reference's and the spread of the means.
+One path-traced reference is one draw of the yarn's fibers; its mean radiance alone varies from draw to draw by several
+per cent (the back-lit straight yarn: 5.4 % over eight draws, its flyaways), as much as a model's error may. This traces
+``--count`` further draws per scene, fiber seed and sampling seed S + 2 … S + 1 + count (S the scene's seed; S and S + 1
+are the reference and its instance floor, ``knitbake.compare.report.FLOORS``), at the reference's spp (its JSON summary
+in DIR; else the scene's; or ``--spp``), into ``DIR/<scene>_fiber<seed>.exr`` with their JSON summaries, and prints each
+draw's mean radiance over the reference's and the spread of the means.
 
     .venv/bin/python benchmarks/bench_instances.py --out out/bench/refs2 [--count 6] [--scenes a,b] [--spp N]
 """

@@ -132,6 +132,7 @@ def yarn_scale_metrics(test, reference, diameter_px: float, exposure_stops: floa
 
 
 def _luminance_mean(img) -> float:
+    """Mean luminance (``LUMINANCE``) of an (H, W, 3) image."""
     return float((np.asarray(img, np.float64) @ LUMINANCE).mean())
 
 

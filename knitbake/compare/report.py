@@ -110,10 +110,11 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
     ablation or a combination "a+b" (``knitrun.render.ablations.combined``). ``floor_references``: floor name
     (``FLOORS``) → an EXR of that floor image, rendered at the reference's spp with the seeds ``FLOORS`` gives; a
     floor not given is path traced when ``floors`` is true and the reference is traced here too (a given
-    reference's seeds are not known), else not reported. ``client``: a Dask client (``knitbake.scale_out.dask_client``) that traces the
-    reference and the floors at once, as tasks (the same images). ``instances``: EXRs of further fiber instances of
-    the reference (other fiber seeds, the reference's spp; ``benchmarks/bench_instances.py``): with the reference
-    and the instance floor at least three, the report adds the ensemble (module docstring)."""
+    reference's seeds are not known), else not reported. ``client``: a Dask client
+    (``knitbake.scale_out.dask_client``) that traces the reference and the floors at once, as tasks (the same
+    images). ``instances``: EXRs of further fiber instances of the reference (other fiber seeds, the reference's
+    spp; ``benchmarks/bench_instances.py``): with the reference and the instance floor at least three, the report
+    adds the ensemble (module docstring)."""
     scene = load_scene(scene_path)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -78,23 +78,22 @@ flyaways, so the three variants share most loops and differ mostly in hairs; ``f
 
 Which draw (the coverage profile)
 ---------------------------------
-Three periods of flyaways, one shared set among them, are a small sample: the mean flyaway coverage across the
-strip (per texture row, i.e. per distance from the axis) varies between draws of cotton1's flyaways by ±26 % (sd)
-beyond the yarn body (0.44–1.72× the yarn's own over 64 draws), and the strip renderer draws the pack's three
-variants along every yarn, so a draw's excess is a systematic error of every image (stop 51: the back-lit straight
-yarn's hairs 1.34× the mean of eight references; the draw the stage used to take, the regular fibers' own stream,
-has 1.35× the yarn's coverage beyond the body). So the stage
-draws ``FLYAWAY_DRAWS`` sets of flyaways (the same regular fibers, ``generate_fibers(..., flyaway_seed=j)``) and
-keeps the one whose variants' mean coverage profile (``coverage_profile``, cast at ``PROFILE_COLUMNS`` columns per
-period) is nearest to the yarn's expected profile, that of ``PROFILE_PERIODS`` periods of one long yarn drawn as the
-reference path tracer draws it (``expected_flyaway_profile``, edges of the window left out): nearest in the rel L1 of
-the coverage summed over bands of distance from the axis (``PROFILE_BANDS``, each side; ``profile_error``).
-Measured on cotton1 (standard, scratch, stop 51): the kept draw (10 of 64) is within 0.066 of the expected bands,
-its coverage beyond the body 1.04× the expected and over the whole strip 0.99×; seven bands instead of four kept a
-draw 0.87× beyond the body, and rows compared one by one stay above 0.21 (single loops). The kept
-draw is still one set of real flyaways (hairs stay hairs); what the choice fixes is their mean coverage, not the
-individual fibers. The attributes record the draw (``flyaway_draw`` of ``flyaway_draws``), its profile's rel L1
-against the expected one (``coverage_profile_rel_l1``) and the expected profile's own sampling error
+Three periods of flyaways, one shared set among them, are a small sample: the mean flyaway coverage across the strip
+(per texture row, i.e. per distance from the axis) varies between draws of cotton1's flyaways by ±26 % (sd) beyond the
+yarn body (0.44–1.72× the yarn's own over 64 draws), and the strip renderer draws the pack's three variants along every
+yarn, so a draw's excess is a systematic error of every image (stop 51: the back-lit straight yarn's hairs 1.34× the
+mean of eight references; the draw the stage used to take, the regular fibers' own stream, has 1.35× the yarn's coverage
+beyond the body). So the stage draws ``FLYAWAY_DRAWS`` sets of flyaways (the same regular fibers, ``generate_fibers(...,
+flyaway_seed=j)``) and keeps the one whose variants' mean coverage profile (``coverage_profile``, cast at
+``PROFILE_COLUMNS`` columns per period) is nearest to the yarn's expected profile, that of ``PROFILE_PERIODS`` periods
+of one long yarn drawn as the reference path tracer draws it (``expected_flyaway_profile``, edges of the window left
+out): nearest in the rel L1 of the coverage summed over bands of distance from the axis (``PROFILE_BANDS``, each side;
+``profile_error``). Measured on cotton1 (standard, scratch, stop 51): the kept draw (10 of 64) is within 0.066 of the
+expected bands, its coverage beyond the body 1.04× the expected and over the whole strip 0.99×; seven bands instead of
+four kept a draw 0.87× beyond the body, and rows compared one by one stay above 0.21 (single loops). The kept draw is
+still one set of real flyaways (hairs stay hairs); what the choice fixes is their mean coverage, not the individual
+fibers. The attributes record the draw (``flyaway_draw`` of ``flyaway_draws``), its profile's rel L1 against the
+expected one (``coverage_profile_rel_l1``) and the expected profile's own sampling error
 (``coverage_profile_target_rel_l1``: half the rel L1 between its two halves).
 """
 
@@ -498,7 +497,7 @@ def bake_flyaway_textures(spec: YarnSpec, width: int = 256, height: int = 64, sa
     period = spec.geometry.ply_pitch
     band = min(band, width // 4)
     regular = scene or regular_scene(spec, seed)
-    draw, profile_error, target_error = nearest_flyaway_draw(spec, seed, band * period / width, height, regular)
+    draw, draw_error, target_error = nearest_flyaway_draw(spec, seed, band * period / width, height, regular)
     variants, counts = flyaway_variants(spec, seed, band * period / width, flyaway_seed=draw)
     half_width = max([spec.radius] + [_reach(f) for f in variants])
     level0 = []
@@ -512,7 +511,7 @@ def bake_flyaway_textures(spec: YarnSpec, width: int = 256, height: int = 64, sa
         out[f"textures/flyaway/mip{k}"] = (level.astype(np.float32), 1.0 / (2 * n_sub), {
             "error_kind": _QUANTISATION_KIND.format(s=samples), "error_statistic": "max", "half_width": half_width,
             "samples_per_axis": samples, "seam_band_texels": band, "flyaway_draw": draw,
-            "flyaway_draws": FLYAWAY_DRAWS, "coverage_profile_rel_l1": profile_error,
+            "flyaway_draws": FLYAWAY_DRAWS, "coverage_profile_rel_l1": draw_error,
             "coverage_profile_target_rel_l1": target_error})
     return out, counts
 
