@@ -13,6 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from cli.knitrun_cli import main as knitrun
+from data_formats.errors import FormatError
 from data_formats.images import read_exr, write_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
@@ -22,7 +23,8 @@ from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render,
                                      strip_receivers)
-from knitrun.render.strip_shading import HAIR_DEPTHS, _hair_light, resolve, resolve_behind, shade_regular, variant_of
+from knitrun.render.strip_shading import (HAIR_DEPTHS, _hair_light, body_glow, cylinder_solid_angle, resolve,
+                                          resolve_behind, shade_regular, variant_of)
 from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor, shading_look
@@ -480,6 +482,70 @@ def _through_yarn(v, w_b, w_n, reach, a_f, n_cross, gap=0.0):
     return out / HAIR_DEPTHS
 
 
+def test_an_infinite_cylinders_solid_angle_against_directions_drawn_on_the_sphere():
+    """``cylinder_solid_angle``: the fraction of 400,000 uniform directions from a point ρ radii from the axis of a
+    unit cylinder along z whose ray meets it (ray–circle test in the xy plane), times 4π; 2π at the surface."""
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(400_000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    for rho in (1.0, 1.3, 2.0, 5.0):
+        dxy = d[:, :2]
+        along = -rho * dxy[:, 0]  # toward the axis from (ρ, 0): the projection on the xy plane meets the circle?
+        miss = rho * rho - along ** 2 / np.maximum(np.sum(dxy ** 2, axis=1), 1e-300)
+        hit = (along > 0) & (miss <= 1.0)
+        expected = 4 * np.pi * hit.mean()
+        assert cylinder_solid_angle(rho) == pytest.approx(expected, abs=4 * np.pi * 3 * np.sqrt(0.25 / len(d)))
+    assert cylinder_solid_angle(1.0) == pytest.approx(2 * np.pi) and cylinder_solid_angle(0.9) == pytest.approx(
+        2 * np.pi)
+
+
+def test_the_bodys_glow_on_a_hair_is_the_tube_phase_over_the_tubes_solid_angle():
+    """``body_glow`` against the module docstring's sum written out here, at the same depths; zero for a light along
+    the yarn; linear in R_Y and S_Y; a hair on the lit side gets more of it than one on the far side of a yarn that
+    reflects more than it passes on."""
+    t, n, b = np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), np.array([0, 1.0, 0])  # b = n × t
+    tube = np.array([[0.3, 0.25, 0.2], [0.2, 0.15, 0.1]])
+    albedo = np.array([0.9, 0.8, 0.7])
+    reach, out = 2.2, np.empty(3)
+
+    def glow(v, w, tube=tube):
+        body_glow(tube, albedo, reach, v, n, b, np.asarray(w, float) / np.linalg.norm(w), out)
+        return out.copy()
+
+    def g(a):
+        return 0.25 * np.pi * (np.sin(a) + (np.pi - a) * np.cos(a))
+
+    w = np.array([0.0, 0.6, 0.8])  # in the normal plane: cos θ_L = 1
+    expected = np.zeros(3)
+    depth = np.sqrt(reach ** 2 - 1.4 ** 2)
+    for k in range(HAIR_DEPTHS):
+        z = depth * ((2 * k + 1) / HAIR_DEPTHS - 1)
+        rho = np.hypot(1.4, z)
+        alpha = np.arccos(np.clip((1.4 * 0.6 + z * 0.8) / rho, -1, 1))
+        expected += ((tube[0] * g(alpha) + tube[1] * g(np.pi - alpha)) / np.pi ** 2 * 4 * np.arcsin(1 / rho)
+                     / (4 * np.pi) * albedo / HAIR_DEPTHS)
+    np.testing.assert_allclose(glow(1.4, w), expected, rtol=1e-12)
+    np.testing.assert_allclose(glow(1.4, [1.0, 0, 0]), 0.0)  # the light along the yarn lights no side of it
+    np.testing.assert_allclose(glow(1.4, w, 2 * tube), 2 * expected, rtol=1e-12)
+    assert np.all(glow(1.4, w) > glow(-1.4, w))  # R_Y > S_Y: the lit side (+b) glows more
+    assert np.all(glow(1.4, w) > 0.0) and np.all(np.isfinite(glow(1.0001, w)))
+
+
+def test_the_bodys_glow_lights_only_the_hairs_beside_a_yarn_under_directional_lights(tmp_path, pack):
+    """``Features.hair_glow``: under the sun the hairs beside the yarn get brighter and nothing gets darker; under the
+    sky alone (no directional light) the image is the full model's, bit for bit; the GL backend refuses it in one
+    line (it draws no glow yet)."""
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="sun")
+    full, glowing = _render(path, pack).image, _render(path, pack, features=Features(hair_glow=True)).image
+    assert np.all(np.isfinite(glowing)) and np.all(glowing >= full - 1e-7) and glowing.sum() > full.sum()
+    sky = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY, name="sky")
+    np.testing.assert_array_equal(_render(sky, pack).image, _render(sky, pack, features=Features(hair_glow=True)).image)
+    from knitrun.render.gl import gl_renderer
+
+    with pytest.raises(FormatError, match="hair_glow"):
+        gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)}, Features(hair_glow=True))
+
+
 def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_crosses_it():
     """``_hair_light`` beyond the body: 1 with the light on the hair's side or along the yarn, its own yarn's
     transmittance where the ray toward the light crosses the tube (ray–circle intersection at the same depths), and
@@ -680,11 +746,11 @@ def test_a_hair_takes_each_kind_of_light_whether_or_not_the_other_kind_is_compil
     seen = {}
     shade_kernel = pipeline.shade_flyaway
 
-    def shade(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit):
-        shade_kernel(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit)
+    def shade(idx, points, look, corrections, flyaway, lights, glow, lobes, im, rgb, alpha, transmit):
+        shade_kernel(idx, points, look, corrections, flyaway, lights, glow, lobes, im, rgb, alpha, transmit)
         n = len(rgb)
         parts = []
-        for kinds in ((lights, None, None), (None, lobes, im)):
+        for kinds in ((lights, glow, None, None), (None, None, lobes, im)):
             out = (np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)))
             shade_kernel(idx, points, look, corrections, flyaway, *kinds, *out)
             parts.append(out)

@@ -87,13 +87,19 @@ tube's surface"). Alone, with the diagonal ξ, it left the grazing patch 1.21× 
 at grazing light, which the axis plane's wrong shadows had hidden). Both backends draw it; the ablation
 ``axis_shadows`` looks up on the axis plane.
 
+``hair_glow`` lights the hairs beside a yarn's body, under directional lights, by the light that body scatters
+(``strip_shading.body_glow``: the bounce's tube phase from the pack's hull albedo and transmittance, the tube's solid
+angle from the hair). In front light the rows beside the straight yarn's body hold 42 % light that the path-traced
+reference scatters more than once and the hairs' single scattering lacks (BENCHMARKS.md, "Issue 13: the flyaway
+draw"). Not the default, CPU only: measured on the seven scenes in BENCHMARKS.md (stop 51).
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ
 closed on the renderer (at every view), + flyaways (= the full model, the default); every rung draws the surface
 lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
 detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
-bounce, with the lookups on the axis plane, with ξ closed apart on single and multiple scattering and with two
-blocking yarns counted.
+bounce, with the lookups on the axis plane, with ξ closed apart on single and multiple scattering, with two
+blocking yarns counted and with the body's glow on its hairs.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -120,6 +126,7 @@ class Features:
     split_xi: bool = False  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms)
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
+    hair_glow: bool = False  # hairs beside a yarn lit by the light its body scatters (strip_shading.body_glow)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -140,6 +147,7 @@ ABLATIONS = {
     "axis_shadows": Features(surface_shadows=False),
     "split_xi": Features(split_xi=True),
     "two_blockers": Features(two_blockers=True),
+    "hair_glow": Features(hair_glow=True),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -152,7 +160,8 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "no_bounce": "full without the yarn-level bounce",
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "split_xi": "full with ξ closed apart on single and multiple scattering",
-                   "two_blockers": "full with two blocking yarns counted"}
+                   "two_blockers": "full with two blocking yarns counted",
+                   "hair_glow": "full with the body's glow on its hairs"}
 
 
 def combined(name: str) -> Features:

@@ -696,6 +696,7 @@ class Renderer:
                     else (None, None)  # a kind of light the scene lacks is not compiled (``shade_flyaway``)
                 shade_flyaway(idx, hairs, *self.kernel_looks[k],
                               Lights(light_dir, light_e, light_vis[-1], light_beyond[-1]) if len(light_dir) else None,
+                              hair_glow(looks[k]) if features.hair_glow and len(light_dir) else None,
                               *environment,
                               fly_rgb, fly_alpha, fly_transmit)
         lap("shade")
@@ -775,6 +776,16 @@ def _yarn_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, verte
                          np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, values)
         out.append(values)
     return out
+
+
+def hair_glow(look) -> np.ndarray | None:
+    """(2, 3): R_Y and S_Y of ``look``'s yarn tube (``yarn_bounce.tube_optics``, in the entry's colour) for the
+    body's glow on its hairs (``strip_shading.body_glow``, ``Features.hair_glow``); None for a pack without ρ_Y and
+    T_Y (no glow)."""
+    if look.hull_albedo is None or look.hull_transmittance is None:
+        return None
+    return np.ascontiguousarray(np.stack(tube_optics(np.reshape(look.hull_albedo, 3),
+                                                     np.reshape(look.hull_transmittance, 3), look.gap)), np.float64)
 
 
 def bounce_facts(vertex, covered) -> dict:

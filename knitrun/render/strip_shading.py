@@ -79,6 +79,16 @@ the body sends on toward the camera as it receives it. Without τ a hair over th
 scattered radiance by its own single scattering and darkens it, where in the path-traced reference hairs over the
 body add light.
 
+The body's glow on its hairs (``Features.hair_glow``, off by default, CPU only; ``body_glow``): a hair beside its
+yarn's body (|v_strip| > 1) is also lit by the light the body scatters, which in front light is 42 % of what the
+path-traced reference shows beside the body (light that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13:
+the flyaway draw"). The body is the tube of ``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal
+plane it sends toward a point at angle α (in the normal plane) from the light the radiance
+E V cos θ_L (R_Y g(α) + S_Y g(π − α))/π²; a hair at distance ρ radii from the axis sees the (infinite) tube over the
+solid angle Ω = 4 asin(1/ρ) and, taking its BCSDF's response to that extended source as its albedo
+a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the camera, averaged over the depths
+the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
+
 Zinke's density factors d_f, d_b come with the look (``Look.d_f``, ``d_b``: ``dual_scattering.D_F``, ``D_B``); both
 0 (``Features.multiple_scattering`` False) leave single scattering alone, the split that ``benchmarks/probe_split.py``
 compares with the reference traced with one scattering event.
@@ -106,9 +116,11 @@ from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
 from knitrun.render.strip_raster import sample_attributes
 from knitrun.render.texture_sampling import mip_level, sample_mip
+from knitrun.render.yarn_bounce import INV_PI2, lambert_pair
 from knitrun.shading.dual_scattering import (K_F_BACK_DIRECT, K_F_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel,
                                              ds_scratch, forward_fraction)
-from knitrun.shading.fiber_bcsdf import N_CONTEXT, context_into, evaluate, r_lobe_context_into, spread_params
+from knitrun.shading.fiber_bcsdf import (N_CONTEXT, P_A_D, P_A_R, P_A_TT, context_into, evaluate, r_lobe_context_into,
+                                         spread_params)
 from knitrun.shading.fiber_frame import azimuth_difference, dot, longitudinal_angle
 from knitrun.shading.im_lookup import im_slice_kernel
 from knitrun.shading.table_lookup import axis_cell
@@ -564,13 +576,48 @@ def flyaway_coverage(idx, points, look, flyaway, alpha):
             alpha[q] = min(max(texel[3], 0.0), 1.0) if drawn else 0.0
 
 
+@njit(cache=True)
+def cylinder_solid_angle(rho):
+    """Solid angle (sr) of an infinite cylinder of radius 1 seen from a point ρ ≥ 1 from its axis: the strip of
+    half-angle asin(1/ρ) about the axis direction, integrated over every elevation along it, 4 asin(1/ρ) (2π at the
+    surface, 4/ρ far away)."""
+    return 4.0 * math.asin(min(1.0 / rho, 1.0))
+
+
+@njit(cache=True)
+def body_glow(tube, albedo, reach, v, n, b, w, out):
+    """out[:3] = the radiance toward the camera, per unit irradiance and visibility of a directional light from ``w``,
+    that a hair at strip coordinate ``v`` (yarn radii from the axis, along b; |v| > 1) returns of the light its own
+    yarn's body scatters onto it (module docstring, "The body's glow on its hairs"), averaged over ``HAIR_DEPTHS``
+    depths within ``reach`` radii. ``tube`` (2, 3): the body's R_Y and S_Y (``yarn_bounce.tube_optics``), ``albedo``
+    (3,): the hair's A_R + A_TT + A_D; n, b the strip frame."""
+    out[0] = out[1] = out[2] = 0.0
+    wb, wn = dot(w, b), dot(w, n)
+    cos_l = math.sqrt(wb * wb + wn * wn)  # cos θ_L: the light's part normal to the yarn
+    if cos_l < DEGENERATE:
+        return
+    wb, wn = wb / cos_l, wn / cos_l
+    depth = math.sqrt(max(reach * reach - v * v, 0.0))
+    for k in range(HAIR_DEPTHS):
+        z = depth * ((2.0 * k + 1.0) / HAIR_DEPTHS - 1.0)
+        rho = math.sqrt(v * v + z * z)
+        if rho <= 1.0:
+            continue
+        g, g_forward = lambert_pair((v * wb + z * wn) / rho)
+        share = cos_l * INV_PI2 * cylinder_solid_angle(rho) / (4.0 * math.pi) / HAIR_DEPTHS
+        for ch in range(3):
+            out[ch] += share * (tube[0, ch] * g + tube[1, ch] * g_forward) * albedo[ch]
+
+
 @njit(parallel=True, cache=True)
-def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rgb, alpha, transmit):
+def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, im, rgb, alpha, transmit):
     """Shade the flyaway-layer points ``idx`` of one yarn (the named tuples of ``knitrun.render.shading_inputs``;
     ``flyaway``: its three texture variants); writes rgb[idx], alpha[idx] and transmit[idx] (RGB, the hair's
     forward fraction ā_f(θ_o): what it passes on of the radiance behind it). ``lights`` is None without directional
     lights, ``lobes`` and ``im`` None without an environment: as in ``shade_regular``, a kind of light a scene lacks
-    is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: about half this kernel's compile)."""
+    is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: about half this kernel's compile).
+    ``glow`` (2, 3): the body's R_Y and S_Y for its glow on the hairs beside it under the directional lights
+    (``body_glow``), or None: none (the default, ``Features.hair_glow``)."""
     params, ds, period = look.params, look.ds, look.period
     half_width, radius, n_rest, gap = look.flyaway_half_width, look.radius, look.n_cross_rest, look.gap
     reach = half_width / radius  # the hair layer's half-width in yarn radii
@@ -580,7 +627,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
         vec = np.empty((_N_VEC, 3))  # scratch owned by this block of points
         t, wo, n, b, tf, ny = vec[_T], vec[_WO], vec[_N], vec[_B], vec[_TF], vec[_TEX]
         f, wl, psi, scratch, w, wo_l = vec[_XI], vec[_IM], vec[_PSI], vec[_SCRATCH], vec[_W], vec[_WO_L]
-        texel = np.empty(4)
+        texel, hair_albedo = np.empty(4), np.empty(3)
         wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
         for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
             q = idx[m]
@@ -615,6 +662,13 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, lobes, im, rg
                     lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap) * cos_i
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
+                    if glow is not None and not on_body:  # the body's glow (``body_glow``), lit as the hair is
+                        for ch in range(3):
+                            hair_albedo[ch] = params[P_A_R + ch] + params[P_A_TT + ch] + params[P_A_D + ch]
+                        body_glow(glow, hair_albedo, reach, v_strip, n, b, w, f)
+                        body_lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap)
+                        for ch in range(3):
+                            rgb[q, ch] += lights.irradiance[light, ch] * body_lit * f[ch]
             if lobes is not None:
                 for j in range(lobes.direction.shape[0]):
                     if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term

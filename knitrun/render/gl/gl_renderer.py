@@ -262,6 +262,9 @@ class GLRenderer:
         if features.two_blockers:
             raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
                               "counts two")
+        if features.hair_glow:
+            raise FormatError("the GL backend does not light hairs by their yarn's glow (Features.hair_glow); the "
+                              "CPU renderer does")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
