@@ -153,13 +153,15 @@ def ensemble_floor(instances, diameter_px: float) -> dict:
             "rel_l1": float(np.mean(each)), "rel_l1_each": [float(x) for x in each]}
 
 
-def ensemble_metrics(test, instances, diameter_px: float, floor: dict | None = None) -> dict:
+def ensemble_metrics(test, instances, diameter_px: float, floor: dict | None = None, filtered=None) -> dict:
     """``test`` against an ensemble of K ≥ 3 fiber instances (module docstring): ``mean_ratio`` (its mean luminance
     over the instances'), ``rel_l1`` (leave-one-out, at the yarn scale) and ``to_floor``, rel_l1 over the ensemble
-    floor's (``floor``: ``ensemble_floor(instances, diameter_px)``, computed when not given)."""
+    floor's (``floor``: ``ensemble_floor(instances, diameter_px)``, computed when not given). ``filtered``: the
+    instances' ``yarn_filter`` at ``diameter_px``, for a caller measuring many tests against one ensemble."""
     floor = floor or ensemble_floor(instances, diameter_px)
     test = _checked(test, instances[0])[0]
-    filtered = [yarn_filter(img, diameter_px) for img in instances]
+    if filtered is None:
+        filtered = [yarn_filter(img, diameter_px) for img in instances]
     total, k = sum(filtered), len(filtered)
     ft = yarn_filter(test, diameter_px)
     rel_l1 = float(np.mean([_rel_l1(ft, (total - f) / (k - 1)) for f in filtered]))

@@ -154,6 +154,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         draws = [ref] + ([floor_images["instance"]] if instance is not None else []) + \
             [_reference_image(scene, path, spp, None, None, say, "instance")[0] for path in instances]
         ensemble = {**ensemble_floor(draws, diameter), "files": [str(path) for path in instances]}
+        filtered = [yarn_filter(draw, diameter) for draw in draws]  # once for every model measured against them
 
     render(scene, packs, ABLATIONS["full"])  # pays the kernels' compile or cache load once
     rows, full = {}, None
@@ -172,7 +173,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
                       "ms_per_pass": {k: v * 1e3 for k, v in result.timings.items()},
                       "speedup": None if ref_seconds is None else ref_seconds / seconds, "xi": result.facts["xi"]}
         if ensemble is not None:
-            rows[name]["ensemble"] = ensemble_metrics(result.image, draws, diameter, ensemble)
+            rows[name]["ensemble"] = ensemble_metrics(result.image, draws, diameter, ensemble, filtered)
     if full is not None:
         _, yarn_map = flip_error(yarn_filter(full, diameter).astype(np.float32),
                                  yarn_filter(ref, diameter).astype(np.float32), exposure, magma=True)
