@@ -26,6 +26,7 @@ from knitbake.compare.report import FLOOR_LABELS, compare_scene
 from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_instances import instance_files  # noqa: E402
 from probe_split import checked_models_and_scenes  # noqa: E402
 
 SCENES = ("straight_yarn_directional", "straight_yarn_sky", "straight_yarn_backlit", "knit_patch_directional",
@@ -66,7 +67,7 @@ def main():
                 ref = folder / f"{name}.exr"
                 floors = {k: folder / f"{name}{s}.exr" for k, s in FLOOR_FILES.items()
                           if (folder / f"{name}{s}.exr").is_file()}
-                more = sorted(folder.glob(f"{name}_fiber*.exr"), key=lambda f: int(f.stem.rsplit("fiber", 1)[1]))
+                more = instance_files(folder, name)
                 more = more[:args.instances] if args.instances > 0 else more if args.instances else []
         summary = compare_scene(root / f"{name}.toml", Path(args.out) / name, reference=ref,
                                 spp=None if ref else args.spp, packs={"cotton1": args.pack}, floor_references=floors,

@@ -31,6 +31,12 @@ def instance_path(folder, scene_name: str, seed: int) -> Path:
     return Path(folder) / f"{scene_name}_fiber{seed}.exr"
 
 
+def instance_files(folder, scene_name: str) -> list[Path]:
+    """Every draw of a scene's fibers kept in ``folder`` (``instance_path``), by seed."""
+    found = Path(folder).glob(f"{scene_name}_fiber*.exr")
+    return sorted(found, key=lambda f: int(f.stem.rsplit("fiber", 1)[1]))
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", required=True, help="folder of the references (bench_floors.py --out)")
