@@ -91,7 +91,8 @@ at grazing light, which the axis plane's wrong shadows had hidden). Both backend
 (``strip_shading.body_glow``: the bounce's tube phase from the pack's hull albedo and transmittance, the tube's solid
 angle from the hair). In front light the rows beside the straight yarn's body hold 42 % light that the path-traced
 reference scatters more than once and the hairs' single scattering lacks (BENCHMARKS.md, "Issue 13: the flyaway
-draw"). Not the default, CPU only: measured on the seven scenes in BENCHMARKS.md (stop 51).
+draw"). The default on both backends since stop 52 (measured on the seven scenes in BENCHMARKS.md, stops 51–52);
+the ablation ``no_hair_glow`` leaves it out.
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ
@@ -99,7 +100,7 @@ closed on the renderer (at every view), + flyaways (= the full model, the defaul
 lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
 detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
 bounce, with the lookups on the axis plane, with ξ closed apart on single and multiple scattering, with two
-blocking yarns counted and with the body's glow on its hairs.
+blocking yarns counted and without the body's glow on its hairs.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -126,7 +127,7 @@ class Features:
     split_xi: bool = False  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms)
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
-    hair_glow: bool = False  # hairs beside a yarn lit by the light its body scatters (strip_shading.body_glow)
+    hair_glow: bool = True  # hairs beside a yarn lit by the light its body scatters (strip_shading.body_glow)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -147,7 +148,7 @@ ABLATIONS = {
     "axis_shadows": Features(surface_shadows=False),
     "split_xi": Features(split_xi=True),
     "two_blockers": Features(two_blockers=True),
-    "hair_glow": Features(hair_glow=True),
+    "no_hair_glow": Features(hair_glow=False),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -161,7 +162,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "split_xi": "full with ξ closed apart on single and multiple scattering",
                    "two_blockers": "full with two blocking yarns counted",
-                   "hair_glow": "full with the body's glow on its hairs"}
+                   "no_hair_glow": "full without the body's glow on its hairs"}
 
 
 def combined(name: str) -> Features:

@@ -79,7 +79,7 @@ the body sends on toward the camera as it receives it. Without τ a hair over th
 scattered radiance by its own single scattering and darkens it, where in the path-traced reference hairs over the
 body add light.
 
-The body's glow on its hairs (``Features.hair_glow``, off by default, CPU only; ``body_glow``): a hair beside its
+The body's glow on its hairs (``Features.hair_glow``, the default; ``body_glow``; GLSL ``body_glow``): a hair beside its
 yarn's body (|v_strip| > 1) is also lit by the light the body scatters, which in front light is 42 % of what the
 path-traced reference shows beside the body (light that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13:
 the flyaway draw"). The body is the tube of ``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal
@@ -617,7 +617,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, 
     lights, ``lobes`` and ``im`` None without an environment: as in ``shade_regular``, a kind of light a scene lacks
     is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: about half this kernel's compile).
     ``glow`` (2, 3): the body's R_Y and S_Y for its glow on the hairs beside it under the directional lights
-    (``body_glow``), or None: none (the default, ``Features.hair_glow``)."""
+    (``body_glow``), or None: none (``Features.hair_glow`` off, or a pack without ρ_Y and T_Y)."""
     params, ds, period = look.params, look.ds, look.period
     half_width, radius, n_rest, gap = look.flyaway_half_width, look.radius, look.n_cross_rest, look.gap
     reach = half_width / radius  # the hair layer's half-width in yarn radii

@@ -262,9 +262,6 @@ class GLRenderer:
         if features.two_blockers:
             raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
                               "counts two")
-        if features.hair_glow:
-            raise FormatError("the GL backend does not light hairs by their yarn's glow (Features.hair_glow); the "
-                              "CPU renderer does")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
@@ -351,6 +348,9 @@ class GLRenderer:
         }
         if flyaway is not None:  # the three variants
             uniforms.update(flyaway_half_width=float(kernel_look.flyaway_half_width), fly_levels=flyaway[0][1])
+            glow = pipeline.hair_glow(look) if self.features.hair_glow else None
+            uniforms.update(use_glow=int(glow is not None), glow_back=np.zeros(3) if glow is None else glow[0],
+                            glow_forward=np.zeros(3) if glow is None else glow[1])
             textures.update({f"fly_tex{v}": tex for v, (tex, _) in enumerate(flyaway)})
         assert len(textures) <= ATLAS_UNITS[0], "a yarn entry's textures would share units with the atlases"
         return uniforms, textures

@@ -14,6 +14,9 @@ uniform sampler2D fly_tex1;
 uniform sampler2D fly_tex2;
 uniform int fly_levels;
 uniform usampler2D fly_variant;     // variant of (period index − VARIANT_OFFSET, curve): strip_shading.variant_of
+uniform int use_glow;               // the body's glow on its hairs (Features.hair_glow; strip_shading.body_glow)
+uniform vec3 glow_back;             // the body tube's R_Y and S_Y (yarn_bounce.tube_optics, the entry's colour)
+uniform vec3 glow_forward;
 const int VARIANT_OFFSET = 2;
 
 vec4 fly_fetch(int layer, ivec2 texel, int level) {
@@ -79,6 +82,32 @@ vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b
     return through / float(HAIR_DEPTHS);
 }
 
+// strip_shading.body_glow: the radiance toward the camera, per unit irradiance and visibility of a directional light
+// from w, that a hair at v_strip (|v_strip| > 1) returns of the light its own yarn's body scatters onto it: the tube's
+// phase (R_Y g(α) + S_Y g(π − α))/π² at the hair times the tube's solid angle 4 asin(1/ρ) over 4π times the hair's
+// albedo, averaged over HAIR_DEPTHS depths within the hair layer's reach (SHADING.md §6)
+vec3 body_glow(float reach, float v_strip, vec3 n, vec3 b, vec3 w, vec3 albedo) {
+    float wb = dot(w, b), wn = dot(w, n);
+    float cos_l = sqrt(wb * wb + wn * wn);
+    if (cos_l < DEGENERATE) return vec3(0.0);
+    wb /= cos_l;
+    wn /= cos_l;
+    float depth = sqrt(max(reach * reach - v_strip * v_strip, 0.0));
+    vec3 glow = vec3(0.0);
+    for (int k = 0; k < HAIR_DEPTHS; ++k) {
+        float z = depth * ((2.0 * float(k) + 1.0) / float(HAIR_DEPTHS) - 1.0);
+        float rho = sqrt(v_strip * v_strip + z * z);
+        if (rho <= 1.0) continue;
+        // yarn_bounce.lambert_pair: g(α) and g(π − α) from cos α
+        float c = clamp((v_strip * wb + z * wn) / rho, -1.0, 1.0);
+        float a = acos(c), s = sqrt(1.0 - c * c);
+        float g = 0.25 * PI * (s + (PI - a) * c), g_forward = 0.25 * PI * (s - a * c);
+        float share = cos_l * INV_PI2 * 4.0 * asin(min(1.0 / rho, 1.0)) / (4.0 * PI) / float(HAIR_DEPTHS);
+        glow += share * (glow_back * g + glow_forward * g_forward) * albedo;
+    }
+    return glow;
+}
+
 void main() {
     StripPoint sp = strip_point();
     gl_FragDepth = clamp((fin.depth - depth_tolerance) / far_plane, 0.0, 1.0);
@@ -121,6 +150,8 @@ void main() {
         float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS));
         rgb += light_irradiance[l] * lit * hair_light(on_body, reach, v_strip, sp.t, sp.n, sp.b, w) * f
              * cos(theta_i_f);
+        if (use_glow != 0 && !on_body)  // the body's glow, lit as the hair is
+            rgb += light_irradiance[l] * lit * body_glow(reach, v_strip, sp.n, sp.b, w, p.a_r + p.a_tt + p.a_d);
     }
     for (int j = 0; j < n_lobes; ++j) {
         float vis = lobe_visibility(j, sp.position, shadow_bias);
