@@ -510,8 +510,10 @@ def compare(scene_path, out_dir, reference, spp, pack_values, exposure, instance
     for name, row in summary["ablations"].items():
         speed = f", {row['speedup']:.0f}x faster than the reference" if row["speedup"] else ""
         floor = f" ({row['to_instance_floor']['rel_l1']:.2f}x the floor)" if row["to_instance_floor"] else ""
+        ply = row["contrast"]["ply"]
+        contrast = f"  ply-scale contrast {ply:.2f}x" if ply is not None else ""
         click.echo(f"{ABLATION_LABELS[name]:30s} yarn-scale rel L1 {row['yarn']['rel_l1']:.3f}{floor}  mean ratio "
-                   f"{row['yarn']['mean_ratio']:.3f}  FLIP {row['flip']:.4f}  {row['ms']:.0f} ms{speed}")
+                   f"{row['yarn']['mean_ratio']:.3f}{contrast}  FLIP {row['flip']:.4f}  {row['ms']:.0f} ms{speed}")
     if "ensemble" in summary:
         e = summary["ensemble"]
         click.echo(f"against {e['instances']} fiber instances (their means spread {100 * e['mean_sd']:.1f} %; "

@@ -18,8 +18,9 @@ from data_formats.images import read_exr
 from data_formats.scene import load_scene
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
-from knitbake.compare.image_metrics import (compare_images, ensemble_floor, ensemble_metrics, flip_error,
-                                            radiance_ratio, yarn_filter, yarn_scale_metrics)
+from knitbake.compare.image_metrics import (CONTRAST_BANDS, compare_images, ensemble_floor, ensemble_metrics,
+                                            flip_error, radiance_ratio, sub_yarn_contrast, yarn_filter,
+                                            yarn_scale_metrics)
 from knitbake.trace.reference import trace_reference
 from knitrun.render.pipeline import render
 from tests.helpers import FRONT, SUN, straight, write_scene
@@ -113,6 +114,44 @@ def test_ensemble_the_draws_expectation_beats_one_draw():
     assert ensemble_metrics(1.1 * base, draws, 3.0)["to_floor"] > ensemble_metrics(base, draws, 3.0)["to_floor"]
 
 
+def _striped(rng, shape=(96, 96), period=6.0):
+    """An image of yarn-like stripes across x (a ply-scale pattern of ``period`` px) with a slow ramp, RGB."""
+    x = np.arange(shape[1])[None, :] + rng.uniform(0, period)
+    lum = 0.5 + 0.3 * np.sin(2 * np.pi * x / period) + 0.1 * np.arange(shape[0])[:, None] / shape[0]
+    return np.repeat(np.broadcast_to(lum, shape)[..., None], 3, axis=2).astype(np.float64)
+
+
+def test_sub_yarn_contrast_is_one_for_the_reference_and_scales_with_the_contrast_not_the_brightness():
+    """C(test)/C(ref) per band: 1 for the reference itself and for it 3× brighter; 2 for its variation about the
+    mean doubled (the band is linear and keeps the mean); below 1 for it blurred; None for a band that rounds to
+    nothing at a tiny diameter."""
+    ref = _striped(np.random.default_rng(0))
+    d = 18.0
+    same, bright = sub_yarn_contrast(ref, ref, d), sub_yarn_contrast(3.0 * ref, ref, d)
+    hard = sub_yarn_contrast(ref.mean() + 2.0 * (ref - ref.mean()), ref, d)
+    soft = sub_yarn_contrast(yarn_filter(ref, 5), ref, d)
+    for band in CONTRAST_BANDS:
+        assert same[band] == pytest.approx(1.0) and bright[band] == pytest.approx(1.0)
+        assert hard[band] == pytest.approx(2.0) and same[f"{band}_noise"] == 0.0
+    assert soft["ply"] < 0.5
+    assert sub_yarn_contrast(ref, ref, 2.0)["ply"] is None  # d/6 and d/2 both round to 1 px
+
+
+def test_sub_yarn_contrast_takes_the_path_tracers_noise_off_the_references():
+    """A reference and its Monte Carlo floor = one image plus independent per-pixel noise (its variance at the ply
+    scale about a third of the band's, as at the examples' spp): the noiseless image scores 1 at the ply scale
+    only with the noise taken off (without it the noisy reference looks 'harder' and the image flatter, < 0.9),
+    and a floor traced at the same spp (``test_traced``) scores 1 too."""
+    rng = np.random.default_rng(1)
+    clean = _striped(rng)
+    noisy = [clean + rng.normal(0.0, 0.45, clean.shape) for _ in range(3)]
+    ref, mc, other = noisy
+    corrected = sub_yarn_contrast(clean, ref, 18.0, mc)
+    assert corrected["ply"] == pytest.approx(1.0, abs=0.04) and 0.2 < corrected["ply_noise"] < 0.5
+    assert sub_yarn_contrast(clean, ref, 18.0)["ply"] < 0.9
+    assert sub_yarn_contrast(other, ref, 18.0, mc, test_traced=True)["ply"] == pytest.approx(1.0, abs=0.06)
+
+
 def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     scene = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     out = tmp_path / "report"
@@ -126,6 +165,7 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     assert summary["yarn_px"] == pytest.approx(2 * load_preset("cotton1").radius / pixel)
     for row in summary["ablations"].values():
         assert 0 <= row["flip"] <= 1 and row["rmse"] >= 0 and row["speedup"] > 0
+        assert set(row["contrast"]) >= set(CONTRAST_BANDS) and row["contrast"]["ply_noise"] > 0  # the MC floor's
         assert row["yarn"]["rel_l1"] >= 0 and row["yarn"]["mean_ratio"] > 0
         assert row["to_instance_floor"]["rel_l1"] == pytest.approx(
             row["yarn"]["rel_l1"] / summary["floors"]["instance"]["yarn"]["rel_l1"])
@@ -137,6 +177,7 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
         assert (out / name).is_file(), name
     report = (out / "report.md").read_text()
     assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
+    assert "ply-scale contrast" in report and "with the Monte Carlo floor" in report
     assert summary["ablations"]["full"]["xi"] == {"cotton1": "closed on the renderer at every view"}
     assert summary["ablations"]["papers_xi"]["xi"] == {"cotton1": "the paper's"}
     # the test pack is baked without the split closure (the presets' default): its split_xi row says what it drew

@@ -19,6 +19,17 @@ edges extended), and at 2d:
   per tile of ``TILE_DIAMETERS`` · d pixels; tiles where the reference's mean luminance is below ``SIGNAL`` of its
   brightest tile's are skipped; the worst tile is the one whose ratio is farthest from 1 (in log).
 
+Sub-yarn contrast (``sub_yarn_contrast``; the look, which the yarn-scale errors filter away): how much a yarn's
+brightness varies inside its own width, against the reference's. Of the luminance L, the band B = F_a(L) − F_b(L)
+between two box filters (``CONTRAST_BANDS``, in yarn diameters: the **ply scale** d/6 to d/2, where the plies'
+grooves and the fibers' glints lie, and **across the yarn**, d/2 to d, the shading across a tube), and the contrast
+C = √var(B) / mean(L) (so a brightness error does not count). The reference's var(B) holds the path tracer's noise,
+which at the examples' spp is a third of it at the ply scale: given the Monte Carlo floor M (the same fibers, another
+sampling seed, same spp) it is taken off, var(B(ref)) − var(B(ref) − B(M))/2. The ratio C(test)/C(ref) is 1 for an
+image with the reference's sub-yarn contrast; above 1 it is harder (tubes, grooves, chrome streaks), below it flatter.
+Measured on the patch under the sky: the noise-corrected C of the 64-spp reference, of the same fibers at 512 spp
+and of another fiber instance agree to 0.5 % at the ply scale (BENCHMARKS.md, "Issue 13: … sub-yarn contrast").
+
 Against an ensemble of K ≥ 3 fiber instances I_1 … I_K of the reference (``ensemble_metrics``; a strip image models
 what the yarn looks like on average over its fibers, which one instance shows only with its own draw's deviations):
 
@@ -43,6 +54,7 @@ from data_formats.images import tonemap
 REL_MSE_EPSILON = 0.01
 TILE_DIAMETERS = 2  # tile side of the radiance ratio, in yarn diameters
 SIGNAL = 0.1  # tiles darker than this fraction of the brightest reference tile are not compared
+CONTRAST_BANDS = {"ply": (1 / 6, 1 / 2), "across": (1 / 2, 1.0)}  # box sizes of the contrast bands, in diameters
 
 
 def _ldr(img, exposure_stops):
@@ -129,6 +141,40 @@ def yarn_scale_metrics(test, reference, diameter_px: float, exposure_stops: floa
         if not suffix:
             out["flip"], _ = flip_error(ft.astype(np.float32), fr.astype(np.float32), exposure_stops)
     return {**out, **radiance_ratio(test, reference, max(1, int(round(TILE_DIAMETERS * diameter_px))))}
+
+
+def _band(luminance, diameter_px: float, band: str) -> np.ndarray | None:
+    """B = F_a(L) − F_b(L) of ``CONTRAST_BANDS[band]`` (box sizes rounded, ≥ 1); None where both round alike."""
+    a, b = (max(1, int(round(f * diameter_px))) for f in CONTRAST_BANDS[band])
+    if a == b:
+        return None
+    return uniform_filter(luminance, a, mode="nearest") - uniform_filter(luminance, b, mode="nearest")
+
+
+def sub_yarn_contrast(test, reference, diameter_px: float, monte_carlo=None, test_traced: bool = False) -> dict:
+    """The sub-yarn contrast of ``test`` over the reference's per band of ``CONTRAST_BANDS`` (module docstring):
+    ``<band>`` the ratio C(test)/C(ref) (None where the band is empty at this diameter or the reference has no
+    contrast left), ``<band>_reference`` C(ref), and ``<band>_noise`` the share of the reference's band variance
+    taken off as the path tracer's noise (0 without ``monte_carlo``, the Monte Carlo floor image).
+    ``test_traced``: the test is path traced at the reference's spp too (a floor), and loses the same noise."""
+    test, reference = _checked(test, reference)
+    lt, lr = (np.asarray(img, np.float64) @ LUMINANCE for img in (test, reference))
+    lm = None if monte_carlo is None else np.asarray(_checked(monte_carlo, reference)[0], np.float64) @ LUMINANCE
+    out = {}
+    for band in CONTRAST_BANDS:
+        bt, br = _band(lt, diameter_px, band), _band(lr, diameter_px, band)
+        if bt is None or not lt.mean() > 0 or not lr.mean() > 0:
+            out.update({band: None, f"{band}_reference": None, f"{band}_noise": None})
+            continue
+        var_r = float(br.var())
+        noise = 0.0 if lm is None else 0.5 * float((br - _band(lm, diameter_px, band)).var())
+        signal = var_r - noise
+        c_ref = math.sqrt(signal) / lr.mean() if signal > 0 else 0.0
+        var_t = float(bt.var()) - (noise if test_traced else 0.0)
+        c_test = math.sqrt(max(var_t, 0.0)) / lt.mean()
+        out.update({band: c_test / c_ref if c_ref > 0 else None, f"{band}_reference": c_ref,
+                    f"{band}_noise": noise / var_r if var_r > 0 else 0.0})
+    return out
 
 
 def _luminance_mean(img) -> float:

@@ -25,6 +25,11 @@ flyaways), as much as the ±5 % a model's mean is held to. Given further fiber i
 adds the **ensemble** (``image_metrics.ensemble_metrics``): each model's mean radiance over the mean of all K
 instances (the reference, the instance floor and the further ones), with the instances' own spread, and its
 leave-one-out yarn-scale rel L1 over the ensemble floor.
+
+The yarn scale filters the look away: a strip image of polished tubes and one of matte cotton can have the same
+errors there. So every row also has its **sub-yarn contrast** (``image_metrics.sub_yarn_contrast``): the brightness
+variation inside a yarn's width over the reference's, with the path tracer's noise taken off the reference's by the
+Monte Carlo floor; the floors' rows show how far another draw's contrast lies from the reference's.
 """
 
 from __future__ import annotations
@@ -38,8 +43,8 @@ from data_formats.atomic import atomic_path
 from data_formats.errors import FormatError
 from data_formats.images import read_exr, write_exr, write_png
 from data_formats.scene import load_scene
-from knitbake.compare.image_metrics import (compare_images, ensemble_floor, ensemble_metrics, flip_error, yarn_filter,
-                                            yarn_scale_metrics)
+from knitbake.compare.image_metrics import (compare_images, ensemble_floor, ensemble_metrics, flip_error,
+                                            sub_yarn_contrast, yarn_filter, yarn_scale_metrics)
 from knitbake.trace.reference import read_summary, reference_seconds, trace_reference
 from knitrun.render.ablations import ABLATION_LABELS, ABLATION_ORDER, ABLATIONS, combined
 from knitrun.render.camera import pixel_size, scene_camera
@@ -148,6 +153,9 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         floor_rows[name], _ = _metrics(image, ref, diameter, exposure)
         floor_images[name] = image
         floor_facts[name] = facts
+    monte_carlo = floor_images.get("monte_carlo")  # the path tracer's noise in the contrast (``sub_yarn_contrast``)
+    for name, row in floor_rows.items():
+        row["contrast"] = sub_yarn_contrast(floor_images[name], ref, diameter, monte_carlo, test_traced=True)
     instance = floor_rows.get("instance")
     ensemble, draws = None, []
     if instances:
@@ -170,6 +178,7 @@ def compare_scene(scene_path, out_dir, reference=None, spp=None, packs=None, exp
         write_png(out / f"flip_{name}.png", _srgb_to_linear(error_map))
         write_png(out / f"diff_{name}.png", 4.0 * np.abs(result.image - ref), exposure)
         rows[name] = {**metrics, "to_instance_floor": _to_floor(metrics, instance), "ms": seconds * 1e3,
+                      "contrast": sub_yarn_contrast(result.image, ref, diameter, monte_carlo),
                       "ms_per_pass": {k: v * 1e3 for k, v in result.timings.items()},
                       "speedup": None if ref_seconds is None else ref_seconds / seconds, "xi": result.facts["xi"]}
         if ensemble is not None:
@@ -218,16 +227,22 @@ def _markdown(summary) -> str:
              "Ratio to floor: the model's yarn-scale rel L1 over that of another fiber instance of the reference "
              "(1 = as close as another draw of the same fibers)." if inst else
              "No floors: the reference was given without floor images, so no error has a ratio to the floor.", "",
-             "| model | mean radiance ratio | yarn-scale rel L1 | ratio to instance floor | pixel FLIP | strip ms |",
-             "|---|---|---|---|---|---|"]
+             "Ply-scale contrast: the brightness variation inside a yarn (d/6 to d/2) over the reference's, its "
+             "path-tracing noise taken off " + ("with the Monte Carlo floor" if "monte_carlo" in floors else
+                                                "— not here: no Monte Carlo floor, so the reference's counts its noise")
+             + " (1 = the reference's; above 1 harder: tubes, grooves, streaks; below flatter).", "",
+             "| model | mean radiance ratio | yarn-scale rel L1 | ratio to instance floor | ply-scale contrast | "
+             "pixel FLIP | strip ms |",
+             "|---|---|---|---|---|---|---|"]
     for name, row in floors.items():
         lines.append(f"| *{FLOOR_LABELS[name]}* | {row['yarn']['mean_ratio']:.3f} | {row['yarn']['rel_l1']:.3f} | "
                      f"{_fmt(row['yarn']['rel_l1'] / inst['yarn']['rel_l1'] if inst else None, '.2f')} | "
-                     f"{row['flip']:.4f} | — |")
+                     f"{_fmt(row.get('contrast', {}).get('ply'), '.2f')} | {row['flip']:.4f} | — |")
     for name, row in summary["ablations"].items():
         ratio = row["to_instance_floor"]["rel_l1"] if row["to_instance_floor"] else None
         lines.append(f"| {ABLATION_LABELS.get(name, name)} | {row['yarn']['mean_ratio']:.3f} | "
-                     f"{row['yarn']['rel_l1']:.3f} | {_fmt(ratio, '.2f')} | {row['flip']:.4f} | {row['ms']:.0f} |")
+                     f"{row['yarn']['rel_l1']:.3f} | {_fmt(ratio, '.2f')} | "
+                     f"{_fmt(row.get('contrast', {}).get('ply'), '.2f')} | {row['flip']:.4f} | {row['ms']:.0f} |")
     xi = summary["ablations"].get("full", {}).get("xi")
     if xi:
         lines += ["", "ξ of the full model: " + "; ".join(f"{yarn}: {how}" for yarn, how in xi.items()) + "."]
@@ -242,16 +257,21 @@ def _markdown(summary) -> str:
         lines += _ensemble_markdown(summary)
     lines += ["", "## Every metric", "",
               "Yarn scale (d = the projected yarn diameter): rel L1, relMSE and FLIP of the box-filtered images; mean "
-              "and worst-tile radiance ratios over tiles of 2d px where the reference has signal.", "",
+              "and worst-tile radiance ratios over tiles of 2d px where the reference has signal. Contrast: the "
+              "sub-yarn contrast over the reference's at the ply scale (d/6 to d/2) and across the yarn (d/2 to d).",
+              "",
               "| model | FLIP | RMSE | relMSE | yarn FLIP | rel L1 (d) | rel L1 (2d) | relMSE (d) | relMSE (2d) | "
-              "mean ratio | worst tile | speed-up |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "mean ratio | worst tile | contrast: ply | across | speed-up |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for label, row in [(FLOOR_LABELS[k], r) for k, r in floors.items()] + \
             [(ABLATION_LABELS.get(k, k), r) for k, r in summary["ablations"].items()]:
         y = row["yarn"]
         speed = f"{row['speedup']:.0f}×" if row.get("speedup") else "—"
         lines.append(f"| {label} | {row['flip']:.4f} | {row['rmse']:.4f} | {row['rel_mse']:.4f} | {y['flip']:.4f} | "
                      f"{y['rel_l1']:.3f} | {y['rel_l1_2x']:.3f} | {y['rel_mse']:.4f} | {y['rel_mse_2x']:.4f} | "
-                     f"{y['mean_ratio']:.3f} | {_fmt(y['worst_tile_ratio'])} | {speed} |")
+                     f"{y['mean_ratio']:.3f} | {_fmt(y['worst_tile_ratio'])} | "
+                     f"{_fmt(row.get('contrast', {}).get('ply'), '.2f')} | "
+                     f"{_fmt(row.get('contrast', {}).get('across'), '.2f')} | {speed} |")
     lines += ["", "![reference | full | FLIP at the yarn scale](side_by_side.png)", ""]
     for name in summary["ablations"]:
         lines.append(f"**{ABLATION_LABELS.get(name, name)}**: ![strip](strip_{name}.png) ![FLIP](flip_{name}.png)")
