@@ -237,12 +237,12 @@ def _markdown(summary) -> str:
     for name, row in floors.items():
         lines.append(f"| *{FLOOR_LABELS[name]}* | {row['yarn']['mean_ratio']:.3f} | {row['yarn']['rel_l1']:.3f} | "
                      f"{_fmt(row['yarn']['rel_l1'] / inst['yarn']['rel_l1'] if inst else None, '.2f')} | "
-                     f"{_fmt(row.get('contrast', {}).get('ply'), '.2f')} | {row['flip']:.4f} | — |")
+                     f"{_fmt(row['contrast']['ply'], '.2f')} | {row['flip']:.4f} | — |")
     for name, row in summary["ablations"].items():
         ratio = row["to_instance_floor"]["rel_l1"] if row["to_instance_floor"] else None
         lines.append(f"| {ABLATION_LABELS.get(name, name)} | {row['yarn']['mean_ratio']:.3f} | "
                      f"{row['yarn']['rel_l1']:.3f} | {_fmt(ratio, '.2f')} | "
-                     f"{_fmt(row.get('contrast', {}).get('ply'), '.2f')} | {row['flip']:.4f} | {row['ms']:.0f} |")
+                     f"{_fmt(row['contrast']['ply'], '.2f')} | {row['flip']:.4f} | {row['ms']:.0f} |")
     xi = summary["ablations"].get("full", {}).get("xi")
     if xi:
         lines += ["", "ξ of the full model: " + "; ".join(f"{yarn}: {how}" for yarn, how in xi.items()) + "."]
@@ -270,8 +270,8 @@ def _markdown(summary) -> str:
         lines.append(f"| {label} | {row['flip']:.4f} | {row['rmse']:.4f} | {row['rel_mse']:.4f} | {y['flip']:.4f} | "
                      f"{y['rel_l1']:.3f} | {y['rel_l1_2x']:.3f} | {y['rel_mse']:.4f} | {y['rel_mse_2x']:.4f} | "
                      f"{y['mean_ratio']:.3f} | {_fmt(y['worst_tile_ratio'])} | "
-                     f"{_fmt(row.get('contrast', {}).get('ply'), '.2f')} | "
-                     f"{_fmt(row.get('contrast', {}).get('across'), '.2f')} | {speed} |")
+                     f"{_fmt(row['contrast']['ply'], '.2f')} | "
+                     f"{_fmt(row['contrast']['across'], '.2f')} | {speed} |")
     lines += ["", "![reference | full | FLIP at the yarn scale](side_by_side.png)", ""]
     for name in summary["ablations"]:
         lines.append(f"**{ABLATION_LABELS.get(name, name)}**: ![strip](strip_{name}.png) ![FLIP](flip_{name}.png)")
