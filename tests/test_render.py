@@ -917,6 +917,57 @@ def test_fiber_detail_keeps_each_rows_brightness():
     assert spiky.max() == DETAIL_MAX and spiky.min() >= 0.0
 
 
+def test_the_environments_detail_is_the_ao_inter_reflected_and_softer():
+    """``fiber_detail``: channel 0 is ``fiber_detail_chain`` of the AO, channel 1 that of the AO inter-reflected with
+    the albedo (ao / (1 − ρ (1 − ao))), which still averages to 1 along a row but varies less; at ρ = 0 the two are
+    equal."""
+    from knitrun.render.yarn_look import fiber_detail, fiber_detail_chain
+
+    rng = np.random.default_rng(6)
+    ao, cov = [rng.uniform(0.1, 1.0, (8, 32))], [rng.uniform(0.3, 1.0, (8, 32))]
+    stack = fiber_detail(ao, cov, 0.75)
+    both = stack.data.reshape(8, 32, 2)
+    np.testing.assert_allclose(both[..., 0], fiber_detail_chain(ao, cov)[0], rtol=1e-6)
+    np.testing.assert_allclose(both[..., 1], fiber_detail_chain([ao[0] / (1 - 0.75 * (1 - ao[0]))], cov)[0], rtol=1e-6)
+    np.testing.assert_allclose((both[..., 1] * cov[0]).sum(axis=1) / cov[0].sum(axis=1), 1.0, atol=1e-6)
+    assert both[..., 1].std() < 0.6 * both[..., 0].std()
+    np.testing.assert_array_equal(fiber_detail(ao, cov, 0.0).data[:, 0], fiber_detail(ao, cov, 0.0).data[:, 1])
+
+
+def test_the_directional_lights_take_the_first_detail_and_the_environment_the_second():
+    """``shade_regular`` with a detail texture of constant channels (a, b): the sun's radiance is a × the
+    no-detail image's, the sky's (lobes and cells) b ×, and both lights together a × sun + b × sky."""
+    n = 12
+    tangent, view, flat, full, off = _kernel_frames(n, seed=7)
+    points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
+    table = im.bake_im_table(ROUGH, TEST_SHAPE, nodes=4)[0]
+    i_m = im_table_from(table, im.im_axes(TEST_SHAPE))
+    fit = fit_srbf(sky_image(32, 64), n_lobes=4, seed=0)
+    look = Look(ROUGH, np.stack([np.full((4, 3), x) for x in (0.7, 0.2, 0.3, 0.1, 0.3)]), 1.0, 1.0, 1.0, 0.0, 0.0,
+                0.0, 0.0, D_F, D_B)
+    sun = Lights(np.array([[0.0, 0.6, 0.8]]), np.full((1, 3), 2.0), np.ones((1, n)), np.zeros((1, 0)))
+    cells = Lights(np.array([[0.0, 0.0, 1.0], [0.6, 0.8, 0.0]]), np.full((2, 3), 0.5), np.ones((2, n)),
+                   np.zeros((2, 0)))
+
+    def shaded(detail, directional, environment):
+        rgb, alpha = np.zeros((n, 3)), np.zeros(n)
+        lobes = Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((4, n))) if environment else None
+        shade_regular(np.arange(n), points, look, off, flat, full, detail, sun if directional else None, lobes,
+                      cells if environment else None, im_slices(i_m, fit.sharpness) if environment else None, None,
+                      rgb, alpha)
+        return rgb
+
+    def constant(a, b):
+        return mip_stack([[np.dstack([np.full((1, 1), a), np.full((1, 1), b)])]])
+
+    plain_sun, plain_sky = shaded(no_detail(), True, False), shaded(no_detail(), False, True)
+    assert plain_sun.max() > 0 and plain_sky.max() > 0
+    np.testing.assert_allclose(shaded(constant(2.0, 3.0), True, False), 2.0 * plain_sun, rtol=1e-12)
+    np.testing.assert_allclose(shaded(constant(2.0, 3.0), False, True), 3.0 * plain_sky, rtol=1e-12)
+    np.testing.assert_allclose(shaded(constant(2.0, 3.0), True, True), 2.0 * plain_sun + 3.0 * plain_sky,
+                               rtol=1e-10, atol=1e-14)
+
+
 def test_a_uniform_ao_texture_leaves_the_image_as_without_detail(tmp_path, pack):
     """Detail is the AO texture's variation only: a pack whose AO is one value renders exactly as without detail."""
     import shutil

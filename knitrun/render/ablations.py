@@ -27,7 +27,7 @@ diagonal ξ's excess had stood in for, and the surface lookups light legs that m
 unless the ξ is right at grazing light.
 
 ``fiber_detail`` multiplies the regular fibers' radiance by the fiber-level detail of the pack's AO texture
-(``yarn_look.fiber_detail_chain``: each texel's ambient visibility over its row's mean), the crevices between plies
+(``yarn_look.fiber_detail``: each texel's ambient visibility over its row's mean), the crevices between plies
 and fibers that Ψ^Fiber_G(v), a function of v alone, smooths away; it belongs with the fiber-level shadowing, so the
 rungs without Ψ^Fiber go without it too. Measured in BENCHMARKS.md, "Issue 13: fiber-level detail".
 
@@ -118,7 +118,7 @@ class Features:
     flyaways: bool = True
     interreflection: bool = True  # yarn-level inter-reflection (ρ_Y) and transmission (T_Y)
     full_tables: bool = True  # the unfactorized ξ, Ψ^Fiber when the pack has them; False: the paper's factors
-    fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail_chain)
+    fiber_detail: bool = True  # the fiber-level detail of the AO texture (yarn_look.fiber_detail)
     closed_xi: bool = True  # ξ closed on this renderer (correction/xi_closed) where the pack has it, else the paper's
     view_xi: bool = True  # with closed_xi: ξ closed at every view (correction/xi_view) where the pack has it
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)

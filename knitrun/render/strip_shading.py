@@ -37,7 +37,10 @@ k = (V₂ − V) + 2 (1 − V₂), V₂ the fraction of the light that at most o
 of a beam crossing cotton1 meets no fiber, and without it the path-traced fibers in another yarn's shadow showed 2–3×
 the strips' single scattering (BENCHMARKS.md, "Issue 13: light between a blocking yarn's fibers, and light that
 neighbouring yarns scatter"). With ``bounce`` (the ablation ``yarn_bounce``, ``knitrun.render.yarn_bounce``) each
-point adds the yarn-level light its neighbours scatter onto it, before the fiber-level detail.
+point adds the yarn-level light its neighbours scatter onto it, before the fiber-level detail. The detail
+(``yarn_look.fiber_detail``) has two channels: the directional lights' terms and the bounce take the first (the AO
+texture's contrast), the environment's lobes and cells the second (the AO inter-reflected with ρ_Y: crevices the sky
+barely sees still get their walls' scattered light; BENCHMARKS.md, "Issue 13: … sub-yarn contrast", stop 52).
 Tangent spread: a texel averages fibers whose tangents scatter; the length of its
 premultiplied tangent gives their variance (``tangent_spread``, Toksvig 2005; ASSET_PACK.md §8), and every BCSDF
 evaluation of the point (DS, I_M's R lobe, the multiple-scattering lights) uses the lobes widened by it for that
@@ -451,7 +454,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
         vec = np.empty((_N_VEC, 3))
         t, wo, n, b, tf, tex = vec[_T], vec[_WO], vec[_N], vec[_B], vec[_TF], vec[_TEX]
         xi, psi, scratch, i_m, w, xi_s = vec[_XI], vec[_PSI], vec[_SCRATCH], vec[_IM], vec[_W], vec[_XI_S]
-        cov, fiber_detail = np.empty(1), np.empty(1)
+        cov, fiber_detail, ambient = np.empty(1), np.empty(2), np.empty(3)
         comp, ds_work = ds_scratch()
         wide, ctx = np.empty(params.shape[0]), np.empty(N_CONTEXT)
         for m in range(block * POINT_BLOCK, min(idx.shape[0], (block + 1) * POINT_BLOCK)):
@@ -463,7 +466,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
             sample_mip(coverage, 0, level, u, v, cov)
             sample_mip(tangent, 0, level, u, v, tex)
             alpha[q] = min(max(cov[0], 0.0), 1.0)
-            sample_mip(detail, 0, level, u, v, fiber_detail)
+            sample_mip(detail, 0, level, u, v, fiber_detail)  # the directional lights' and the environment's
             _texture_tangent(tex, t, n, b, tf)
             spread2 = tangent_spread(tex, cov[0])
             theta_o = longitudinal_angle(t, wo)
@@ -488,6 +491,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                         single = (comp[K_F_DIRECT, ch] - lit * d_b * comp[K_F_BACK_DIRECT, ch]) * cos_i
                         rgb[q, ch] += lights.irradiance[light, ch] * (
                             xi_s[ch] * single + xi[ch] * (comp[K_TOTAL, ch] - single))
+            ambient[0], ambient[1], ambient[2] = rgb[q, 0], rgb[q, 1], rgb[q, 2]  # the environment's terms: below
             if lobes is not None:
                 for j in range(lobes.direction.shape[0]):
                     vis = lobes.visibility[j, q]
@@ -517,11 +521,13 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     for ch in range(3):
                         multiple = (lit * d_b * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
                         rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
+            for ch in range(3):
+                ambient[ch] = rgb[q, ch] - ambient[ch]
             if bounce is not None:  # light the neighbouring yarns scatter onto this one (``yarn_bounce``)
                 for ch in range(3):
                     rgb[q, ch] += bounce[q, ch]
             for ch in range(3):
-                rgb[q, ch] *= fiber_detail[0]
+                rgb[q, ch] = (rgb[q, ch] - ambient[ch]) * fiber_detail[0] + ambient[ch] * fiber_detail[1]
 
 
 @njit(cache=True, inline='always')

@@ -43,6 +43,7 @@ from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.conventions import CM_PER_UNIT, LUMINANCE
 from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
+from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.shading_inputs import Corrections, Look
 from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
 from knitrun.shading.dual_scattering import (D_B, D_F, DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts,
@@ -84,7 +85,7 @@ class YarnLook:
     psi_gn: np.ndarray
     tangent: MipStack
     coverage: MipStack
-    detail: MipStack  # fiber-level detail (``fiber_detail_chain``), or one texel of 1 when not drawn
+    detail: MipStack  # fiber-level detail, directional and environment (``fiber_detail``), or ones when not drawn
     flyaway: MipStack | None
     radius: float  # drawn yarn radius = regular strip half-width
     period: float  # texture period along the rest arc length
@@ -108,8 +109,8 @@ class YarnLook:
 
 
 def no_detail() -> MipStack:
-    """One texel of 1: the fiber-level detail switched off."""
-    return mip_stack([[np.ones((1, 1), np.float32)]])
+    """One texel of 1 in both channels (``fiber_detail``): the fiber-level detail switched off."""
+    return mip_stack([[np.ones((1, 1, 2), np.float32)]])
 
 
 def ones_factor():
@@ -146,14 +147,28 @@ def gap_transmittance(coverage_levels) -> float:
     return min(max(1.0 - mean, 0.0), 1.0 - 1e-9)
 
 
-def fiber_detail_chain(ao_levels, coverage_levels) -> list:
+def fiber_detail(ao_levels, coverage_levels, albedo: float) -> MipStack:
+    """The fiber-level detail texture: two channels per texel, the directional lights' detail
+    (``fiber_detail_chain`` of the AO texture) and the environment's (of the AO inter-reflected with the yarn's hull
+    albedo ``albedo``, ρ_Y's luminance; 0: none)."""
+    direct, ambient = fiber_detail_chain(ao_levels, coverage_levels), \
+        fiber_detail_chain(ao_levels, coverage_levels, albedo)
+    return mip_stack([[np.stack([d, a], axis=-1) for d, a in zip(direct, ambient)]])
+
+
+def fiber_detail_chain(ao_levels, coverage_levels, albedo: float = 0.0) -> list:
     """The fiber-level detail of each mip level: the texel's ambient visibility over the coverage-weighted mean of its
     row, D = ao / ā(v) (1 where nothing is covered, at most ``DETAIL_MAX``). Along u it averages to 1 over the covered
     texels of a row, so it adds the fibers' contrast (the crevices between plies and fibers the AO texture holds,
-    ASSET_PACK.md §8) without moving a row's brightness, which Ψ^Fiber_G(v) carries."""
+    ASSET_PACK.md §8) without moving a row's brightness, which Ψ^Fiber_G(v) carries. With ``albedo`` ρ > 0 the
+    visibility is first inter-reflected, ao' = ao / (1 − ρ (1 − ao)) (``interreflection.interreflected_visibility``):
+    in a bright yarn a crevice the sky barely sees still gets the light its fiber walls scatter into it, as the
+    environment's terms need (under a directional light the shadowing is directional and keeps the plain AO)."""
     out = []
     for ao, cov in zip(ao_levels, coverage_levels):
         ao, cov = np.asarray(ao, np.float64), np.asarray(cov, np.float64)
+        if albedo > 0.0:
+            ao = interreflected_visibility(ao, albedo)
         weight = cov.sum(axis=1, keepdims=True)
         mean = np.where(weight > 0, (ao * cov).sum(axis=1, keepdims=True) / np.where(weight > 0, weight, 1.0), 1.0)
         detail = np.where((cov > 0) & (mean > 0), ao / np.where(mean > 0, mean, 1.0), 1.0)
@@ -168,7 +183,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
     ``full_tables``: use the unfactorized ξ and Ψ^Fiber when the pack has them, else the factors; ``detail``: the
-    fiber-level detail from the pack's AO texture (``fiber_detail_chain``); ``transmission``: yarn-level transport,
+    fiber-level detail from the pack's AO texture (``fiber_detail``; the environment's channel inter-reflected with
+    ρ_Y's luminance under ``transmission``); ``transmission``: yarn-level transport,
     n_cross and the gap transmittance from the pack's transmittance T_Y and the hull albedo ρ_Y for the directional
     lights' bounce, where it has them (module docstring); ``closed_xi``: ξ from the pack's
     ``correction/xi_closed`` (closed on the diagonal θ_o = −θ_i, schema ≥ 2.3; ASSET_PACK.md §6) instead of the
@@ -285,7 +301,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         psi_gm=tables.get("shadowing/psi_GM", ones_factor()), psi_gn=tables.get("shadowing/psi_GN", ones_factor()),
         tangent=mip_stack([pack.mip_chain("textures/tangent")]),
         coverage=mip_stack([pack.mip_chain("textures/coverage")]),
-        detail=mip_stack([fiber_detail_chain(pack.mip_chain("textures/ao"), pack.mip_chain("textures/coverage"))])
+        detail=fiber_detail(pack.mip_chain("textures/ao"), pack.mip_chain("textures/coverage"),
+                            float(hull_albedo @ LUMINANCE) if transmission and hull_albedo is not None else 0.0)
         if detail else no_detail(),
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,

@@ -9,7 +9,7 @@ uniform vec3 background;
 uniform sampler2D tangent_tex;   // coverage-premultiplied strip-frame tangent (t, b, n), mip chain of the pack
 uniform sampler2D coverage_tex;
 uniform int texture_levels;
-uniform sampler2D detail_tex;    // fiber-level detail (yarn_look.fiber_detail_chain), or one texel of 1
+uniform sampler2D detail_tex;    // fiber-level detail: directional, environment (yarn_look.fiber_detail), or ones
 uniform int detail_levels;
 uniform int surface_shadows;     // Features.surface_shadows: lights looked up on the tube surface seen
 // the axial parallax (Features.parallax; pipeline.parallax_shift): the frame's polylines, POLYLINE_ROW points a row,
@@ -112,7 +112,7 @@ void main() {
     vec3 offset = surface + (length(half_width) > 0.0 ? radius * v * normalize(half_width) : vec3(0.0));
     vec3 receiver = sp.position + surface;
     Params p = yarn_params();
-    vec3 rgb = vec3(0.0), xi, psi, total, back_direct, f_scatter;
+    vec3 rgb = vec3(0.0), ambient = vec3(0.0), xi, psi, total, back_direct, f_scatter;  // directional, environment
     for (int l = 0; l < n_lights; ++l) {
         vec3 w = light_dir[l];
         corrections(v, t, n, b, theta_o, w, xi, psi);
@@ -138,7 +138,7 @@ void main() {
         float mu_r = lobe_centre_at(wide.alpha_r, sigma_r, theta_o_f);
         vec3 i_m = im_kernel(wide, mu_r, sigma_r, cos2_normaliser(mu_r, sigma_r), theta_o_f, theta_j_f, -phi_f,
                              lobe_lambda[j]);
-        rgb += lobe_weight[j] * vis * xi * psi * i_m;
+        ambient += lobe_weight[j] * vis * xi * psi * i_m;
     }
     for (int c = 0; c < n_clusters; ++c) {
         vec3 w = cluster_dir[c];
@@ -151,10 +151,11 @@ void main() {
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross,
                   lit, false, total, back_direct, f_scatter);
-        rgb += cluster_irradiance[c] * xi * (lit * D_B * back_direct + f_scatter) * cos(theta_c_f);
+        ambient += cluster_irradiance[c] * xi * (lit * D_B * back_direct + f_scatter) * cos(theta_c_f);
     }
     if (yarn_bounce != 0)
         rgb += bounce_at(fin.segment, bounce_s);
-    rgb *= sample_mip(detail_tex, detail_levels, level, u, v).r;
+    vec2 detail = sample_mip(detail_tex, detail_levels, level, u, v).rg;
+    rgb = rgb * detail.r + ambient * detail.g;
     out_colour = vec4(alpha * rgb + (1.0 - alpha) * background, 1.0);
 }
