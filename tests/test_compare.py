@@ -139,9 +139,9 @@ def test_sub_yarn_contrast_is_one_for_the_reference_and_scales_with_the_contrast
 
 def test_sub_yarn_contrast_takes_the_path_tracers_noise_off_the_references():
     """A reference and its Monte Carlo floor = one image plus independent per-pixel noise (its variance at the ply
-    scale about a quarter of the band's; the examples' references: up to a sixth): the noiseless image scores 1 at the ply scale
-    only with the noise taken off (without it the noisy reference looks 'harder' and the image flatter, < 0.9),
-    and a floor traced at the same spp (``test_traced``) scores 1 too."""
+    scale about a quarter of the band's; the examples' references: up to a sixth): the noiseless image scores 1 at
+    the ply scale only with the noise taken off (without it the noisy reference looks 'harder' and the image flatter,
+    < 0.9), and a floor traced at the same spp (``test_traced``) scores 1 too."""
     rng = np.random.default_rng(1)
     clean = _striped(rng)
     noisy = [clean + rng.normal(0.0, 0.45, clean.shape) for _ in range(3)]

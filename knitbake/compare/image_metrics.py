@@ -24,8 +24,8 @@ brightness varies inside its own width, against the reference's. Of the luminanc
 between two box filters (``CONTRAST_BANDS``, in yarn diameters: the **ply scale** d/6 to d/2, where the plies'
 grooves and the fibers' glints lie, and **across the yarn**, d/2 to d, the shading across a tube), and the contrast
 C = √var(B) / mean(L) (so a brightness error does not count). The reference's var(B) holds the path tracer's noise,
-at the examples' spp 1–17 % of it at the ply scale (17 % on the patch under the sky): given the Monte Carlo floor M (the same fibers, another
-sampling seed, same spp) it is taken off, var(B(ref)) − var(B(ref) − B(M))/2. The ratio C(test)/C(ref) is 1 for an
+at the examples' spp 1–17 % of it at the ply scale (17 % on the patch under the sky): given the Monte Carlo floor M
+(the same fibers, another sampling seed, same spp) it is taken off, var(B(ref)) − var(B(ref) − B(M))/2. The ratio C(test)/C(ref) is 1 for an
 image with the reference's sub-yarn contrast; above 1 it is harder (tubes, grooves, chrome streaks), below it flatter.
 Measured on the patch under the sky: the noise-corrected C of the 64-spp reference, of the same fibers at 512 spp
 and of another fiber instance agree to 0.5 % at the ply scale (BENCHMARKS.md, "Issue 13: … sub-yarn contrast").
