@@ -13,11 +13,11 @@ import pytest
 from data_formats.scene import load_scene
 from knitrun.render import compile_ahead, pipeline
 from knitrun.render.ablations import ABLATIONS
-from knitrun.render.strip_shading import (flyaway_coverage, resolve, resolve_behind, same_surface, shade_flyaway,
+from knitrun.render.strip_shading import (_resolve, flyaway_coverage, resolve_behind, same_surface, shade_flyaway,
                                           shade_regular)
 from tests.helpers import FRONT, SKY, SUN, straight, write_scene
 
-KERNELS = (shade_regular, shade_flyaway, resolve, resolve_behind, flyaway_coverage, same_surface)
+KERNELS = (shade_regular, shade_flyaway, _resolve, resolve_behind, flyaway_coverage, same_surface)
 
 
 def _scene(folder, lights, layers=2):

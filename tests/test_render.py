@@ -734,6 +734,46 @@ def test_the_flyaway_layer_skips_exactly_the_points_its_hairs_do_not_cover(tmp_p
     assert 0 < len(covered) < 0.9 * len(seen["coverage"]) and result.facts["flyaway_points_covered"] == len(covered)
 
 
+def test_the_hairs_of_two_yarns_both_show_in_the_gap_between_them(tmp_path, pack):
+    """``render.hair_layers``: between two parallel yarns (A nearer the camera) both flyaway strips cover the gap.
+    With one layer the gap shows A's hairs alone, even where A's strip holds no hair and B's does; with two, B's
+    hairs composited under A's: A alone + t_A (B alone − background), t_A A's transmittance (from A drawn over two
+    backgrounds). Each yarn is drawn "alone" with the other moved out of view, so that it keeps its curve index (the
+    flyaway variant hashes it)."""
+    camera = """[camera]
+position = [0.0, 0.0, 1.0]
+look_at = [0.0, 0.0, 0.0]
+ortho_height = 0.32
+width = 48
+height = 64"""
+    light = """[[lights]]
+type = "directional"
+direction = [0.0, 0.0, 1.0]
+irradiance = [2.0, 2.0, 2.0]"""  # from the camera: neither yarn shadows the gap
+    radius = load_scene(write_scene(tmp_path, [straight()], camera=camera, lights=light, name="probe")).yarns[0].radius
+    a, b = straight(z=0.1) + [0.0, 1.5 * radius, 0.0], straight() - [0.0, 1.5 * radius, 0.0]
+    away = np.array([5.0, 0.0, 0.0])
+
+    def draw(curves, layers=1, background=(0.1, 0.2, 0.3)):
+        scene = load_scene(write_scene(tmp_path, curves, camera=camera, lights=light, name="pair"))
+        scene = dataclasses.replace(scene, background=background,
+                                    render=dataclasses.replace(scene.render, hair_layers=layers))
+        return render(scene, {"cotton1": str(pack)}).image.astype(np.float64)
+
+    one, two = draw([a, b]), draw([a, b], 2)
+    a_alone, a_light, b_alone = draw([a, b + away]), draw([a, b + away], 1, (0.6, 0.7, 0.8)), draw([a + away, b])
+    transmit_a = (a_light - a_alone) / 0.5
+    y = 0.16 - (np.arange(64) + 0.5) * 0.32 / 64  # pixel centres (cm)
+    half_px = 0.16 / 64
+    gap = (np.abs(y) < 0.5 * radius - 1.5 * half_px)  # rows whose pixels lie off both bodies by a quarter pixel
+    assert gap.sum() >= 3
+    assert np.array_equal(one[gap], a_alone[gap])
+    np.testing.assert_allclose(two[gap], (a_alone + transmit_a * (b_alone - (0.1, 0.2, 0.3)))[gap], atol=1e-5)
+    b_hairs = np.abs(b_alone[gap] - (0.1, 0.2, 0.3)).sum(axis=-1)
+    assert b_hairs.max() > 0.02 and np.abs(two[gap] - one[gap]).sum(axis=-1).max() > 0.5 * b_hairs.max()
+    assert transmit_a[gap].min() < 0.95  # A's hairs are there too
+
+
 def test_a_hair_takes_each_kind_of_light_whether_or_not_the_other_kind_is_compiled(tmp_path, pack, monkeypatch):
     """``shade_flyaway`` with the directional lights alone (no lobes: that branch not compiled) plus the lobes alone
     (no directional lights) is the hair radiance of both together; alpha and transmittance do not depend on the

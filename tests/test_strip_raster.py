@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from knitrun.render.camera import Camera, project, tan_half_fov
-from knitrun.render.strip_raster import (SAMPLE_PATTERNS, rasterize_behind, rasterize_depth, rasterize_strips,
+from knitrun.render.strip_raster import (SAMPLE_PATTERNS, rasterize_before, rasterize_behind, rasterize_depth, rasterize_strips,
                                          rasterize_visibility, sample_attributes)
 
 Z_UP = np.array([0.0, 0.0, 1.0])
@@ -234,6 +234,44 @@ def test_frustum_culling_drops_only_invisible_segments():
     visible = np.flatnonzero(np.abs(x[:-1]) < 2.8)
     drawn = np.unique(g.segment[g.coverage])
     assert set(drawn) <= set(visible) and len(drawn) >= len(visible) - 2
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_the_k_nearest_strips_before_a_ceiling_come_nearest_first_from_one_depth_test(ortho):
+    """``rasterize_before``: at each sample the K nearest strips, nearest first, each with the depth and slot it has
+    drawn alone, among those less than the reach behind the strip another buffer has there (anywhere where it has
+    none); a strip is counted once at a sample, and the K-th layer is what K rounds of depth peeling find."""
+    cam = ortho_camera(64, 64) if ortho else Camera(np.array([0.0, 0.0, 6.0]), np.zeros(3), Y_UP, 64, 64,
+                                                    fov_deg=40.0)
+    lines = [[[-1.0, 0.0, 0.3], [1.0, 0.0, 0.3]], [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]],
+             [[-1.0, -1.0, -0.5], [1.0, 1.0, -0.5]]]  # horizontal nearest, vertical, diagonal farthest
+    pts = np.array([p for line in lines for p in line])
+    offsets, rest, radius = [0, 2, 4, 6], np.tile([0.0, 2.0], 3), np.full(3, 0.2)
+    wall = [[-2.0, 0.6, -0.25], [2.0, 0.6, -0.25]]  # a wide strip between the vertical and the diagonal strips
+    front = rasterize_visibility(np.array(wall), [0, 2], False, [0.0, 4.0], 0.6, [9], cam, msaa=4)
+    layers = rasterize_before(pts, offsets, False, rest, radius, [0, 1, 2], cam, front, 0.0, layers=3)
+    alone = [rasterize_visibility(pts[2 * c:2 * c + 2], [0, 2], False, rest[:2], 0.2, [c], cam, msaa=4)
+             for c in range(3)]
+    free = rasterize_visibility(pts, offsets, False, rest, radius, [0, 1, 2], cam, msaa=4)
+    peeled = [free, rasterize_behind(free, cam, 1e-4)]  # a gap: the floor from a float32 depth lets a strip in again
+    peeled.append(rasterize_behind(peeled[1], cam, 1e-4))
+    open_ = ~front.coverage
+    for m in range(3):  # where the wall is not: every strip, nearest first, as depth peeling finds them
+        assert np.array_equal(layers[m].curve[open_], peeled[m].curve[open_])
+        assert np.array_equal(layers[m].depth[open_], peeled[m].depth[open_])
+    for c in range(3):
+        at = [layers[m].curve == c for m in range(3)]
+        assert np.all(sum(a.astype(int) for a in at) <= 1)  # each strip once per sample
+        for a, layer in zip(at, layers):
+            assert np.array_equal(layer.depth[a], alone[c].depth[a]) and np.array_equal(layer.slot[a] >= 0, a[a])
+    behind_wall = front.coverage & alone[2].coverage
+    assert behind_wall.sum() > 20
+    assert not any(np.any(layer.curve[behind_wall] == 2) for layer in layers)  # beyond the ceiling: dropped
+    both = open_ & alone[0].coverage & alone[1].coverage & alone[2].coverage
+    assert both.sum() > 4 and np.all(layers[0].curve[both] == 0) and np.all(layers[1].curve[both] == 1) and \
+        np.all(layers[2].curve[both] == 2)
+    one = rasterize_before(pts, offsets, False, rest, radius, [0, 1, 2], cam, front, 0.0)
+    assert len(one) == 1 and np.array_equal(one[0].curve, layers[0].curve)
 
 
 @pytest.mark.parametrize("ortho", [False, True])

@@ -17,14 +17,18 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    shading): they add nothing.
 3. ``raster``: the regular-fiber strips (half-width = yarn radius) into a k-sample visibility buffer
    (``strip_raster``: triangle, curve and depth per sample; the other attributes are interpolated at the shading
-   points alone); with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into a second
-   one. With ``render.layers`` = 2 (the default) the regular strips are depth-peeled
+   points alone); with flyaways, the flyaway strips (half-width = the pack's flyaway ``half_width``) into
+   ``render.hair_layers`` more. With ``render.layers`` = 2 (the default) the regular strips are depth-peeled
    (``strip_raster.rasterize_behind``, on the front pass's triangles): at each sample the nearest strip more than
    the front yarn's radius behind the front strip, so the yarn behind shows through a strip's partial coverage
-   (gaps between plies, the fuzzy edge) instead of the background. A flyaway
-   sample is kept where no regular strip is nearer than the yarn radius, and a flyaway shading point where its
-   hair texture covers anything (``strip_shading.flyaway_coverage``): one of zero coverage adds nothing to the
-   image, so the passes below skip it.
+   (gaps between plies, the fuzzy edge) instead of the background. The flyaway layers are the K =
+   ``render.hair_layers`` nearest flyaway strips at each sample among those less than the largest yarn radius
+   behind its front regular strip (``strip_raster.rasterize_before``: one depth test keeping K per sample): in a
+   knit two or three yarns' hair strips overlap almost everywhere (each 2.3 radii wide for cotton1), and with the
+   nearest alone the hairs of all but one were lost — the gaps between stitches darker and emptier than the
+   reference's (BENCHMARKS.md, "Issue 13: the hairs of every yarn that overlaps a pixel"). A flyaway shading point
+   is kept where its hair texture covers anything (``strip_shading.flyaway_coverage``): one of zero coverage adds
+   nothing to the image, so the passes below skip it.
 4. ``shadow``: per directional light a yarn-level shadow map of ``render.shadow_map_size``² texels, filtered by PCF
    (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
    angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by 1.5 yarn
@@ -67,7 +71,7 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    It moves nothing on a yarn that lies across the view, and on a bend turns the tangent that meets the mirror
    angle to where the reference's fibers meet it. Hairs keep their own strip's attributes.
 6. ``resolve``: coverage-weighted MSAA resolve, the second layer over the background, the front over that
-   (``strip_shading.resolve_behind``), the flyaway layer on top.
+   (``strip_shading.resolve_behind``), the flyaway layers on top, the K-th first.
 
 ``Features`` (``knitrun.render.ablations``) switch the baked terms off for the ablations of Huang et al. 2025
 Fig. 7.
@@ -95,7 +99,8 @@ from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
 from knitrun.render.shadow_map import behind_map, build_shadow_map, own_strip_depth, shadow_visibility
-from knitrun.render.strip_raster import rasterize_behind, rasterize_visibility, vertex_tangent, vertex_tangents
+from knitrun.render.strip_raster import (rasterize_before, rasterize_behind, rasterize_visibility, vertex_tangent,
+                                         vertex_tangents)
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
                                           same_surface, shade_flyaway, shade_regular, shading_points)
 from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, tube_optics, vertex_bounce
@@ -121,8 +126,8 @@ class RenderResult:
 
 class _FrameRaster(NamedTuple):
     """What a frame's ``raster`` pass hands on: the shading points of the front layer, of the layer behind it (None at
-    ``render.layers`` 1) and of the flyaway layer (None without flyaways) as ``strip_shading.shading_points`` gives
-    them, the flyaway points as the kernels read them (``hairs``), which of them a hair covers (``covered``), and the
+    ``render.layers`` 1) and of the flyaway layers (None without flyaways; one set, ``layer_start`` the points of
+    each layer, ``_stacked``) as ``strip_shading.shading_points`` gives them, the flyaway points as the kernels read them (``hairs``), which of them a hair covers (``covered``), and the
     yarn entries whose flyaways are drawn."""
 
     points: dict
@@ -528,7 +533,7 @@ class Renderer:
         scene, looks = self.scene, self.looks
         frame = self.frame_index(frame)
         timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame,
-                              "layers": scene.render.layers}
+                              "layers": scene.render.layers, "hair_layers": scene.render.hair_layers}
         clock = [time.perf_counter()]
 
         def lap(name):
@@ -561,7 +566,8 @@ class Renderer:
         fly_radius = np.array([looks[k].flyaway_half_width for k in lines.entry])
         vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry, camera, msaa)
         points = shading_points(vis, camera)
-        behind_points = behind = fly_buffer = None
+        behind_points = behind = None
+        fly_buffers = []
         if scene.render.layers > 1 and len(lines.entry):
             behind = rasterize_behind(vis, camera, radius)
             behind_points = shading_points(behind, camera)
@@ -569,15 +575,14 @@ class Renderer:
         fly_points = hairs = covered = None
         if drawn_fly and len(lines.entry):
             fly_curves = np.isin(lines.entry, drawn_fly)
-            fly_buffer = rasterize_visibility(lines.points, lines.offsets, False, lines.rest,
-                                              np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, msaa)
-            tolerance = float(radius.max())
-            mask = ~vis.coverage | (fly_buffer.depth <= vis.depth + tolerance)
-            mask &= fly_curves[fly_buffer.curve]  # uncovered samples (curve −1) are dropped by the coverage anyway
-            fly_points = shading_points(fly_buffer, camera, mask=mask)
+            fly_buffers = rasterize_before(lines.points, lines.offsets, False, lines.rest,
+                                           np.where(fly_curves, fly_radius, 1e-9), lines.entry, camera, vis,
+                                           float(radius.max()), scene.render.hair_layers)
+            # uncovered samples (curve −1) are dropped by the coverage anyway
+            fly_points = _stacked([shading_points(b, camera, mask=fly_curves[b.curve]) for b in fly_buffers])
             hairs = _kernel_points(fly_points, lines, looks)
             covered = self._hair_coverage(hairs, fly_points["yarn"], drawn_fly) > 0.0
-        return _FrameRaster(points, behind_points, fly_points, hairs, covered, drawn_fly, (vis, behind, fly_buffer))
+        return _FrameRaster(points, behind_points, fly_points, hairs, covered, drawn_fly, (vis, behind, *fly_buffers))
 
     def _light_and_shade(self, lines, camera, raster, facts, lap) -> np.ndarray:
         """The ``shadow``, ``shade`` and ``resolve`` passes of a frame (module docstring): its (H, W, 3) float32 image.
@@ -597,8 +602,10 @@ class Renderer:
         facts["flyaway_points_shared"] = 0
         if fly_points is not None:
             partner = np.empty(len(fly_points["weight"]), np.int64)
-            same_surface(points["start"], points["curve"], points["position"], fly_points["start"],
-                         fly_points["curve"], fly_points["position"], SHARE_REACH * fly_points["footprint"], partner)
+            for start in fly_points["layer_start"]:
+                same_surface(points["start"], points["curve"], points["position"], start,
+                             fly_points["curve"], fly_points["position"], SHARE_REACH * fly_points["footprint"],
+                             partner)
             shared = np.flatnonzero(covered & (partner >= 0))
             where.append(np.flatnonzero(covered & (partner < 0)))
             facts["flyaway_points_shared"] = int(len(shared))
@@ -710,7 +717,7 @@ class Renderer:
         rgb, alpha = shaded[0]
         resolve(points["start"], points["weight"], rgb, alpha, np.zeros_like(rgb), image, image)
         if fly_points is not None:
-            resolve(fly_points["start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image, image)
+            resolve(fly_points["layer_start"], fly_points["weight"], fly_rgb, fly_alpha, fly_transmit, image, image)
         if not np.all(np.isfinite(image)):
             raise RuntimeError("strip renderer produced a non-finite pixel (a bug: please report the scene)")
         lap("resolve")
@@ -727,7 +734,7 @@ class Renderer:
         drawn_fly = [k for k, look in enumerate(self.looks) if look.flyaway is not None]
         fly_points = hairs = covered = None
         if drawn_fly:
-            fly_points = no_shading_points(pixels)
+            fly_points = _stacked([no_shading_points(pixels)])
             hairs = _kernel_points(fly_points, lines, self.looks)
             covered = self._hair_coverage(hairs, fly_points["yarn"], drawn_fly) > 0.0
         behind = no_shading_points(pixels) if self.scene.render.layers > 1 else None
@@ -857,6 +864,16 @@ def _between(rest, at, values) -> np.ndarray:
     f = np.where((b > a) & (span > 0.0), (rest - rest[a]) / np.where(span > 0.0, span, 1.0), 0.0)
     f = np.clip(f, 0.0, 1.0)[:, None]
     return (1.0 - f) * values[below] + f * values[above]
+
+
+def _stacked(layers: list) -> dict:
+    """One dict of shading points from a list of ``shading_points`` dicts, the points of each in turn; its
+    ``layer_start`` (L, H·W + 1) holds each one's ``start`` into them (``start``: the first's)."""
+    base = np.cumsum([0] + [len(layer["weight"]) for layer in layers])
+    out = {key: np.concatenate([layer[key] for layer in layers]) for key in layers[0] if key != "start"}
+    out["layer_start"] = np.stack([layer["start"] + b for layer, b in zip(layers, base)])
+    out["start"] = out["layer_start"][0]
+    return out
 
 
 def _kernel_points(points, lines, looks) -> Points:

@@ -42,7 +42,8 @@ attributes at the samples asked for (``sample_attributes``; the renderer asks at
 of the samples of a knit at MSAA 4; ``rasterize_strips`` at every covered sample). ``rasterize_depth`` runs the same
 depth test and writes the depth alone (``_raster_depth``: shadow maps); ``rasterize_behind`` runs it again on a
 buffer's own binned triangles, keeping at each sample the nearest strip beyond a floor behind the first (depth
-peeling). Buffers are identical for any thread count.
+peeling); ``rasterize_before`` keeps the K nearest strips in front of a ceiling that another buffer sets, in one
+depth test (a sorted list of K per sample). Buffers are identical for any thread count.
 """
 
 import math
@@ -66,7 +67,8 @@ DEGENERATE_SIN = 1e-6  # |ω_o × t| below this: the strip is skipped (ASSET_PAC
 
 # Per clipped-triangle vertex record: screen X, Y (px), q (1/z pinhole, 1 orthographic), then q·(z, s, v, tx, ty, tz).
 _NREC = 9
-_NO_FLOOR = np.zeros((1, 1, 1))  # the floor of a depth test that does not peel (never read)
+NO_BOUND, FLOOR, CEILING = 0, 1, 2  # what a depth test's bound is (``_depth_test``)
+_NO_BOUND = np.zeros((1, 1, 1))  # the bound of a depth test without one (never read)
 
 
 @dataclass
@@ -133,16 +135,22 @@ def rasterize_visibility(points, offsets, closed, rest_arclength, radius, yarn_i
     """The strips' ``StripVisibility`` of camera.height × camera.width × ``msaa`` samples (arguments as
     ``rasterize_strips``): the depth test of ``rasterize_strips`` writing 12 bytes per sample instead of 37, for a
     renderer that shades a fraction of the samples (``strip_shading.shading_points``)."""
+    triangles, bins = _binned_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera, msaa, near, far,
+                                     closing_length, tile)
+    return _draw(triangles, bins, camera, (int(camera.height), int(camera.width), msaa), _NO_BOUND, NO_BOUND)[0]
+
+
+def _binned_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera, msaa, near, far, closing_length,
+                   tile):
+    """The strips' ``StripTriangles`` and their tile lists (``StripVisibility.bins``)."""
     if msaa not in SAMPLE_PATTERNS:
         raise ValueError(f"msaa = {msaa}, expected one of {sorted(SAMPLE_PATTERNS)}")
     n_curves = len(offsets) - 1
     yarn_id = np.ascontiguousarray(np.broadcast_to(np.asarray(yarn_id, dtype=np.int32), (max(n_curves, 0),)))
     tri, tile_start, tile_tris, seg_a, seg_curve = _triangles(points, offsets, closed, rest_arclength, radius, camera,
                                                               near, far, closing_length, tile)
-    w, h = int(camera.width), int(camera.height)
-    shape = (h, w, msaa)
     triangles = StripTriangles(tri, seg_a.astype(np.int32), seg_curve.astype(np.int32), yarn_id, SAMPLE_PATTERNS[msaa])
-    return _draw(triangles, (tile_start, tile_tris, tile), camera, shape, _NO_FLOOR, False)
+    return triangles, (tile_start, tile_tris, tile)
 
 
 def rasterize_behind(front: StripVisibility, camera: Camera, gap):
@@ -151,24 +159,44 @@ def rasterize_behind(front: StripVisibility, camera: Camera, gap):
     (C,) per curve or a scalar) behind the view depth of the strip c that ``front`` has there (the next layer: what
     shows through a strip of partial coverage), and nothing where ``front`` has none. A gap of the front yarn's
     radius skips the front strip itself and any strip within its tube."""
+    return _draw(front.triangles, front.bins, camera, front.slot.shape, _view_floor(front, camera, gap), FLOOR)[0]
+
+
+def rasterize_before(points, offsets, closed, rest_arclength, radius, yarn_id, camera: Camera, front: StripVisibility,
+                     reach, layers=1, near=1e-3, far=math.inf, closing_length=None, tile=32):
+    """The ``layers`` nearest strips at each sample, nearest first, as that many ``StripVisibility`` buffers of the
+    strips ``rasterize_visibility`` draws from the same arguments (at ``front``'s msaa), keeping only strips less
+    than reach[c] (scene units, (C,) per curve or a scalar) behind the view depth of the strip c that ``front``
+    (another buffer of the same camera, e.g. the regular strips') has at the sample, and any strip where ``front``
+    has none. One depth test keeps the K nearest: each triangle is tested once per sample, so a strip counts twice
+    at a sample only where it overlaps itself (a fold at a bend tighter than its half-width)."""
+    msaa = front.slot.shape[2]
+    triangles, bins = _binned_strips(points, offsets, closed, rest_arclength, radius, yarn_id, camera, msaa, near, far,
+                                     closing_length, tile)
+    return _draw(triangles, bins, camera, front.slot.shape, _view_floor(front, camera, reach), CEILING, layers)
+
+
+def _view_floor(front: StripVisibility, camera: Camera, gap) -> np.ndarray:
+    """The view z of ``front``'s strip at each sample plus gap[c] of its curve c (+inf where it has none)."""
     n_curves = len(front.triangles.yarn_id)
     gap = np.ascontiguousarray(np.broadcast_to(np.asarray(gap, np.float64), (n_curves,)))
     floor = np.empty(front.slot.shape)
     _peel_floor(front.depth, front.curve, gap, front.pattern, float(camera.ortho_height) > 0, tan_half_fov(camera),
                 floor)
-    return _draw(front.triangles, front.bins, camera, front.slot.shape, floor, True)
+    return floor
 
 
-def _draw(triangles, bins, camera, shape, floor, peel):
-    """Depth-test the binned ``triangles`` into a new ``StripVisibility`` of ``shape`` (``_raster``)."""
-    out = StripVisibility(np.empty(shape, np.int32), np.empty(shape, np.int32), np.empty(shape, np.float32),
-                          triangles, bins)
+def _draw(triangles, bins, camera, shape, bound, bound_kind, layers=1):
+    """Depth-test the binned ``triangles`` into ``layers`` new ``StripVisibility`` buffers of ``shape``, the nearest
+    first (``_raster``)."""
+    slot, curve = np.empty((layers, *shape), np.int32), np.empty((layers, *shape), np.int32)
+    depth = np.empty((layers, *shape), np.float32)
     tile_start, tile_tris, tile = bins
     height, width = shape[:2]
     _raster(triangles.records, tile_start, tile_tris, triangles.seg_curve, width, height, tile, -(-width // tile),
-            triangles.pattern, float(camera.ortho_height) > 0, tan_half_fov(camera), floor, peel, out.slot,
-            out.curve, out.depth)
-    return out
+            triangles.pattern, float(camera.ortho_height) > 0, tan_half_fov(camera), bound, bound_kind, slot, curve,
+            depth)
+    return [StripVisibility(slot[m], curve[m], depth[m], triangles, bins) for m in range(layers)]
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -545,12 +573,15 @@ def _bin(count, boxes, tiles_x, tiles_y):
 
 
 @njit(cache=True, error_model="numpy")
-def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, floor, peel, best_z, best_tri):
+def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, bound, bound_kind, best_z, best_tri):
     """Depth-test triangles tile_tris[first:stop] at the ``pattern`` samples of the pixels [x_lo, x_hi) × [y_lo,
-    y_hi): for each sample the nearest view z (1/q-interpolated) and its triangle slot (−1: none). The barycentrics
-    are e_k/area (``_barycentrics`` repeats the arithmetic for a kept sample). With ``peel``, a fragment counts only
-    beyond the sample's floor: view z > floor[py, px, s] (a full-frame array; unread without ``peel``)."""
+    y_hi): for each sample the K nearest view z (1/q-interpolated), nearest first, and their triangle slots (−1:
+    none), K = best_z.shape[3]. The barycentrics are e_k/area (``_barycentrics`` repeats the arithmetic for a kept
+    sample). ``bound`` (a full-frame array of view z; unread with ``bound_kind`` NO_BOUND): with FLOOR a fragment
+    counts only beyond it, view z > bound[py, px, s] (depth peeling); with CEILING only before it, view z <
+    bound[py, px, s]."""
     k_samples = pattern.shape[0]
+    n_keep = best_z.shape[3]
     best_z[:] = np.inf
     best_tri[:] = -1
     for idx in range(first, stop):
@@ -587,11 +618,18 @@ def _depth_test(tri, tile_tris, first, stop, x_lo, y_lo, x_hi, y_hi, pattern, fl
                     z = (l0 * rec[0, 3] + l1 * rec[1, 3] + l2 * rec[2, 3]) / \
                         (l0 * rec[0, 2] + l1 * rec[1, 2] + l2 * rec[2, 2])
                     j, i = px - x_lo, py - y_lo
-                    if peel and z <= floor[py, px, s]:
+                    if bound_kind == FLOOR and z <= bound[py, px, s]:
                         continue
-                    if z < best_z[i, j, s]:
-                        best_z[i, j, s] = z
-                        best_tri[i, j, s] = slot
+                    if bound_kind == CEILING and z >= bound[py, px, s]:
+                        continue
+                    if z < best_z[i, j, s, n_keep - 1]:  # insert into the sample's sorted list of the K nearest
+                        m = n_keep - 1
+                        while m > 0 and z < best_z[i, j, s, m - 1]:
+                            best_z[i, j, s, m] = best_z[i, j, s, m - 1]
+                            best_tri[i, j, s, m] = best_tri[i, j, s, m - 1]
+                            m -= 1
+                        best_z[i, j, s, m] = z
+                        best_tri[i, j, s, m] = slot
 
 
 @njit(cache=True, error_model="numpy")
@@ -612,44 +650,45 @@ def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, patt
     for t in prange(n_tiles):
         x_lo, y_lo = (t % tiles_x) * tile, (t // tiles_x) * tile
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
-        best_z = np.empty((y_hi - y_lo, x_hi - x_lo, 1))
-        best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, 1), np.int64)
-        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, _NO_FLOOR,
-                    False, best_z, best_tri)
+        best_z = np.empty((y_hi - y_lo, x_hi - x_lo, 1, 1))
+        best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, 1, 1), np.int64)
+        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, _NO_BOUND,
+                    NO_BOUND, best_z, best_tri)
         for i in range(y_hi - y_lo):
             for j in range(x_hi - x_lo):
-                depth[y_lo + i, x_lo + j] = np.inf if best_tri[i, j, 0] < 0 else \
-                    _sample_depth(best_z[i, j, 0], x_lo + j, y_lo + i, pattern[0], width, height, ortho, tan_half)
+                depth[y_lo + i, x_lo + j] = np.inf if best_tri[i, j, 0, 0] < 0 else \
+                    _sample_depth(best_z[i, j, 0, 0], x_lo + j, y_lo + i, pattern[0], width, height, ortho, tan_half)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _raster(tri, tile_start, tile_tris, seg_curve, width, height, tile, tiles_x, pattern, ortho, tan_half, floor, peel,
-            slot, curve, depth):
-    """Depth-test every tile's triangles at the ``pattern`` samples and write the visibility buffer of its pixels
-    (with ``peel``: the nearest beyond ``floor``, ``_depth_test``)."""
-    k_samples = pattern.shape[0]
+def _raster(tri, tile_start, tile_tris, seg_curve, width, height, tile, tiles_x, pattern, ortho, tan_half, bound,
+            bound_kind, slot, curve, depth):
+    """Depth-test every tile's triangles at the ``pattern`` samples and write the visibility buffers of its pixels:
+    slot[m], curve[m] and depth[m] (each (K, H, W, k)) of the m-th nearest strip (``_depth_test``, its ``bound``)."""
+    n_keep, k_samples = slot.shape[0], pattern.shape[0]
     n_tiles = tile_start.shape[0] - 1
     n_seg = seg_curve.shape[0]
     for t in prange(n_tiles):
         x_lo, y_lo = (t % tiles_x) * tile, (t // tiles_x) * tile
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
-        best_z = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples))
-        best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples), np.int64)
-        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, floor, peel,
-                    best_z, best_tri)
-        for i in range(y_hi - y_lo):
-            for j in range(x_hi - x_lo):
-                py, px = y_lo + i, x_lo + j
-                for s in range(k_samples):
-                    kept = best_tri[i, j, s]
-                    slot[py, px, s] = kept
-                    if kept < 0:
-                        curve[py, px, s] = -1
-                        depth[py, px, s] = 0.0
-                    else:
-                        curve[py, px, s] = seg_curve[kept % n_seg]
-                        depth[py, px, s] = _sample_depth(best_z[i, j, s], px, py, pattern[s], width, height, ortho,
-                                                         tan_half)
+        best_z = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples, n_keep))
+        best_tri = np.empty((y_hi - y_lo, x_hi - x_lo, k_samples, n_keep), np.int64)
+        _depth_test(tri, tile_tris, tile_start[t], tile_start[t + 1], x_lo, y_lo, x_hi, y_hi, pattern, bound,
+                    bound_kind, best_z, best_tri)
+        for m in range(n_keep):
+            for i in range(y_hi - y_lo):
+                for j in range(x_hi - x_lo):
+                    py, px = y_lo + i, x_lo + j
+                    for s in range(k_samples):
+                        kept = best_tri[i, j, s, m]
+                        slot[m, py, px, s] = kept
+                        if kept < 0:
+                            curve[m, py, px, s] = -1
+                            depth[m, py, px, s] = 0.0
+                        else:
+                            curve[m, py, px, s] = seg_curve[kept % n_seg]
+                            depth[m, py, px, s] = _sample_depth(best_z[i, j, s, m], px, py, pattern[s], width, height,
+                                                                ortho, tan_half)
 
 
 @njit(cache=True, error_model="numpy")

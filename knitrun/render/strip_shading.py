@@ -731,19 +731,29 @@ def _hair_light(on_body, tables, ds, n_rest, gap, reach, v, t, n, b, wi, out, sc
 
 # --- resolve ---------------------------------------------------------------------------------------------------------
 
-@njit(parallel=True, cache=True)
 def resolve(start, weight, rgb, alpha, transmit, under, out):
     """out[p] = Σ_points w α L + (1 − min(1, Σ w α (1 − τ)))·under[p] over the points of pixel p (flattened H·W,
     RGB); τ = ``transmit`` (N, 3), the fraction of the radiance behind a point that it passes on (0: opaque).
-    ``under`` may be ``out`` (each pixel reads its own row before writing it): the layers composite in place."""
+    ``start`` (H·W + 1,) the points of each pixel, or (L, H·W + 1) those of L layers, the nearest first: composited
+    back to front, each over the one behind. ``under`` may be ``out`` (each pixel reads its own row before writing
+    it): the layers composite in place."""
+    _resolve(np.atleast_2d(start), weight, rgb, alpha, transmit, under, out)
+
+
+@njit(parallel=True, cache=True)
+def _resolve(starts, weight, rgb, alpha, transmit, under, out):
+    """``resolve`` over (L, H·W + 1) ``starts``."""
     for p in prange(out.shape[0]):
         for ch in range(3):  # scalar sums per channel: no per-pixel scratch array (1.2M pixels a frame)
-            acc, cov = 0.0, 0.0
-            for q in range(start[p], start[p + 1]):
-                a = weight[q] * alpha[q]
-                acc += a * rgb[q, ch]
-                cov += a * (1.0 - transmit[q, ch])
-            out[p, ch] = acc + (1.0 - min(cov, 1.0)) * under[p, ch]
+            value = under[p, ch]
+            for layer in range(starts.shape[0] - 1, -1, -1):
+                acc, cov = 0.0, 0.0
+                for q in range(starts[layer, p], starts[layer, p + 1]):
+                    a = weight[q] * alpha[q]
+                    acc += a * rgb[q, ch]
+                    cov += a * (1.0 - transmit[q, ch])
+                value = acc + (1.0 - min(cov, 1.0)) * value
+            out[p, ch] = value
 
 
 @njit(parallel=True, cache=True)

@@ -43,7 +43,8 @@ segment by rest arc length as ``yarn_bounce.bounce_at_points`` does.
 
 The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
 textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
-sample keeps the nearest flyaway strip where no regular strip is nearer than that radius (the CPU's mask);
+sample keeps the nearest flyaway strip where no regular strip is nearer than that radius (the CPU's first flyaway
+layer: the CPU draws ``render.hair_layers`` of them, this backend one, and its CPU twin one);
 ``shaders/flyaway.frag`` shades it as ``shade_flyaway`` does into two targets, A·L and A·(1 − τ), whose resolves are
 composited over the regular image as the CPU's resolve does.
 """
@@ -267,9 +268,10 @@ class GLRenderer:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
                               f"{MAX_LIGHTS}")
         self.ctx = gl_context() if ctx is None else ctx
-        # one layer of strips (depth peeling is not ported, SCENE.md ``layers``): the CPU twin (shading inputs; the
-        # image the tests compare with) draws what this one does; facts["layers"] says so
-        scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, layers=1))
+        # one layer of strips and one of flyaway strips (depth peeling and the K nearest hair strips are not ported,
+        # SCENE.md ``layers``, ``hair_layers``): the CPU twin (shading inputs; the image the tests compare with) draws
+        # what this one does; facts["layers"] and facts["hair_layers"] say so
+        scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, layers=1, hair_layers=1))
         self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
         start = time.perf_counter()
         self.scene, self.features = scene, features
@@ -287,7 +289,8 @@ class GLRenderer:
         self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)
         self.bounce = pipeline.bounce_drawn(features, self.cpu.looks, len(self.light_dir))
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
-        self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1)
+        self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1,
+                                hair_layers=1)
 
     @property
     def frame_count(self):
