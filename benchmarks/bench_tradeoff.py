@@ -7,6 +7,8 @@ writes them; missing ones are rendered there at ``--spp``):
 * ``quality``: the pack's bake quality (one pack per quality, ``--packs``) × MSAA samples × shadow-map size, on the
   example straight yarn and 6 × 6 patch under the directional light.
 * ``srbf``: the SRBF count J fitted to the built-in sky, on the same two scenes under the sky (standard pack).
+* ``hairs``: ``render.hair_layers``, the flyaway strips composited per sample (1: the nearest alone), on the 6 × 6
+  patch under the directional light and under the sky (standard pack).
 * ``gn``: the knot simulator's Gauss–Newton iterations per frame. A 6 × 6 stockinette stitch mesh is stretched
   1.4× in x in one frame (the hardest step: no warm start from a nearby frame) and simulated with k iterations;
   the reference is the example scene ``simulated_patch_directional`` (the path-traced patch of the k = 16 curves,
@@ -21,7 +23,7 @@ when no other configuration of the same scene is at least as fast with at most i
 one).
 
     .venv/bin/python benchmarks/bench_tradeoff.py --packs draft=d.h5,standard=s.h5,final=f.h5 --reference-dir DIR
-                                                  [--sweeps quality,srbf,gn] [--spp 64] [--plot PNG]
+                                                  [--sweeps quality,srbf,hairs,gn] [--spp 64] [--plot PNG]
 """
 
 import argparse
@@ -50,6 +52,8 @@ SKY_SCENES = ("straight_yarn_sky", "knit_patch_sky")
 MSAA = (1, 4, 8)
 SHADOW = (512, 2048)
 SRBF = (1, 4, 16, 64)
+HAIR_SCENES = ("knit_patch_directional", "knit_patch_sky")
+HAIRS = (1, 2, 3, 4)
 GN = (0, 1, 2, 4, 8)
 GN_CONVERGED = 16
 GN_SCENE = "simulated_patch_directional"
@@ -111,6 +115,20 @@ def sweep_srbf(pack, reference_dir, spp):
             scene = dataclasses.replace(base, render=dataclasses.replace(base.render, srbf_count=j))
             seconds, image = timed_render(scene, {"cotton1": pack})
             rows.append({"scene": name, "quality": "standard", "knob": f"J = {j}", "label": str(j),
+                         "ms": 1e3 * seconds, **metrics(image, *reference)})
+    return rows
+
+
+def sweep_hairs(pack, reference_dir, spp):
+    rows = []
+    for name in HAIR_SCENES:
+        path = ROOT / "examples" / "scenes" / f"{name}.toml"
+        base, reference = load_scene(path), reference_for(name, path, reference_dir, spp)
+        rows.append(floor_row(name, reference))
+        for k in HAIRS:
+            scene = dataclasses.replace(base, render=dataclasses.replace(base.render, hair_layers=k))
+            seconds, image = timed_render(scene, {"cotton1": pack})
+            rows.append({"scene": name, "quality": "standard", "knob": f"{k} hair layers", "label": f"h{k}",
                          "ms": 1e3 * seconds, **metrics(image, *reference)})
     return rows
 
@@ -219,6 +237,8 @@ def plot(path, by_scene, floors):
         legend = ("orange draft, blue standard, green final; size: MSAA; thick: 2048 x 2048 shadow map"
                   if name in QUALITY_SCENES else "labels: SRBF count J" if name in SKY_SCENES
                   else "labels: Gauss-Newton iterations (time includes the solve)")
+        if name in HAIR_SCENES:
+            legend += "; hK: K hair layers"
         draw.text((x0 + pad, y0 + 24), legend, fill="black")
     canvas.save(path)
 
@@ -228,18 +248,19 @@ def main():
     parser.add_argument("--packs", required=True, help="quality=pack.h5,... e.g. draft=d.h5,standard=s.h5 (the "
                                                        "SRBF and GN sweeps use the standard pack)")
     parser.add_argument("--reference-dir", required=True)
-    parser.add_argument("--sweeps", default="quality,srbf,gn")
+    parser.add_argument("--sweeps", default="quality,srbf,hairs,gn")
     parser.add_argument("--spp", type=int, default=64, help="samples per pixel of references rendered here")
     parser.add_argument("--work-dir", default="out/bench/tradeoff", help="the GN sweep's curves and scenes")
-    parser.add_argument("--plot", help="scatter plot PNG (default docs/tradeoff.png when all three sweeps run; none "
+    parser.add_argument("--plot", help="scatter plot PNG (default docs/tradeoff.png when every sweep runs; none "
                                        "for a subset, so a partial run does not replace the documented plot)")
     args = parser.parse_args()
     packs = dict(item.split("=", 1) for item in args.packs.split(","))
     sweeps = args.sweeps.split(",")
-    unknown = sorted(set(sweeps) - {"quality", "srbf", "gn"})
+    every = {"quality", "srbf", "hairs", "gn"}
+    unknown = sorted(set(sweeps) - every)
     if unknown:
-        parser.error(f"--sweeps: unknown sweep {unknown[0]!r} (quality, srbf, gn)")
-    if args.plot is None and set(sweeps) == {"quality", "srbf", "gn"}:
+        parser.error(f"--sweeps: unknown sweep {unknown[0]!r} (quality, srbf, hairs, gn)")
+    if args.plot is None and set(sweeps) == every:
         args.plot = "docs/tradeoff.png"
     reference_dir = Path(args.reference_dir)
     rows = []
@@ -247,6 +268,8 @@ def main():
         rows += sweep_quality(packs, reference_dir, args.spp)
     if "srbf" in sweeps:
         rows += sweep_srbf(packs["standard"], reference_dir, args.spp)
+    if "hairs" in sweeps:
+        rows += sweep_hairs(packs["standard"], reference_dir, args.spp)
     if "gn" in sweeps:
         rows += sweep_gn(packs["standard"], reference_dir, args.spp, Path(args.work_dir))
     by_scene, floors = {}, {}
