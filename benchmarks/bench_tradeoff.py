@@ -105,31 +105,19 @@ def sweep_quality(packs, reference_dir, spp):
     return rows
 
 
-def sweep_srbf(pack, reference_dir, spp):
+def sweep_setting(pack, reference_dir, spp, scenes, field, values, knob, label):
+    """One ``render`` setting over ``values`` on ``scenes`` (standard pack): rows named ``knob.format(value)``, the plot
+    labels ``label.format(value)``."""
     rows = []
-    for name in SKY_SCENES:
+    for name in scenes:
         path = ROOT / "examples" / "scenes" / f"{name}.toml"
         base, reference = load_scene(path), reference_for(name, path, reference_dir, spp)
         rows.append(floor_row(name, reference))
-        for j in SRBF:
-            scene = dataclasses.replace(base, render=dataclasses.replace(base.render, srbf_count=j))
+        for value in values:
+            scene = dataclasses.replace(base, render=dataclasses.replace(base.render, **{field: value}))
             seconds, image = timed_render(scene, {"cotton1": pack})
-            rows.append({"scene": name, "quality": "standard", "knob": f"J = {j}", "label": str(j),
-                         "ms": 1e3 * seconds, **metrics(image, *reference)})
-    return rows
-
-
-def sweep_hairs(pack, reference_dir, spp):
-    rows = []
-    for name in HAIR_SCENES:
-        path = ROOT / "examples" / "scenes" / f"{name}.toml"
-        base, reference = load_scene(path), reference_for(name, path, reference_dir, spp)
-        rows.append(floor_row(name, reference))
-        for k in HAIRS:
-            scene = dataclasses.replace(base, render=dataclasses.replace(base.render, hair_layers=k))
-            seconds, image = timed_render(scene, {"cotton1": pack})
-            rows.append({"scene": name, "quality": "standard", "knob": f"{k} hair layers", "label": f"h{k}",
-                         "ms": 1e3 * seconds, **metrics(image, *reference)})
+            rows.append({"scene": name, "quality": "standard", "knob": knob.format(value),
+                         "label": label.format(value), "ms": 1e3 * seconds, **metrics(image, *reference)})
     return rows
 
 
@@ -267,9 +255,10 @@ def main():
     if "quality" in sweeps:
         rows += sweep_quality(packs, reference_dir, args.spp)
     if "srbf" in sweeps:
-        rows += sweep_srbf(packs["standard"], reference_dir, args.spp)
+        rows += sweep_setting(packs["standard"], reference_dir, args.spp, SKY_SCENES, "srbf_count", SRBF, "J = {}", "{}")
     if "hairs" in sweeps:
-        rows += sweep_hairs(packs["standard"], reference_dir, args.spp)
+        rows += sweep_setting(packs["standard"], reference_dir, args.spp, HAIR_SCENES, "hair_layers", HAIRS,
+                              "{} hair layers", "h{}")
     if "gn" in sweeps:
         rows += sweep_gn(packs["standard"], reference_dir, args.spp, Path(args.work_dir))
     by_scene, floors = {}, {}
