@@ -54,16 +54,19 @@ msaa = 4
 shadow_map_size = 2048
 srbf_count = 16
 layers = {layers}
+hair_layers = {hair_layers}
 """
 LIGHTS = {"directional": 'type = "directional"\ndirection = [0.4, 0.6, 1.0]\nirradiance = [3.0, 3.0, 3.0]',
           "sky16": 'type = "environment"\nbuiltin = "sky"'}
 
 
-def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", layers=2, features=Features()):
+def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", layers=2, features=Features(),
+               hair_layers=2):
     """(median seconds per frame, its timings, facts, set-up seconds): one renderer set up once (``Renderer`` or
     ``GLRenderer``) with ``features``, then its frames (what a viewer pays per frame)."""
     write_yarn_curves(folder / "patch.h5", stockinette_curves(rows, 21))
-    (folder / "scene.toml").write_text(SCENE.format(width=width, height=height, light=LIGHTS[light], layers=layers))
+    (folder / "scene.toml").write_text(SCENE.format(width=width, height=height, light=LIGHTS[light], layers=layers,
+                                                    hair_layers=hair_layers))
     scene = load_scene(folder / "scene.toml")
     start = time.perf_counter()
     if backend == "gl":
@@ -94,6 +97,8 @@ def main():
                         help="gl: the OpenGL backend, plus the paper's 200K-point size under the sky")
     parser.add_argument("--layers", type=int, choices=(1, 2), default=2,
                         help="render.layers: 2 (default) draws the depth-peeled strips behind the front ones")
+    parser.add_argument("--hair-layers", type=int, default=2, choices=range(1, 9), metavar="K",
+                        help="render.hair_layers: the flyaway strips composited per sample (default 2)")
     parser.add_argument("--ablation", default="full", help="the model timed: an ablation or a combination a+b")
     args = parser.parse_args()
     try:
@@ -111,7 +116,7 @@ def main():
 
         where = f"GL: {gl_context().info['GL_RENDERER']}"
     print(f"## Strip renderer (cotton1, {where}, pack {Path(pack).name}, render.layers = {args.layers}, "
-          f"model {args.ablation})")
+          f"render.hair_layers = {args.hair_layers}, model {args.ablation})")
     print("| light | control points | pixels | shading points | set-up ms (once) | frame ms | load | raster | shadow "
           "| shade | resolve |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -124,7 +129,7 @@ def main():
         cases = cases[:3 if args.backend == "gl" else 2]
     for light, rows, width, height in [c for c in cases if args.light in (None, c[0])]:
         total, timings, facts, setup = time_scene(folder, pack, rows, width, height, light, args.frames, args.backend,
-                                                  args.layers, features)
+                                                  args.layers, features, args.hair_layers)
         passes = " | ".join(f"{1e3 * timings.get(k, 0.0):.0f}" for k in
                             ("load", "raster", "shadow", "shade", "resolve"))
         points = facts.get("shading_points", "—")

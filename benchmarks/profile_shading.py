@@ -50,7 +50,7 @@ def captured_calls(pack, light, layers):
     write_yarn_curves(folder / "patch.h5", stockinette_curves(60, 21))
     (folder / "scene.toml").write_text(bench_render.SCENE.format(width=1280, height=960,
                                                                  light=bench_render.LIGHTS[light],
-                                                                 layers=layers))
+                                                                 layers=layers, hair_layers=2))
     original, pipeline.shade_regular = pipeline.shade_regular, capture
     try:
         pipeline.render(load_scene(folder / "scene.toml"), {"cotton1": str(pack)})
