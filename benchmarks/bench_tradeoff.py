@@ -255,7 +255,8 @@ def main():
     if "quality" in sweeps:
         rows += sweep_quality(packs, reference_dir, args.spp)
     if "srbf" in sweeps:
-        rows += sweep_setting(packs["standard"], reference_dir, args.spp, SKY_SCENES, "srbf_count", SRBF, "J = {}", "{}")
+        rows += sweep_setting(packs["standard"], reference_dir, args.spp, SKY_SCENES, "srbf_count", SRBF, "J = {}",
+                              "{}")
     if "hairs" in sweeps:
         rows += sweep_setting(packs["standard"], reference_dir, args.spp, HAIR_SCENES, "hair_layers", HAIRS,
                               "{} hair layers", "h{}")

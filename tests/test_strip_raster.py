@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from knitrun.render.camera import Camera, project, tan_half_fov
-from knitrun.render.strip_raster import (SAMPLE_PATTERNS, rasterize_before, rasterize_behind, rasterize_depth, rasterize_strips,
-                                         rasterize_visibility, sample_attributes)
+from knitrun.render.strip_raster import (SAMPLE_PATTERNS, rasterize_before, rasterize_behind, rasterize_depth,
+                                         rasterize_strips, rasterize_visibility, sample_attributes)
 
 Z_UP = np.array([0.0, 0.0, 1.0])
 Y_UP = np.array([0.0, 1.0, 0.0])

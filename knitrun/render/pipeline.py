@@ -127,8 +127,8 @@ class RenderResult:
 class _FrameRaster(NamedTuple):
     """What a frame's ``raster`` pass hands on: the shading points of the front layer, of the layer behind it (None at
     ``render.layers`` 1) and of the flyaway layers (None without flyaways; one set, ``layer_start`` the points of
-    each layer, ``_stacked``) as ``strip_shading.shading_points`` gives them, the flyaway points as the kernels read them (``hairs``), which of them a hair covers (``covered``), and the
-    yarn entries whose flyaways are drawn."""
+    each layer, ``_stacked``) as ``strip_shading.shading_points`` gives them, the flyaway points as the kernels read
+    them (``hairs``), which of them a hair covers (``covered``), and the yarn entries whose flyaways are drawn."""
 
     points: dict
     behind_points: dict | None
