@@ -267,6 +267,40 @@ def test_a_reference_without_light_between_yarns(tmp_path):
     assert np.all(alone <= full + 1e-6) and alone.sum() < full.sum()
 
 
+def test_a_reference_without_its_flyaways_keeps_the_same_regular_fibers(tmp_path):
+    """``trace_reference(flyaways=False)``: the loop and hair fibers of the same draw dropped, the regular ones kept
+    point for point; the image differs from the full one (the flyaways' light) and the facts say so; the diagnostic
+    does not combine with ``own_yarn`` (one-line error)."""
+    from data_formats.scene import load_scene
+    from knitbake.fibers.fiber_set import KIND_REGULAR
+    from knitbake.trace import reference
+    from tests.helpers import FRONT, SUN, straight, write_scene
+
+    scene = load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN))
+    drawn = []
+    sweep = reference.sweep_fibers
+
+    def recorded(*args, **kwargs):
+        drawn.append(sweep(*args, **kwargs))
+        return drawn[-1]
+
+    reference.sweep_fibers = recorded
+    try:
+        full, bare = reference.build_reference(scene, seed=3), reference.build_reference(scene, seed=3, flyaways=False)
+    finally:
+        reference.sweep_fibers = sweep
+    regular = drawn[0].kind == KIND_REGULAR
+    assert 0 < regular.sum() < len(regular)  # cotton1 has flyaways to drop
+    assert bare.facts["fibers"] == regular.sum() and full.facts["fibers"] == len(regular)
+    kept = drawn[1].select(regular)
+    assert np.array_equal(kept.points, drawn[0].select(regular).points)
+    with pytest.raises(ValueError, match="do not combine"):
+        reference.build_reference(scene, own_yarn=True, flyaways=False)
+    image, facts = reference.trace_reference(scene, 2, seed=3, flyaways=False)
+    assert facts["flyaways"] is False and facts["fibers"] == regular.sum()
+    assert not np.allclose(image, reference.trace_reference(scene, 2, seed=3)[0])
+
+
 def test_curves_are_deterministic_across_threads_and_batching():
     scene = yarn_scene(ABSORBING, geometry="curves", env=uniform_env([1.0, 0.5, 0.2]),
                        light_dirs=np.array([[1.0, 0.3, 0.2]]), light_irradiance=np.array([[2.0, 2.0, 2.0]]))

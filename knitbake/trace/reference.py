@@ -30,7 +30,7 @@ from data_formats.errors import FormatError
 from data_formats.images import write_exr, write_png
 from data_formats.numba_setup import sources_hash
 from data_formats.scene import EnvironmentLight, Scene, read_curves
-from knitbake.fibers.fiber_set import FiberSet
+from knitbake.fibers.fiber_set import KIND_REGULAR, FiberSet
 from knitbake.fibers.fiber_sweep import sweep_fibers
 from knitbake.fibers.tessellate import tessellate_fibers
 from knitbake.trace.embree_curves import CurveScene
@@ -53,14 +53,19 @@ class ReferenceScene:
     own_yarn: tuple | None  # (yarn of each fiber, σ of each fiber point, reach): ``build_reference``'s ``own_yarn``
 
 
-def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_yarn: bool = False) -> ReferenceScene:
+def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_yarn: bool = False,
+                    flyaways: bool = True) -> ReferenceScene:
     """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``; ``seed`` draws the fibers;
-    ``geometry``: ``GEOMETRIES``. ``own_yarn``: also what the tracer's "no light between yarns" diagnostic reads
+    ``geometry``: ``GEOMETRIES``. ``flyaways`` False: the regular fibers alone, the loop and hair fibers drawn and
+    dropped (the regular ones are those of the full draw; a diagnostic: the full reference less this one is the light
+    the flyaways add). ``own_yarn``: also what the tracer's "no light between yarns" diagnostic reads
     (``path_tracer`` module docstring): the yarn (the scene's curves, numbered over its entries) of each fiber, the
     rest arc length σ of each fiber point (that of the nearest point of its curve's dense polyline) and the reach,
     the strip renderer's (``yarn_bounce.REACH_RADII`` yarn radii, the largest entry's)."""
     if geometry not in GEOMETRIES:
         raise FormatError(f"geometry {geometry!r}: expected one of {', '.join(GEOMETRIES)}")
+    if own_yarn and not flyaways:  # the yarn of each fiber comes from the full draw's fiber ranges
+        raise ValueError("build_reference: own_yarn and flyaways=False do not combine (one diagnostic at a time)")
     t0 = time.perf_counter()
     parts, types, yarns, sigmas, next_yarn = [], [], [], [], 0
     for k, entry in enumerate(scene.yarns):
@@ -72,6 +77,8 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_y
         radii = {i: entry.radius for i in entry.yarn_type_indices}
         drawn = _only_curves(curves, keep)
         fibers = sweep_fibers(drawn, scene.render.frame, specs, radii, seed=seed + 7919 * k)
+        if not flyaways:
+            fibers = fibers.select(fibers.kind == KIND_REGULAR)
         parts.append(fibers)
         types.append(np.full(fibers.n_fibers, k, np.int32))
         if own_yarn:
@@ -134,7 +141,7 @@ def sample_batches(spp: int, batch_spp: int | None) -> list[tuple[int, int]]:
 
 def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None,
                     fiber_seed: int | None = None, geometry: str = "curves", batch_spp: int | None = None,
-                    inter_yarn: bool = True):
+                    inter_yarn: bool = True, flyaways: bool = True):
     """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``seed`` drives the
     path sampling and, unless ``fiber_seed`` is given, the fibers too: another fiber seed draws another instance of
     the same yarns (the fiber-instance floor of a comparison), another sampling seed another estimate of the same
@@ -145,9 +152,10 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
     rays_per_s, the build facts of ``build_reference`` (geometry, fibers, segments, triangles, sweep_s,
     tessellate_s, embree_build_s) and mean_rgb. ``inter_yarn`` False: no light between yarns, a diagnostic
     (``path_tracer`` module docstring: paths end where they would scatter off another yarn than the one seen; the
-    full image less this one is the light the yarns send each other); facts then say ``inter_yarn: false``."""
+    full image less this one is the light the yarns send each other); facts then say ``inter_yarn: false``.
+    ``flyaways`` False: the regular fibers alone (``build_reference``); facts then say ``flyaways: false``."""
     fiber_seed = seed if fiber_seed is None else fiber_seed
-    built = build_reference(scene, seed=fiber_seed, geometry=geometry, own_yarn=not inter_yarn)
+    built = build_reference(scene, seed=fiber_seed, geometry=geometry, own_yarn=not inter_yarn, flyaways=flyaways)
     if on_built is not None:
         on_built(built.facts)
     total, seconds, rays = None, 0.0, 0
@@ -163,7 +171,7 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
              "batch_spp": batch_spp, "seed": seed, "fiber_seed": fiber_seed, "max_depth": max_depth,
              "render_s": seconds, "rays": rays,
              "rays_per_s": rays / seconds if seconds > 0 else 0.0, **built.facts,
-             **({} if inter_yarn else {"inter_yarn": False}),
+             **({} if inter_yarn else {"inter_yarn": False}), **({} if flyaways else {"flyaways": False}),
              "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
     return image, facts
 
