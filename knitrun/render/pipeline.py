@@ -868,11 +868,10 @@ def _between(rest, at, values) -> np.ndarray:
 
 def _stacked(layers: list) -> dict:
     """One dict of shading points from a list of ``shading_points`` dicts, the points of each in turn; its
-    ``layer_start`` (L, H·W + 1) holds each one's ``start`` into them (``start``: the first's)."""
+    ``layer_start`` (L, H·W + 1) holds each one's ``start`` into them (in place of ``start``)."""
     base = np.cumsum([0] + [len(layer["weight"]) for layer in layers])
     out = {key: np.concatenate([layer[key] for layer in layers]) for key in layers[0] if key != "start"}
     out["layer_start"] = np.stack([layer["start"] + b for layer, b in zip(layers, base)])
-    out["start"] = out["layer_start"][0]
     return out
 
 
