@@ -9,12 +9,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numba.core import types
 
 from data_formats.scene import load_scene
 from knitrun.render import compile_ahead, pipeline
 from knitrun.render.ablations import ABLATIONS
-from knitrun.render.strip_shading import (_resolve, flyaway_coverage, resolve_behind, same_surface, shade_flyaway,
-                                          shade_regular)
+from knitrun.render.interreflection import _interreflect
+from knitrun.render.strip_raster import _peel_floor, _raster, _raster_depth
+from knitrun.render.strip_shading import (_resolve, flyaway_coverage, past_blockers, resolve_behind, same_surface,
+                                          shade_flyaway, shade_regular)
 from tests.helpers import FRONT, SKY, SUN, straight, write_scene
 
 KERNELS = (shade_regular, shade_flyaway, _resolve, resolve_behind, flyaway_coverage, same_surface)
@@ -68,3 +71,21 @@ def test_a_failed_helper_costs_time_not_the_image(tmp_path, pack, monkeypatch):
     result = pipeline.Renderer(scene, {"cotton1": str(pack)}, compile_ahead=True).render()
     assert np.array_equal(result.image, alone.image)
     assert [w for w in result.facts["warnings"] if "compile-ahead helper failed (exit 3)" in w]
+
+
+def test_a_frame_compiles_each_of_its_raster_and_visibility_kernels_once(tmp_path, pack):
+    """Fewer specialisations (issue 15, item 4): each kernel a frame calls is compiled for one set of argument
+    types. Numba specialises on read-only and literal arguments, so a broadcast view or a module constant passed in
+    one place and a plain array in another compiled the kernel twice: ``_depth_test`` (a literal 0 and a read-only
+    constant from ``_raster_depth``, a variable and an array from ``_raster``), ``_peel_floor`` and ``_interreflect``
+    (read-only broadcast views) and ``past_blockers`` (called on arrays by the yarn-level bounce), ~2.6 s of a cold
+    frame. ``_depth_test`` is reached only from ``_raster`` and ``_raster_depth``, whose signatures are read here (a
+    warm cache loads those, not their callees'): their bound arguments must have the same types."""
+    for lights in (SUN, SKY):  # a shadow map (``_raster_depth``), both layers and the flyaway layer (``_raster``)
+        pipeline.Renderer(_scene(tmp_path, lights), {"cotton1": str(pack)}).render()
+    bound_types = {tuple(str(t) for t in signature[-5:-3]) for signature in _raster.signatures}
+    bound_types |= {tuple(str(t) for t in signature[-3:-1]) for signature in _raster_depth.signatures}
+    assert len(bound_types) == 1, bound_types
+    assert len(_peel_floor.signatures) == 1, _peel_floor.signatures
+    assert len(_interreflect.signatures) == 1, _interreflect.signatures
+    assert not any(isinstance(t, types.Array) for signature in past_blockers.signatures for t in signature)

@@ -36,10 +36,17 @@ def interreflected_visibility(visibility, albedo):
     numpy's chain of temporaries)."""
     v, rho = np.asarray(visibility, np.float64), np.asarray(albedo, np.float64)
     shape = np.broadcast_shapes(v.shape, rho.shape)
-    v, rho = np.broadcast_to(v, shape), np.broadcast_to(rho, shape)  # read-only views; copied below only if strided
     out = np.empty(shape)
-    _interreflect(np.ascontiguousarray(v).reshape(-1), np.ascontiguousarray(rho).reshape(-1), out.reshape(-1))
+    _interreflect(_flat(v, shape), _flat(rho, shape), out.reshape(-1))
     return out
+
+
+def _flat(a, shape):
+    """``a`` broadcast to ``shape`` as one C-contiguous writable run: the array itself where it already is one,
+    else a copy (a read-only broadcast view would make Numba compile ``_interreflect`` once more)."""
+    if a.shape == shape and a.flags.c_contiguous and a.flags.writeable:
+        return a.reshape(-1)
+    return np.array(np.broadcast_to(a, shape)).reshape(-1)
 
 
 @njit(parallel=True, cache=True)

@@ -840,7 +840,7 @@ def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, verte
                         np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets)), lines.offsets, lines.rest,
                         np.array([looks[k].radius for k in lines.entry], np.float64),
                         *tube_optics(albedo, transmit, gap[:, None]), np.ascontiguousarray(view, np.float64))
-    direct = past_blockers(vertex_vis, vertex_beyond, gap[None, :])
+    direct = past_blockers.py_func(vertex_vis, vertex_beyond, gap[None, :])  # numpy: no array kernel to compile
     vertex, covered = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
     return _between(full.rest, at, vertex), _between(full.rest, at, covered[:, None])[:, 0]
 
