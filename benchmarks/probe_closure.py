@@ -12,7 +12,13 @@ reference within the bake's noise, if the renderer evaluates the DS term that th
 1 says that it does not (BENCHMARKS.md, "Issue 13: the environment's sun as one lobe, and where the regular fibers'
 error lies").
 
-    .venv/bin/python benchmarks/probe_closure.py --pack out/bench/cotton1_standard.h5 [--ablations full,factored]
+``--views`` probes other views and lights instead, each "θ_i:θ_o:φ" in degrees (the same yarn, camera from θ_o,
+light from (θ_i, −φ)): off the diagonal, where the closure stage closes ξ at every view (``correction/xi_view``), and
+between its bin centres, where the renderer interpolates it (BENCHMARKS.md, "Issue 13: where in a knit's shape the
+error starts").
+
+    .venv/bin/python benchmarks/probe_closure.py --pack out/bench/cotton1_standard.h5 [--ablations full,factored] \
+        [--views 0:56.25:22.5,11.25:56.25:22.5]
 """
 
 from __future__ import annotations
@@ -40,8 +46,8 @@ THETA_D = (0.19635, 0.58905, -0.58905)  # bin centres of the standard pack's 8 �
 PHI = (0.39270, 1.96350, -1.17810, 2.74889)  # bin centres of its 8 φ cells (rad)
 
 
-def _scene(folder: Path, period: float, theta_d: float, phi: float, spp: int):
-    wo, light = yarn_direction(theta_d, 0.0), yarn_direction(-theta_d, -phi)
+def _scene(folder: Path, period: float, theta_i: float, theta_o: float, phi: float, spp: int):
+    wo, light = yarn_direction(theta_o, 0.0), yarn_direction(theta_i, -phi)
     centre = np.array([0.0, 0.0, 0.5 * period])
     (folder / "closure.toml").write_text(f"""format = "knit-scene"
 version = "1.0"
@@ -54,7 +60,7 @@ yarn = "cotton1"
 position = {(centre + 2.0 * wo).tolist()}
 look_at = {centre.tolist()}
 up = [0.0, 0.0, 1.0]
-ortho_height = {2.0 * period * math.cos(theta_d)}
+ortho_height = {2.0 * period * math.cos(theta_o)}
 width = 80
 height = 640
 [[lights]]
@@ -72,24 +78,34 @@ def main():
     parser.add_argument("--pack", required=True, help="cotton1 asset pack")
     parser.add_argument("--ablations", default="full,factored")
     parser.add_argument("--spp", type=int, default=32)
+    parser.add_argument("--views", default=None, help="θ_i:θ_o:φ in degrees, comma-separated (default: the diagonal "
+                        "bin centres θ_i = −θ_o = −θ_d)")
     args = parser.parse_args()
+    if args.views:
+        try:
+            views = [tuple(math.radians(float(x)) for x in view.split(":")) for view in args.views.split(",")]
+        except ValueError:
+            parser.error(f"--views {args.views!r}: expected θ_i:θ_o:φ in degrees, comma-separated")
+        if any(len(view) != 3 for view in views):
+            parser.error(f"--views {args.views!r}: expected θ_i:θ_o:φ in degrees, comma-separated")
+    else:
+        views = [(-theta_d, theta_d, phi) for theta_d in THETA_D for phi in PHI]
     period = load_preset("cotton1").geometry.ply_pitch
     ablations = args.ablations.split(",")
-    print("| θ_d | φ | " + " | ".join(ablations) + " |")
-    print("|---|---|" + "---|" * len(ablations))
+    print("| θ_i | θ_o | φ | " + " | ".join(ablations) + " |")
+    print("|---|---|---|" + "---|" * len(ablations))
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         points = np.stack([np.zeros(31), np.zeros(31), np.linspace(-1.5 * period, 2.5 * period, 31)], axis=1)
         write_yarn_curves(folder / "yarn.h5", make_yarn_curves(points[None], np.array([0, 31], np.int64),
                                                                 yarn_types=["cotton1"], units="cm"))
-        for theta_d in THETA_D:
-            for phi in PHI:
-                scene = _scene(folder, period, theta_d, phi, args.spp)
-                reference = (_trace_without_flyaways(scene, args.spp) @ LUMINANCE).sum()
-                ratios = [(render(scene, {"cotton1": args.pack}, regular_fibers(a)).image @ LUMINANCE).sum() / reference
-                          for a in ablations]
-                print(f"| {math.degrees(theta_d):+.1f}° | {math.degrees(phi):+.1f}° | "
-                      + " | ".join(f"{r:.3f}" for r in ratios) + " |", flush=True)
+        for theta_i, theta_o, phi in views:
+            scene = _scene(folder, period, theta_i, theta_o, phi, args.spp)
+            reference = (_trace_without_flyaways(scene, args.spp) @ LUMINANCE).sum()
+            ratios = [(render(scene, {"cotton1": args.pack}, regular_fibers(a)).image @ LUMINANCE).sum() / reference
+                      for a in ablations]
+            print(f"| {math.degrees(theta_i):+.2f}° | {math.degrees(theta_o):+.2f}° | {math.degrees(phi):+.1f}° | "
+                  + " | ".join(f"{r:.3f}" for r in ratios) + " |", flush=True)
 
 
 if __name__ == "__main__":
