@@ -50,7 +50,7 @@ EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 SHAPES = ("straight", "bend", "wave", "tilted", "course", "two_courses")
 COURSES = {"course": (2,), "two_courses": (2, 3)}  # rows of knit_patch_6x6.h5
 SPAN = (0.2, 1.1)  # cm along x: inside the frame at every tilt
-SAMPLES = 361  # polyline points of a synthetic shape (λ / 40 apart)
+SAMPLES = 361  # polyline points of a synthetic shape (0.0025 cm apart: r / 12)
 
 
 def shape_curves(shape: str, radius: float, centre, path: Path) -> None:
@@ -85,8 +85,7 @@ def shape_scene(light: str, shape: str, folder: Path, white: bool):
     base = load_scene(EXAMPLES / f"knit_patch_{light}.toml")
     entry = base.yarns[0]
     path = folder / f"{shape}.h5"
-    if not path.exists():
-        shape_curves(shape, entry.radius, base.camera.look_at, path)
+    shape_curves(shape, entry.radius, base.camera.look_at, path)
     entry = dataclasses.replace(entry, curves=path, **({"color": (1.0, 1.0, 1.0)} if white else {}))
     return dataclasses.replace(base, yarns=(entry,))
 
@@ -105,7 +104,8 @@ def main():
     parser.add_argument("--pack", required=True, help="cotton1 asset pack")
     parser.add_argument("--out", default="out/probe_shapes", help="folder for the curves and references")
     parser.add_argument("--spp", type=int, default=64)
-    parser.add_argument("--lights", default="directional,sky", help="knit_patch_<light> scenes to take the frame from")
+    parser.add_argument("--lights", default="directional,sky",
+                        help="knit_patch_<light> scenes to take the frame from (directional, sky, grazing)")
     parser.add_argument("--shapes", default=",".join(SHAPES))
     parser.add_argument("--models", default="full", help="ablations or combinations a+b (knitrun.render.ablations)")
     parser.add_argument("--instances", type=int, default=4, help="fiber instances traced per shape (at least 3)")
@@ -120,6 +120,9 @@ def main():
             combined(name)
         except ValueError as error:
             parser.error(f"--models: {error}")
+    for light in args.lights.split(","):
+        if not (EXAMPLES / f"knit_patch_{light}.toml").is_file():
+            parser.error(f"--lights: no example scene knit_patch_{light}.toml (directional, sky, grazing)")
     if args.instances < 3:
         parser.error("--instances: an ensemble needs at least 3 fiber instances")
     folder = Path(args.out)
