@@ -57,7 +57,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_strip_raster.py
 	@mkdir -p out/bench
 	$(BIN)/knitbake bake cotton1 --quality draft -o out/bench/cotton1_draft.h5
-	$(BIN)/knitbake bake cotton1 --quality standard --split-xi -o out/bench/cotton1_standard.h5  # split: the ablation rows
+	$(BIN)/knitbake bake cotton1 --quality standard -o out/bench/cotton1_standard.h5
 	$(BIN)/knitbake bake cotton1 --quality final -o out/bench/cotton1_final.h5
 	$(BIN)/python benchmarks/bench_render.py --pack out/bench/cotton1_standard.h5
 	$(BIN)/python benchmarks/bench_floors.py --spp 4,16,64 --out out/bench/refs

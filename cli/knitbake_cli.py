@@ -381,11 +381,12 @@ def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Same seed and settings → identical pack.")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Worker threads (default: all cores).")
 @click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
-@click.option("--split-xi", is_flag=True,
-              help="Also close ξ apart on single and multiple scattering (the tables of the ablation split_xi; "
-                   "the closure takes ~80 %% longer).")
+@click.option("--whole-xi", is_flag=True,
+              help="Close one ξ for single and multiple scattering together, not also apart (what the ablation "
+                   "whole_xi draws; the renderer's default reads the split tables): the closure takes about half "
+                   "as long.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
-def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no_cache, split_xi, as_json):
+def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no_cache, whole_xi, as_json):
     """Bake one yarn type into an asset pack: stage by stage, cached, with an error estimate for every table.
 
     Example: knitbake bake cotton1 -o cotton1.h5 --quality draft
@@ -427,7 +428,7 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
     only_list = [o.strip() for o in only.split(",")] if only is not None else None
     summary = bake(spec, output, quality=quality, only=only_list, needs=needs, seed=seed, use_cache=not no_cache,
                    on_stage=on_stage, progress_factory=progress_factory,
-                   overrides={"closure": {"split": True}} if split_xi else None)
+                   overrides={"closure": {"split": False}} if whole_xi else None)
     for bar in bars.values():
         if not bar.finished:
             bar.__exit__(None, None, None)
@@ -461,9 +462,9 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
               help="Worker processes of the embedded cluster (default: one per 2 cores); each gets cores/workers "
                    "Numba threads.")
 @click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
-@click.option("--split-xi", is_flag=True, help="Also close ξ apart on single and multiple scattering (as for bake).")
+@click.option("--whole-xi", is_flag=True, help="Close one ξ only, not also apart (as for bake).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
-def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, scheduler, workers, no_cache, split_xi,
+def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, scheduler, workers, no_cache, whole_xi,
                          as_json):
     """Bake many yarn types at once on Dask: one task per stage of each yarn, the stage cache shared with bake.
 
@@ -498,7 +499,7 @@ def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, sch
                 bar.length = total
                 bar.update(done - bar.pos)
             results = bake_library(client, jobs, quality, seed, not no_cache, on_task,
-                                   {"closure": {"split": True}} if split_xi else None)
+                                   {"closure": {"split": False}} if whole_xi else None)
     total = time.perf_counter() - t0
     failed = {name: exc for name, exc in results.items() if isinstance(exc, Exception)}
     if as_json:

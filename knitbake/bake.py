@@ -15,10 +15,14 @@ also takes its input stages' results, ``run_stage``):
 | closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer) | its inputs are baked |
 | | ``correction/*_ss``, ``*_ms`` (ξ closed apart) | closure setting ``split`` |
 
-Quality presets (``QUALITY``) set every stage's resolution and sample counts (the closure's ξ closed apart on
-single and multiple scattering, which only the ablation ``split_xi`` reads, is off in every preset: ``overrides``
-``{"closure": {"split": True}}``, ``knitbake bake --split-xi``); a scene (``scene_needs``) removes
-stages it does not need and sets the texture resolution from the largest on-screen yarn width. Each finished stage
+Quality presets (``QUALITY``) set every stage's resolution and sample counts. Every preset also closes ξ apart on
+single and multiple scattering (closure setting ``split``; the renderer's default, ``Features.split_xi``): the
+``overrides`` ``{"closure": {"split": False}}`` (``knitbake bake --whole-xi``) leave it out and save about half the
+closure's time. The standard and final presets close ξ on cells of 10.6° × 10.6° × 40° (17 × 17 × 9, centres on
+θ = 0 and φ = 0; 8 × 8 × 8 until stop 56): between the coarser cells' centres the strips missed the path tracer by up
+to 23 % where the fibers' highlights end (BENCHMARKS.md, "Issue 13: where in a knit's shape the error starts"). A
+scene (``scene_needs``) removes stages it does not need and sets the texture resolution from the largest on-screen
+yarn width. Each finished stage
 is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed; the
 closure's settings hold its input stages' settings and versions), so an
 interrupted or partial re-bake reuses finished stages. An entry stores a SHA-256 of its content; an entry that is
@@ -67,29 +71,29 @@ QUALITY = {
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (12, 24, 12, 32)},
         "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2, "n_colours": 17},
-        "closure": {"iterations": 4, "split": False},
+        "closure": {"iterations": 4, "split": True},
     },
     "standard": {
         "dual_scattering": {"n_theta": 64},
-        "correction": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 32, "spp": 4, "batches": 3,
+        "correction": {"n_v": 16, "n_theta": 17, "n_phi": 9, "rows": 32, "spp": 4, "batches": 3,
                        "ds": {"n_theta": 64}},
-        "shadowing": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 32, "spp": 4, "batches": 3},
+        "shadowing": {"n_v": 16, "n_theta": 17, "n_phi": 9, "rows": 32, "spp": 4, "batches": 3},
         "textures": {"width": 256, "height": 64, "samples": 4, "ao_rays": 16},
         "flyaway": {"width": 256, "height": 64, "samples": 4},
         "environment": {"shape": (24, 48, 24, 96)},
         "interreflection": {"n_views": 6, "rows": 16, "spp": 4, "batches": 3, "n_colours": 17},
-        "closure": {"iterations": 4, "split": False},
+        "closure": {"iterations": 4, "split": True},
     },
     "final": {
         "dual_scattering": {"n_theta": 128},
-        "correction": {"n_v": 16, "n_theta": 8, "n_phi": 8, "rows": 32, "spp": 8, "batches": 4,
+        "correction": {"n_v": 16, "n_theta": 17, "n_phi": 9, "rows": 32, "spp": 8, "batches": 4,
                        "ds": {"n_theta": 128}},
         "shadowing": {"n_v": 32, "n_theta": 16, "n_phi": 16, "rows": 64, "spp": 8, "batches": 4},
         "textures": {"width": 512, "height": 128, "samples": 6, "ao_rays": 32},
         "flyaway": {"width": 512, "height": 128, "samples": 6},
         "environment": {"shape": (32, 64, 32, 128)},
         "interreflection": {"n_views": 8, "rows": 32, "spp": 8, "batches": 4, "n_colours": 17},
-        "closure": {"iterations": 4, "split": False},
+        "closure": {"iterations": 4, "split": True},
     },
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.

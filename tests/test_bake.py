@@ -128,14 +128,14 @@ def test_cli_bake_inspect_export(tmp_path, monkeypatch):
     bad = runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "x.h5"), "--only", "nope"])
     assert bad.exit_code == 1 and "unknown table group" in bad.stderr and not (tmp_path / "x.h5").exists()
     assert runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "x.txt")]).exit_code == 1
-    seen = []  # --split-xi asks the closure for ξ closed apart (off in every preset)
+    seen = []  # --whole-xi asks the closure for the one ξ alone (every preset closes it apart as well)
     real = bake_module.bake
     monkeypatch.setattr(bake_module, "bake", lambda *a, **k: seen.append(k["overrides"]) or real(*a, **k))
-    for flags in ([], ["--split-xi"]):
+    for flags in ([], ["--whole-xi"]):
         assert runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "s.h5"), "--only", "shadowing",
                                         *flags]).exit_code == 0
-    assert seen == [None, {"closure": {"split": True}}]
-    assert all(not stages["closure"]["split"] for stages in bake_module.QUALITY.values())
+    assert seen == [None, {"closure": {"split": False}}]
+    assert all(stages["closure"]["split"] for stages in bake_module.QUALITY.values())
 
 
 @pytest.mark.slow

@@ -20,7 +20,8 @@ from tests.helpers import TINY
 
 SPEC = load_preset("cotton1")
 ROWS = TINY["correction"]["rows"]  # the closure's rows: max(rows, n_v) of the correction stage
-SPLIT = {**TINY, "closure": {**TINY["closure"], "split": True}}  # with ξ closed apart (off in the presets)
+SPLIT = {**TINY, "closure": {**TINY["closure"], "split": True}}  # with ξ closed apart (the presets' default)
+WHOLE = {**TINY, "closure": {**TINY["closure"], "split": False}}  # the one ξ alone (knitbake bake --whole-xi)
 
 
 @pytest.fixture(scope="module")
@@ -52,22 +53,24 @@ def test_a_pack_closed_by_an_older_closure_is_drawn_with_a_warning(closed_pack, 
     old = tmp_path / "old.h5"
     shutil.copy(closed_pack, old)
     with h5py.File(old, "r+") as f:
-        del f["correction/xi_view"].attrs["closure_version"]
+        del f["correction/xi_view"].attrs["closure_version"], f["correction/xi_view_ss"].attrs["closure_version"]
     (tmp_path / "new").mkdir()
     (tmp_path / "old").mkdir()
     bare = Features(flyaways=False)  # the pack has no flyaway textures
     assert Renderer(closure._scene(tmp_path / "new", SPEC, closed_pack), features=bare).warnings == []
-    warned = Renderer(closure._scene(tmp_path / "old", SPEC, old), features=bare).warnings
-    assert len(warned) == 1 and str(old) in warned[0] and "closure stage version < 4" in warned[0]
-    diagonal = Features(flyaways=False, view_xi=False)  # it reads xi_closed, whose version is this one
-    assert Renderer(closure._scene(tmp_path / "old", SPEC, old), features=diagonal).warnings == []
+    for features in (bare, Features(flyaways=False, split_xi=False)):  # xi_view_ss and _ms; xi_view
+        warned = Renderer(closure._scene(tmp_path / "old", SPEC, old), features=features).warnings
+        assert len(warned) == 1 and str(old) in warned[0] and "closure stage version < 4" in warned[0]
+    # the diagonal's tables (xi_closed_ss, _ms; xi_closed) carry this version
+    for features in (Features(flyaways=False, view_xi=False), Features(flyaways=False, view_xi=False, split_xi=False)):
+        assert Renderer(closure._scene(tmp_path / "old", SPEC, old), features=features).warnings == []
 
 
 def test_without_the_split_the_closure_bakes_the_one_xi_alone_and_the_same(closed_pack, monkeypatch):
-    """The presets leave the split off: the closure (its inputs from the cache) then writes no ``*_ss``, ``*_ms``
-    tables, and its one closed ξ is the split bake's, bit for bit."""
+    """With the split off (``knitbake bake --whole-xi``) the closure (its inputs from the cache) writes no ``*_ss``,
+    ``*_ms`` tables, and its one closed ξ is the split bake's, bit for bit."""
     monkeypatch.setenv("KNIT_CACHE_DIR", str(closed_pack.parent / "cache"))
-    summary = bake(SPEC, closed_pack.parent / "one.h5", overrides=TINY, only=list(closure.CLOSURE_INPUTS))
+    summary = bake(SPEC, closed_pack.parent / "one.h5", overrides=WHOLE, only=list(closure.CLOSURE_INPUTS))
     assert not summary["closure"]["cached"] and all(row["cached"] for s, row in summary.items() if s != "closure")
     with h5py.File(closed_pack) as a, h5py.File(closed_pack.parent / "one.h5") as b:
         assert not any(name.endswith(("_ss", "_ms")) for name in b["correction"])
@@ -156,10 +159,10 @@ def test_the_closed_xi_reproduces_the_traced_radiance_where_the_papers_does_not(
 
 
 def test_the_closure_draws_its_lone_yarn_unshadowed_by_its_own_strip(closed_pack, monkeypatch):
-    """The closure's renderer draws the full model without flyaways. The lone yarn's bins are the same looked up on
-    the tube's surface as on the strip plane; without the tilt of its own strip (``pipeline.receiver_bias`` =
-    the bias alone) they are the same again only where no light runs more than 48° from the yarn's normal plane:
-    on a grid of four θ bins the two middle ones (±22.5°), not the outer ones (±67.5°)."""
+    """The closure's renderer draws the full model without flyaways (with the one ξ, which it closes first). The lone
+    yarn's bins are the same looked up on the tube's surface as on the strip plane; without the tilt of its own strip
+    (``pipeline.receiver_bias`` = the bias alone) they are the same again only where no light runs more than 48° from
+    the yarn's normal plane: on a grid of four θ bins the two middle ones (±22.5°), not the outer ones (±67.5°)."""
     import knitrun.render.pipeline as pipeline
 
     asked = []
@@ -174,7 +177,7 @@ def test_the_closure_draws_its_lone_yarn_unshadowed_by_its_own_strip(closed_pack
     with monkeypatch.context() as m:
         m.setattr(pipeline, "Renderer", Recording)
         assert np.all(np.isfinite(closure.render_bins(closed_pack, SPEC, shape, ROWS)))
-    assert asked == [Features(flyaways=False)]
+    assert asked == [Features(flyaways=False, split_xi=False)]
 
     def bins(own_strip=True, **features):
         with monkeypatch.context() as m:
@@ -207,10 +210,12 @@ def test_the_renderer_reads_the_closed_xi_where_the_pack_has_it(closed_pack, tmp
     scene = closure._scene(tmp_path, SPEC, closed_pack)
     with h5py.File(closed_pack) as f:
         paper, closed = f["correction/xi"][()], f["correction/xi_view"][()]
-    view = Renderer(scene)  # the default: ξ closed at every view
+    # the one closed ξ (the pack has it apart too, which the default reads: test_the_renderer_reads_the_split_xi_*)
+    whole = ablations.ABLATIONS["whole_xi"]
+    view = Renderer(scene, features=whole)  # ξ closed at every view
     assert np.array_equal(view.looks[0].xi_view, closed)
     assert view.setup_facts["xi"] == {SPEC.name: "closed on the renderer at every view"}
-    diagonal = Renderer(scene, features=Features(view_xi=False))  # the diagonal of the view-closed ξ
+    diagonal = Renderer(scene, features=Features(view_xi=False, split_xi=False))  # the view-closed ξ's diagonal
     assert diagonal.looks[0].xi_view.shape[0] == 0
     assert np.array_equal(diagonal.looks[0].xi_full, closure.diagonal_of(closed))
     assert diagonal.setup_facts["xi"] == {SPEC.name: "closed on the renderer"}
@@ -225,6 +230,8 @@ def test_the_renderer_reads_the_closed_xi_where_the_pack_has_it(closed_pack, tmp
     shutil.copy(closed_pack, old)
     diagonal = paper * 1.25
     with h5py.File(old, "r+") as f:
+        for name in ("xi_view_ss", "xi_view_ms", "xi_closed_ss", "xi_closed_ms", "radiance_view_ss"):
+            del f[f"correction/{name}"], f[f"correction/{name}_stderr"]
         del f["correction/xi_view"], f["correction/xi_view_stderr"]
         del f["correction/radiance_view"], f["correction/radiance_view_stderr"]
         del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
@@ -232,9 +239,13 @@ def test_the_renderer_reads_the_closed_xi_where_the_pack_has_it(closed_pack, tmp
             value = diagonal if name == "xi_closed" else f["correction/xi_stderr"][()]
             f[f"correction/{name}"] = value.astype(np.float32)
             f[f"correction/{name}"].attrs.update(f["correction/" + name.replace("_closed", "")].attrs)
-    renderer = Renderer(closure._scene(tmp_path, SPEC, old), features=Features(view_xi=True))  # asked, not there
+    renderer = Renderer(closure._scene(tmp_path, SPEC, old), features=whole)  # asked, not there
     assert np.allclose(renderer.looks[0].xi_full, diagonal) and renderer.looks[0].xi_view.shape[0] == 0
     assert renderer.setup_facts["xi"] == {SPEC.name: "closed on the renderer"}
+    default = Renderer(closure._scene(tmp_path, SPEC, old))  # ξ closed apart asked for too, not there either
+    assert np.allclose(default.looks[0].xi_full, diagonal) and default.looks[0].xi_single.shape[0] == 0
+    assert default.setup_facts["xi"] == {
+        SPEC.name: "closed on the renderer (the pack has no ξ closed apart on single and multiple scattering)"}
     with h5py.File(old, "r+") as f:  # a pack from before the closure
         del f["correction/xi_closed"], f["correction/xi_closed_stderr"]
     renderer = Renderer(closure._scene(tmp_path, SPEC, old))
@@ -284,9 +295,11 @@ def test_the_split_xi_reproduces_single_and_multiple_scattering_apart(closed_pac
     assert apart[0] < 0.7 * one[0] and apart[1] < 0.7 * one[1], (one, apart)
 
 
-def test_the_renderer_reads_the_split_xi_when_asked(closed_pack, tmp_path):
-    """``Features.split_xi``: multiple scattering's ξ where the one ξ was read, single scattering's beside it, on the
-    diagonal and at every view; not asked, or a pack without them (schema < 2.5), the one closed ξ (facts say so)."""
+def test_the_renderer_reads_the_split_xi_by_default(closed_pack, tmp_path):
+    """``Features.split_xi`` (the default): multiple scattering's ξ where the one ξ was read, single scattering's
+    beside it, on the diagonal and at every view; not asked (``whole_xi``), or a pack without them (schema < 2.5),
+    the one closed ξ (facts say so); with the paper's ξ, which has no split, that ξ (and facts say nothing of a
+    split)."""
     scene = closure._scene(tmp_path, SPEC, closed_pack)
     with h5py.File(closed_pack) as f:
         ss, ms = f["correction/xi_view_ss"][()], f["correction/xi_view_ms"][()]
@@ -297,9 +310,12 @@ def test_the_renderer_reads_the_split_xi_when_asked(closed_pack, tmp_path):
     assert split.setup_facts["xi"] == {SPEC.name: "closed on the renderer, apart on single and multiple scattering"}
     view = Renderer(scene, features=Features(split_xi=True, view_xi=True)).looks[0]
     assert np.array_equal(view.xi_view, ms) and np.array_equal(view.xi_single_view, ss)
-    assert Renderer(scene).looks[0].xi_single.shape[0] == 0  # the default: one ξ
+    default = Renderer(scene).looks[0]
+    assert np.array_equal(default.xi_view, ms) and np.array_equal(default.xi_single_view, ss)
+    whole = Renderer(scene, features=ablations.ABLATIONS["whole_xi"]).looks[0]
+    assert whole.xi_single.shape[0] == 0 and whole.xi_single_view.shape[0] == 0
     papers = Renderer(scene, features=Features(split_xi=True, closed_xi=False))  # the split needs the closed ξ
-    assert papers.looks[0].xi_single.shape[0] == 0 and "needs the closed ξ" in papers.setup_facts["xi"][SPEC.name]
+    assert papers.looks[0].xi_single.shape[0] == 0 and papers.setup_facts["xi"][SPEC.name] == "the paper's"
     old = tmp_path / "schema24.h5"
     shutil.copy(closed_pack, old)
     with h5py.File(old, "r+") as f:

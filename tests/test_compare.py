@@ -178,15 +178,16 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     report = (out / "report.md").read_text()
     assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
     assert "ply-scale contrast" in report and "with the Monte Carlo floor" in report
-    assert summary["ablations"]["full"]["xi"] == {"cotton1": "closed on the renderer at every view"}
+    assert summary["ablations"]["full"]["xi"] == {
+        "cotton1": "closed on the renderer at every view, apart on single and multiple scattering"}
+    assert summary["ablations"]["whole_xi"]["xi"] == {"cotton1": "closed on the renderer at every view"}
     assert summary["ablations"]["papers_xi"]["xi"] == {"cotton1": "the paper's"}
-    # the test pack is baked without the split closure (the presets' default): its split_xi row says what it drew
-    assert "the pack has no ξ closed apart" in summary["ablations"]["split_xi"]["xi"]["cotton1"]
-    assert "Rows drawn without the tables they ask for: full with ξ closed apart" in report
+    assert "Rows drawn without the tables they ask for" not in report
     old = tmp_path / "schema22.h5"  # a pack from before the closure: every row shaded with the paper's ξ, and said
     shutil.copy(pack, old)
     with h5py.File(old, "r+") as f:
-        for name in ("xi_closed", "xi_view", "radiance_view"):
+        for name in ("xi_closed", "xi_view", "radiance_view", "xi_closed_ss", "xi_closed_ms", "xi_view_ss",
+                     "xi_view_ms", "radiance_view_ss"):
             del f[f"correction/{name}"], f[f"correction/{name}_stderr"]
     # with a third draw the report adds the ensemble (here the Monte Carlo floor stands in for a further fiber
     # instance: the plumbing is what is tested; ``test_ensemble_*`` test the statistics)
@@ -199,6 +200,10 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     assert set(given["floors"]) == {"instance"}
     assert given["ablations"]["full"]["xi"] == {"cotton1": "the paper's (the pack has no correction/xi_closed)"}
     assert "ξ of the full model: cotton1: the paper's (the pack has no" in (tmp_path / "r2" / "report.md").read_text()
+    lacking = [line for line in (tmp_path / "r2" / "report.md").read_text().splitlines()
+               if line.startswith("Rows drawn without the tables they ask for: ")]
+    assert len(lacking) == 1 and ("full with one ξ closed on single and multiple scattering together: cotton1: ξ the "
+                                  "paper's (the pack has no correction/xi_closed)") in lacking[0]
     draws = [read_exr(out / f) for f in ("reference.exr", "floor_instance.exr", "floor_monte_carlo.exr")]
     assert given["ensemble"]["instances"] == 3 and given["ensemble"]["files"] == [str(out / "floor_monte_carlo.exr")]
     strip = read_exr(tmp_path / "r2" / "strip_full.exr")

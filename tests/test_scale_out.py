@@ -122,8 +122,8 @@ def test_the_bake_library_command(tmp_path):
     assert "1 of 1 pack(s)" in result.output and (tmp_path / "silk1.h5").exists()
 
 
-def test_bake_library_passes_split_xi_on(tmp_path, monkeypatch):
-    """`--split-xi` asks every yarn's closure for ξ closed apart, as `knitbake bake --split-xi` does."""
+def test_bake_library_passes_whole_xi_on(tmp_path, monkeypatch):
+    """`--whole-xi` asks every yarn's closure for the one ξ alone, as `knitbake bake --whole-xi` does."""
     import contextlib
 
     from click.testing import CliRunner
@@ -139,9 +139,9 @@ def test_bake_library_passes_split_xi_on(tmp_path, monkeypatch):
 
     monkeypatch.setattr(scale_out, "dask_client", lambda *a: contextlib.nullcontext())
     monkeypatch.setattr(scale_out, "bake_library", fake_library)
-    for flags in ([], ["--split-xi"]):
+    for flags in ([], ["--whole-xi"]):
         CliRunner().invoke(knitbake, ["bake-library", "silk1", "-o", str(tmp_path), *flags])
-    assert seen == [None, {"closure": {"split": True}}]
+    assert seen == [None, {"closure": {"split": False}}]
 
 
 def _small_scene():

@@ -235,7 +235,7 @@ def test_the_bounce_is_computed_about_one_and_a_half_radii_apart_and_interpolate
 def test_ablations_combine_as_their_changes_to_the_full_model():
     """"a+b" is the full model with what a and b each change (the probes' ``--models``); an unknown name is refused
     in one line."""
-    assert combined("no_bounce+split_xi") == Features(yarn_bounce=False, split_xi=True)
+    assert combined("no_bounce+whole_xi") == Features(yarn_bounce=False, split_xi=False)
     assert combined("full") == ABLATIONS["full"] and combined("no_tables") == ABLATIONS["no_tables"]
     assert combined("no_tables+no_bounce") == Features(xi=False, fiber_shadowing=False, fiber_detail=False,
                                                        yarn_bounce=False)

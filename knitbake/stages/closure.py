@@ -40,9 +40,9 @@ at a diagonal bin centre the two lookups read the same grid value and no other, 
 the one that stage ran, on the same Ψ_* (the diagonal bins of ``correction/radiance_view`` are the correction
 stage's ``correction/radiance``, not traced again).
 
-Apart on single and multiple scattering (closure version 3, schema 2.5; with the setting ``split``, which the
-quality presets leave off and ``knitbake bake --split-xi`` turns on: it costs 80 % more closure time, and only the
-ablation ``split_xi`` reads it). One ξ scales the renderer's single
+Apart on single and multiple scattering (closure version 3, schema 2.5; with the setting ``split``, which every
+quality preset turns on since stop 56 and ``knitbake bake --whole-xi`` off: it costs 80–90 % more closure time, and
+the renderer reads it by default, ``Features.split_xi``). One ξ scales the renderer's single
 scattering and its multiple scattering alike, and closed on their sum it makes up for what one lacks with the
 other: on cotton1 the renderer's multiple scattering is about half the path tracer's and its single scattering about
 right (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter"), so the closed ξ leaves single scattering

@@ -10,21 +10,20 @@ and the geometric fiber count for light crossing a yarn instead of the one from 
 False shades with the rank-1 factors ξ_M ξ_N and Ψ_{G,M} Ψ_{G,N} (the paper's) instead of the pack's unfactorized
 tables.
 
-The full model (the defaults) draws the flyaway layer and shades the regular fibers with ξ closed on this renderer
-at every view, looks the lights up on the tube surface the camera sees, reads the textures with the axial parallax
-and adds the light the neighbouring yarns scatter onto each yarn. The flyaway layer lowers the yarn-scale error on
-every scene once its hairs lie in their own yarn's shadow and the regular fibers are not already too bright: with
-the paper's ξ the lone yarn's regular fibers alone are 15–16 % brighter than the reference traced without hairs
-under the sky and back-lit (BENCHMARKS.md, "Issue 13: hairs in their own yarn's shadow, and the closed ξ with
-flyaways as the default", "Issue 13: ξ closed on the strip renderer"). The last four terms became the default
-together in stop 49 (BENCHMARKS.md, "Issue 13: the default model of stop 49"): against the model without them
-(``diagonal_xi+no_parallax+no_bounce+axis_shadows``) the yarn-scale error over the instance floor falls on the
-four patches (1.70 / 1.58 / 1.80 / 2.02× → 1.51 / 1.46 / 1.70 / 1.87×: directional, grazing, sky, simulated)
-and the straight yarn under the sky (1.14 → 1.04×), the back-lit and directional straight yarns move by +0.01
-and +0.02×, and six of the seven mean radiance ratios lie in [0.95, 1.05] instead of five (the back-lit yarn's is
-1.058). Each alone does not: the view-closed ξ darkens the patches unless the bounce gives back the light that the
-diagonal ξ's excess had stood in for, and the surface lookups light legs that make the grazing patch too bright
-unless the ξ is right at grazing light.
+The full model (the defaults) draws the flyaway layer and shades the regular fibers with ξ closed on this renderer at
+every view, apart on single and multiple scattering, looks the lights up on the tube surface the camera sees, reads the
+textures with the axial parallax and adds the light the neighbouring yarns scatter onto each yarn. The flyaway layer
+lowers the yarn-scale error on every scene once its hairs lie in their own yarn's shadow and the regular fibers are not
+already too bright: with the paper's ξ the lone yarn's regular fibers alone are 15–16 % brighter than the reference
+traced without hairs under the sky and back-lit (BENCHMARKS.md, "Issue 13: hairs in their own yarn's shadow, and the
+closed ξ with flyaways as the default", "Issue 13: ξ closed on the strip renderer"). The last four terms became the
+default together in stop 49 (BENCHMARKS.md, "Issue 13: the default model of stop 49"): against the model without them
+(``diagonal_xi+no_parallax+no_bounce+axis_shadows``) the yarn-scale error over the instance floor falls on the four
+patches (1.70 / 1.58 / 1.80 / 2.02× → 1.51 / 1.46 / 1.70 / 1.87×: directional, grazing, sky, simulated) and the straight
+yarn under the sky (1.14 → 1.04×), the back-lit and directional straight yarns move by +0.01 and +0.02×, and six of the
+seven mean radiance ratios lie in [0.95, 1.05] instead of five (the back-lit yarn's is 1.058). Each alone does not: the
+view-closed ξ darkens the patches unless the bounce gives back the light that the diagonal ξ's excess had stood in for,
+and the surface lookups light legs that make the grazing patch too bright unless the ξ is right at grazing light.
 
 ``fiber_detail`` multiplies the regular fibers' radiance by the fiber-level detail of the pack's AO texture
 (``yarn_look.fiber_detail``: each texel's ambient visibility over its row's mean), the crevices between plies
@@ -62,12 +61,17 @@ spreads what its fibers scatter, not the light that crosses between them (``yarn
 49 it spread all of T_Y, τ_Y included, and the example patches came out 10–18 % too bright with it
 (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter", "Issue 13: the default model of stop 49").
 
-``split_xi`` shades with ξ closed apart on single and multiple scattering (the pack's ``correction/xi_closed_ss`` and
-``_ms``, schema 2.5, baked with ``knitbake bake --split-xi``; ASSET_PACK.md §6 "Closure apart"): single scattering (the
-BCSDF f of the lit fibers, and the environment's I_M) takes the first, the dual-scattering terms of multiple scattering
-the second. Not the default: it corrects a dark colour channel (the lone red yarn's green 1.41 → 1.11 of the reference)
-and the lone yarn under a directional light, but the sky scenes and the grazing patch get worse (BENCHMARKS.md, "Issue
-13: ξ closed apart on single and multiple scattering").
+``split_xi`` shades with ξ closed apart on single and multiple scattering (the pack's ``correction/xi_view_ss`` and
+``_ms``, or the diagonal's ``xi_closed_ss``, ``_ms``; schema 2.5, baked by every quality preset since stop 56, before
+that with ``knitbake bake --split-xi``; ASSET_PACK.md §6 "Closure apart"): single scattering (the BCSDF f of the lit
+fibers, and the environment's I_M) takes the first, the dual-scattering terms of multiple scattering the second. A pack
+without them is shaded with the one closed ξ, and the render's facts say so. The default on both backends since stop 56,
+together with the standard pack's finer closure cells (17 × 17 × 9 instead of 8 × 8 × 8): one ξ closed on the sum of the
+two made up for the renderer's multiple scattering, about half the path tracer's on the lone yarn, with single
+scattering, so a red yarn's dark channels came out 1.23–1.28× too bright on the red patches; apart they are 1.02–1.07×,
+and the four patches' yarn-scale error over the instance floor falls from 1.51 / 1.57 / 1.38 / 1.86× to 1.41 / 1.54 /
+1.36 / 1.76× (directional, sky, grazing, simulated; BENCHMARKS.md, "Issue 13: ξ closed apart as the default"). The
+ablation ``whole_xi`` shades with the one ξ.
 
 ``two_blockers`` counts up to two yarns between a point and a directional light instead of one: a depth-peeled
 second shadow layer (``shadow_map``, ``behind``) gives V₂, the fraction of the light that at most one yarn blocks,
@@ -99,7 +103,7 @@ plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-l
 closed on the renderer (at every view), + flyaways (= the full model, the default); every rung draws the surface
 lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
 detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
-bounce, with the lookups on the axis plane, with ξ closed apart on single and multiple scattering, with two
+bounce, with the lookups on the axis plane, with one ξ closed on single and multiple scattering together, with two
 blocking yarns counted and without the body's glow on its hairs.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
@@ -124,7 +128,8 @@ class Features:
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
     parallax: bool = True  # the regular points' texture coordinate and tangent where the tube's seen surface lies
     yarn_bounce: bool = True  # light the neighbouring yarns scatter onto a yarn under directional lights
-    split_xi: bool = False  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms)
+    split_xi: bool = True  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms) where the pack
+    # has it, else the one closed ξ
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
     hair_glow: bool = True  # hairs beside a yarn lit by the light its body scatters (strip_shading.body_glow)
@@ -146,7 +151,7 @@ ABLATIONS = {
     "no_parallax": Features(parallax=False),
     "no_bounce": Features(yarn_bounce=False),
     "axis_shadows": Features(surface_shadows=False),
-    "split_xi": Features(split_xi=True),
+    "whole_xi": Features(split_xi=False),
     "two_blockers": Features(two_blockers=True),
     "no_hair_glow": Features(hair_glow=False),
 }
@@ -160,7 +165,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "no_parallax": "full without the axial parallax",
                    "no_bounce": "full without the yarn-level bounce",
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
-                   "split_xi": "full with ξ closed apart on single and multiple scattering",
+                   "whole_xi": "full with one ξ closed on single and multiple scattering together",
                    "two_blockers": "full with two blocking yarns counted",
                    "no_hair_glow": "full without the body's glow on its hairs"}
 

@@ -277,9 +277,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
                 else "the paper's" + ("" if full_tables else " factors") +
                 ("" if CLOSED_XI in stored or not full_tables else f" (the pack has no {CLOSED_XI})"))
                + (", apart on single and multiple scattering" if split else
-                  "" if not (split_xi and corrections) else
-                  " (the pack has no ξ closed apart on single and multiple scattering)" if view_xi or closed_xi else
-                  " (ξ closed apart needs the closed ξ, which is not in use)"))
+                  " (the pack has no ξ closed apart on single and multiple scattering)"
+                  if split_xi and (view_xi or closed_xi) else ""))  # the paper's ξ has no split: nothing to say
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:

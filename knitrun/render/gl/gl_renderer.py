@@ -7,7 +7,8 @@ What runs where
 * Set-up (once, on the CPU, shared with the CPU renderer): ``pipeline.Renderer`` reads the packs (with the ablation's
   tables), the yarn curves and the environment's SRBF fit; the multiple-scattering lights (cells of the sky) are
   formed once (``knitrun.render.ms_lights.ms_cells``). Here every pack table becomes a GL texture: the DS tables
-  (``ds_table``), ξ and Ψ^Fiber (3-D textures for the full tables, 2-D for the factors), the I_M^{TT,D} table (a 3-D
+  (``ds_table``), ξ (with single scattering's, ``Features.split_xi``) and Ψ^Fiber (3-D textures for the full tables,
+  2-D for the factors), the I_M^{TT,D} table (a 3-D
   texture, its second and third axes merged into one), the tangent, coverage and fiber-detail mip chains (each level
   uploaded as that GL mip level).
 * Per frame (``render``): the curves' polylines (``pipeline._polylines``) and their vertex tangents are uploaded as
@@ -257,9 +258,6 @@ class GLRenderer:
         if not features.multiple_scattering:
             raise FormatError("the GL backend draws the full light transport; Features.multiple_scattering=False "
                               "(single scattering alone) is drawn by the CPU renderer")
-        if features.split_xi:
-            raise FormatError("the GL backend does not draw ξ closed apart on single and multiple scattering "
-                              "(Features.split_xi); the CPU renderer does")
         if features.two_blockers:
             raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
                               "counts two")
@@ -321,6 +319,14 @@ class GLRenderer:
         view = corr.xi_view  # (N_v, N_θ, N_θ, N_φ, 3) as texel (φ, θ_i·N_θ + θ_o, v)
         xi_view, use_view = full(view.reshape(view.shape[0], view.shape[1] * view.shape[2], view.shape[3], 3))
         psi_full, use_psi = full(corr.psi_full)
+        # ξ of single scattering (Features.split_xi; shading.glsl xi_single_kind): view-closed, a full table or none
+        single_view = corr.xi_single_view
+        if single_view.shape[0] > 0:
+            xi_single, single_kind = _texture3d(ctx, single_view.reshape(
+                single_view.shape[0], single_view.shape[1] * single_view.shape[2], single_view.shape[3], 3)), 2
+        else:
+            xi_single, used = full(corr.xi_single)
+            single_kind = 1 if used else 0
         p = kernel_look.params
         albedo = (look.yarn_albedo or 0.0) if self.features.interreflection else 0.0
         uniforms = {
@@ -337,13 +343,14 @@ class GLRenderer:
             "detail_levels": int(detail_levels),
             "use_xi_full": use_xi, "use_psi_full": use_psi, "use_xi_view": use_view,
             "surface_shadows": int(self.features.surface_shadows), "parallax": int(self.features.parallax),
-            "xi_view_n_theta": int(view.shape[2]),
+            "xi_view_n_theta": int(view.shape[2]), "xi_single_kind": single_kind,
+            "xi_single_n_theta": int(single_view.shape[2]),
             "im_lo": im.lo, "im_hi": im.hi, "im_repeat": [int(r) for r in im.repeat],
             "im_size": [na, nb, nc, nd], "im_code": [int(c) for c in im.codes],
         }
         textures = {
             "ds_table": _texture2d(ctx, kernel_look.ds.reshape(5, -1, 3)),
-            "xi_view": xi_view, "xi_full": xi_full,
+            "xi_view": xi_view, "xi_full": xi_full, "xi_single": xi_single,
             "xi_m": _texture2d(ctx, corr.xi_m), "xi_n": _texture2d(ctx, corr.xi_n),
             "psi_full": psi_full, "psi_gm": _texture2d(ctx, corr.psi_gm), "psi_gn": _texture2d(ctx, corr.psi_gn),
             "im_table": _texture3d(ctx, table.reshape(na, nb * nc, nd, 3)),

@@ -57,8 +57,8 @@ vec4 fly_sample(int layer, float level, float u, float v) {
 // crosses the tube, τ_Y + (1 − τ_Y) a_f(θ_i)^(n_cross_rest·chord), averaged over HAIR_DEPTHS depths within the hair layer's reach
 vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
     if (on_body) {
-        vec3 xi, psi;
-        corrections(v_strip, t, n, b, 0.0, w, xi, psi);
+        vec3 xi, xi_s, psi;
+        corrections(v_strip, t, n, b, 0.0, w, xi, xi_s, psi);
         return vec3(fiber_lit(psi));
     }
     float wb = dot(w, b), wn = dot(w, n);

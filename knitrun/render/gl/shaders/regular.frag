@@ -112,17 +112,19 @@ void main() {
     vec3 offset = surface + (length(half_width) > 0.0 ? radius * v * normalize(half_width) : vec3(0.0));
     vec3 receiver = sp.position + surface;
     Params p = yarn_params();
-    vec3 rgb = vec3(0.0), ambient = vec3(0.0), xi, psi, total, back_direct, f_scatter;  // directional, environment
+    vec3 rgb = vec3(0.0), ambient = vec3(0.0);  // directional, environment
+    vec3 xi, xi_s, psi, total, back_direct, f_scatter, single;
     for (int l = 0; l < n_lights; ++l) {
         vec3 w = light_dir[l];
-        corrections(v, t, n, b, theta_o, w, xi, psi);
+        corrections(v, t, n, b, theta_o, w, xi, xi_s, psi);
         float vis = pcss(light_atlas, light_map[l], receiver, shadow_bias + own_strip_depth(offset, raster_t, w),
                          PCF_RADIUS);
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), clamped_asin(dot(tf, w)), theta_o_f, phi_f,
                   n_occluded + (1.0 - vis) * n_cross_rest, past_blockers(vis) * fiber_lit(psi), true, total, back_direct,
-                  f_scatter);
-        rgb += light_irradiance[l] * xi * total;
+                  f_scatter, single);
+        // single scattering (D f cos θ_i) by its ξ, the rest by multiple scattering's (strip_shading.shade_regular)
+        rgb += light_irradiance[l] * (xi_s * single + xi * (total - single));
     }
     float lobe_vis[MAX_LOBES];
     for (int j = 0; j < n_lobes; ++j) {
@@ -130,7 +132,7 @@ void main() {
         lobe_vis[j] = vis;
         if (vis <= 0.0) continue;
         vec3 w = lobe_dir[j];
-        corrections(v, t, n, b, theta_o, w, xi, psi);
+        corrections(v, t, n, b, theta_o, w, xi, xi_s, psi);
         float theta_j_f = clamped_asin(dot(tf, w));
         float phi_f = azimuth_difference(tf, wo, w);
         Params wide = spread_params(p, spread2, phi_f);
@@ -138,11 +140,11 @@ void main() {
         float mu_r = lobe_centre_at(wide.alpha_r, sigma_r, theta_o_f);
         vec3 i_m = im_kernel(wide, mu_r, sigma_r, cos2_normaliser(mu_r, sigma_r), theta_o_f, theta_j_f, -phi_f,
                              lobe_lambda[j]);
-        ambient += lobe_weight[j] * vis * xi * psi * i_m;
+        ambient += lobe_weight[j] * vis * xi_s * psi * i_m;  // single scattering
     }
     for (int c = 0; c < n_clusters; ++c) {
         vec3 w = cluster_dir[c];
-        corrections(v, t, n, b, theta_o, w, xi, psi);
+        corrections(v, t, n, b, theta_o, w, xi, xi_s, psi);
         float vis = 0.0;
         for (int j = 0; j < n_lobes; ++j)
             vis += texelFetch(cluster_weights, ivec2(j, c), 0).r * lobe_vis[j];
@@ -150,7 +152,7 @@ void main() {
         float theta_c_f = clamped_asin(dot(tf, w));
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross,
-                  lit, false, total, back_direct, f_scatter);
+                  lit, false, total, back_direct, f_scatter, single);
         ambient += cluster_irradiance[c] * xi * (lit * D_B * back_direct + f_scatter) * cos(theta_c_f);
     }
     if (yarn_bounce != 0)

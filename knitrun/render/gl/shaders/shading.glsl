@@ -145,9 +145,10 @@ vec3 bcsdf_single(Params p, float theta_i, float theta_o, float phi) {
 }
 
 // dual_scattering.ds_kernel: L_o/E (total), f_back^direct and F_scatter (its rows K_TOTAL, K_F_BACK_DIRECT,
-// K_F_SCATTER); with_single false leaves f out
+// K_F_SCATTER) and the single scattering in the total, direct f cos θ_i (strip_shading.shade_regular's ``single``);
+// with_single false leaves f out
 void ds_kernel(Params p, float theta_i, float theta_o, float phi, float n_front, float direct, bool with_single,
-               out vec3 total, out vec3 back_direct, out vec3 f_scatter) {
+               out vec3 total, out vec3 back_direct, out vec3 f_scatter, out vec3 single) {
     int i0, i1;
     float fr;
     axis_cell(theta_i, -HALF_PI, HALF_PI, textureSize(ds_table, 0).x, false, i0, i1, fr);
@@ -179,6 +180,7 @@ void ds_kernel(Params p, float theta_i, float theta_o, float phi, float n_front,
         back_direct[ch] = bd;
         f_scatter[ch] = fs;
         total[ch] = (fd + fs) * cos_i;
+        single[ch] = direct * f_single[ch] * cos_i;
     }
 }
 
@@ -340,10 +342,16 @@ uniform sampler2D psi_gm;
 uniform sampler2D psi_gn;
 uniform int use_xi_full;
 uniform int use_psi_full;
+// ξ of single scattering (ξ closed apart, Features.split_xi): xi_single_kind 0 none (ξ serves both), 1 a full table
+// (v, θ_d, φ) as xi_full, 2 a view-closed one (v, θ_i, θ_o, φ) as xi_view, on xi_single_n_theta θ cells
+uniform sampler3D xi_single;
+uniform int xi_single_kind;
+uniform int xi_single_n_theta;
 
-// strip_shading._corrections: ξ(v, θ_i, θ_o, φ) (view-closed) or ξ(v, θ_d, φ), and Ψ^Fiber_G(v, θ_i, φ) toward w,
-// θ_i and φ against the strip frame
-void corrections(float v, vec3 t, vec3 n, vec3 b, float theta_o, vec3 w, out vec3 xi, out vec3 psi) {
+// strip_shading._corrections: ξ(v, θ_i, θ_o, φ) (view-closed) or ξ(v, θ_d, φ), the ξ of single scattering (xi_s: the
+// same from the single-scattering table where there is one, xi then being multiple scattering's; else xi) and
+// Ψ^Fiber_G(v, θ_i, φ) toward w, θ_i and φ against the strip frame
+void corrections(float v, vec3 t, vec3 n, vec3 b, float theta_o, vec3 w, out vec3 xi, out vec3 xi_s, out vec3 psi) {
     float theta_i = clamped_asin(dot(w, t));
     float phi = -atan(dot(w, b), dot(w, n));
     float theta_d = 0.5 * (theta_o - theta_i);
@@ -352,6 +360,12 @@ void corrections(float v, vec3 t, vec3 n, vec3 b, float theta_o, vec3 w, out vec
     else
         xi = use_xi_full != 0 ? table_v3(xi_full, v, theta_d, phi)
                               : table_v(xi_m, v, theta_d, -HALF_PI, HALF_PI, false) * table_v(xi_n, v, phi, -PI, PI, true);
+    if (xi_single_kind == 2)
+        xi_s = table_v4(xi_single, xi_single_n_theta, v, theta_i, theta_o, phi);
+    else if (xi_single_kind == 1)
+        xi_s = table_v3(xi_single, v, theta_d, phi);
+    else
+        xi_s = xi;
     psi = use_psi_full != 0 ? table_v3(psi_full, v, theta_i, phi)
                             : table_v(psi_gm, v, theta_i, -HALF_PI, HALF_PI, false) * table_v(psi_gn, v, phi, -PI, PI, true);
 }
