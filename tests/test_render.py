@@ -531,9 +531,42 @@ def test_the_bodys_glow_on_a_hair_is_the_tube_phase_over_the_tubes_solid_angle()
     assert np.all(glow(1.4, w) > 0.0) and np.all(np.isfinite(glow(1.0001, w)))
 
 
-def test_the_bodys_glow_lights_only_the_hairs_beside_a_yarn_under_directional_lights(tmp_path, pack):
-    """``Features.hair_glow`` (the default): under the sun the hairs beside the yarn are brighter than without it and
-    nothing is darker; under the sky alone (no directional light) the image is the one without it, bit for bit."""
+def test_a_hair_over_the_body_takes_the_glow_at_the_depths_in_front_of_it():
+    """Over the body (|v| ≤ 1) the hairs the camera sees lie in front of it: ``body_glow`` averages the same sum over
+    the depths √(1 − v²)…√(reach² − v²) alone (none behind the body, none inside it). Lit from behind (ω along −n)
+    such a hair sees the body's dark side, so it takes S_Y's glow and hardly R_Y's (under 1 %: the depths lie a few
+    degrees off the light's axis); where the reach ends inside the body, nothing."""
+    n, b = np.array([0, 0, 1.0]), np.array([0, 1.0, 0])
+    albedo, reach, v, out = np.array([0.9, 0.8, 0.7]), 2.2, 0.5, np.empty(3)
+
+    def glow(tube, w, reach=reach):
+        body_glow(np.asarray(tube, float), albedo, reach, v, n, b, np.asarray(w, float) / np.linalg.norm(w), out)
+        return out.copy()
+
+    def g(a):
+        return 0.25 * np.pi * (np.sin(a) + (np.pi - a) * np.cos(a))
+
+    tube = np.array([[0.3, 0.25, 0.2], [0.2, 0.15, 0.1]])
+    w = np.array([0.0, 0.6, 0.8])
+    front, depth = np.sqrt(1 - v ** 2), np.sqrt(reach ** 2 - v ** 2)
+    expected = np.zeros(3)
+    for k in range(HAIR_DEPTHS):
+        z = front + (depth - front) * (k + 0.5) / HAIR_DEPTHS
+        rho = np.hypot(v, z)
+        alpha = np.arccos(np.clip((v * 0.6 + z * 0.8) / rho, -1, 1))
+        expected += ((tube[0] * g(alpha) + tube[1] * g(np.pi - alpha)) / np.pi ** 2 * 4 * np.arcsin(1 / rho)
+                     / (4 * np.pi) * albedo / HAIR_DEPTHS)
+    np.testing.assert_allclose(glow(tube, w), expected, rtol=1e-12)
+    behind = [0.0, 0.0, -1.0]
+    forward, back = glow([[0.0] * 3, [0.3] * 3], behind), glow([[0.3] * 3, [0.0] * 3], behind)
+    assert np.all(forward > 0) and np.all(back < 1e-2 * forward)
+    np.testing.assert_allclose(glow(tube, w, reach=0.8), 0.0)  # √(0.8² − v²) < √(1 − v²): no hair in front
+
+
+def test_the_bodys_glow_lights_the_hairs_under_directional_lights_only(tmp_path, pack):
+    """``Features.hair_glow`` (the default): under the sun the hairs beside the yarn and in front of it are brighter
+    than without it and nothing is darker; under the sky alone (no directional light) the image is the one without
+    it, bit for bit."""
     path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="sun")
     glowing, plain = _render(path, pack).image, _render(path, pack, features=Features(hair_glow=False)).image
     assert np.all(np.isfinite(glowing)) and np.all(glowing >= plain - 1e-7)

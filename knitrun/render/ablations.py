@@ -91,12 +91,12 @@ tube's surface"). Alone, with the diagonal ξ, it left the grazing patch 1.21× 
 at grazing light, which the axis plane's wrong shadows had hidden). Both backends draw it; the ablation
 ``axis_shadows`` looks up on the axis plane.
 
-``hair_glow`` lights the hairs beside a yarn's body, under directional lights, by the light that body scatters
-(``strip_shading.body_glow``: the bounce's tube phase from the pack's hull albedo and transmittance, the tube's solid
-angle from the hair). In front light the rows beside the straight yarn's body hold 42 % light that the path-traced
-reference scatters more than once and the hairs' single scattering lacks (BENCHMARKS.md, "Issue 13: the flyaway
-draw"). The default on both backends since stop 52 (measured on the seven scenes in BENCHMARKS.md, stops 51–52);
-the ablation ``no_hair_glow`` leaves it out.
+``hair_glow`` lights the hairs beside a yarn's body and in front of it (since stop 56), under directional lights, by the
+light that body scatters (``strip_shading.body_glow``: the bounce's tube phase from the pack's hull albedo and
+transmittance, the tube's solid angle from the hair). In front light the rows beside the straight yarn's body hold 42 %
+light that the path-traced reference scatters more than once and the hairs' single scattering lacks (BENCHMARKS.md,
+"Issue 13: the flyaway draw"). The default on both backends since stop 52 (measured on the seven scenes in
+BENCHMARKS.md, stops 51–52); the ablation ``no_hair_glow`` leaves it out.
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ

@@ -83,14 +83,14 @@ scattered radiance by its own single scattering and darkens it, where in the pat
 body add light.
 
 The body's glow on its hairs (``Features.hair_glow``, the default; ``body_glow``; GLSL ``body_glow``): a hair beside its
-yarn's body (|v_strip| > 1) is also lit by the light the body scatters, which in front light is 42 % of what the
-path-traced reference shows beside the body (light that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13:
-the flyaway draw"). The body is the tube of ``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal
-plane it sends toward a point at angle α (in the normal plane) from the light the radiance
-E V cos θ_L (R_Y g(α) + S_Y g(π − α))/π²; a hair at distance ρ radii from the axis sees the (infinite) tube over the
-solid angle Ω = 4 asin(1/ρ) and, taking its BCSDF's response to that extended source as its albedo
-a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the camera, averaged over the depths
-the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
+yarn's body (|v_strip| > 1), or over it (in front of it, where the camera sees hairs; since stop 56), is also lit by the
+light the body scatters, which in front light is 42 % of what the path-traced reference shows beside the body (light
+that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13: the flyaway draw"). The body is the tube of
+``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal plane it sends toward a point at angle α (in the
+normal plane) from the light the radiance E V cos θ_L (R_Y g(α) + S_Y g(π − α))/π²; a hair at distance ρ radii from the
+axis sees the (infinite) tube over the solid angle Ω = 4 asin(1/ρ) and, taking its BCSDF's response to that extended
+source as its albedo a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the camera,
+averaged over the depths the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
 
 Zinke's density factors d_f, d_b come with the look (``Look.d_f``, ``d_b``: ``dual_scattering.D_F``, ``D_B``); both
 0 (``Features.multiple_scattering`` False) leave single scattering alone, the split that ``benchmarks/probe_split.py``
@@ -593,10 +593,12 @@ def cylinder_solid_angle(rho):
 @njit(cache=True)
 def body_glow(tube, albedo, reach, v, n, b, w, out):
     """out[:3] = the radiance toward the camera, per unit irradiance and visibility of a directional light from ``w``,
-    that a hair at strip coordinate ``v`` (yarn radii from the axis, along b; |v| > 1) returns of the light its own
-    yarn's body scatters onto it (module docstring, "The body's glow on its hairs"), averaged over ``HAIR_DEPTHS``
-    depths within ``reach`` radii. ``tube`` (2, 3): the body's R_Y and S_Y (``yarn_bounce.tube_optics``), ``albedo``
-    (3,): the hair's A_R + A_TT + A_D; n, b the strip frame."""
+    that a hair at strip coordinate ``v`` (yarn radii from the axis, along b) returns of the light its own yarn's body
+    scatters onto it (module docstring, "The body's glow on its hairs"), averaged over ``HAIR_DEPTHS`` depths z
+    (along n, toward the camera) within ``reach`` radii: beside the body (|v| > 1) over −d…d, d = √(reach² − v²); over
+    it (|v| ≤ 1) over the front part √(1 − v²)…d, where the hairs the camera sees lie (those behind are hidden by the
+    body). ``tube`` (2, 3): the body's R_Y and S_Y (``yarn_bounce.tube_optics``), ``albedo`` (3,): the hair's
+    A_R + A_TT + A_D; n, b the strip frame."""
     out[0] = out[1] = out[2] = 0.0
     wb, wn = dot(w, b), dot(w, n)
     cos_l = math.sqrt(wb * wb + wn * wn)  # cos θ_L: the light's part normal to the yarn
@@ -604,8 +606,11 @@ def body_glow(tube, albedo, reach, v, n, b, w, out):
         return
     wb, wn = wb / cos_l, wn / cos_l
     depth = math.sqrt(max(reach * reach - v * v, 0.0))
+    front = math.sqrt(1.0 - v * v) if abs(v) <= 1.0 else -depth  # the nearest depth a hair seen there lies at
+    if depth <= front:
+        return
     for k in range(HAIR_DEPTHS):
-        z = depth * ((2.0 * k + 1.0) / HAIR_DEPTHS - 1.0)
+        z = front + (depth - front) * (k + 0.5) / HAIR_DEPTHS
         rho = math.sqrt(v * v + z * z)
         if rho <= 1.0:
             continue
@@ -668,7 +673,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, 
                     lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap) * cos_i
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
-                    if glow is not None and not on_body:  # the body's glow (``body_glow``), lit as the hair is
+                    if glow is not None:  # the body's glow (``body_glow``), lit as the hair is
                         for ch in range(3):
                             hair_albedo[ch] = params[P_A_R + ch] + params[P_A_TT + ch] + params[P_A_D + ch]
                         body_glow(glow, hair_albedo, reach, v_strip, n, b, w, f)

@@ -83,9 +83,10 @@ vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b
 }
 
 // strip_shading.body_glow: the radiance toward the camera, per unit irradiance and visibility of a directional light
-// from w, that a hair at v_strip (|v_strip| > 1) returns of the light its own yarn's body scatters onto it: the tube's
-// phase (R_Y g(α) + S_Y g(π − α))/π² at the hair times the tube's solid angle 4 asin(1/ρ) over 4π times the hair's
-// albedo, averaged over HAIR_DEPTHS depths within the hair layer's reach (SHADING.md §6)
+// from w, that a hair at v_strip returns of the light its own yarn's body scatters onto it: the tube's phase
+// (R_Y g(α) + S_Y g(π − α))/π² at the hair times the tube's solid angle 4 asin(1/ρ) over 4π times the hair's albedo,
+// averaged over HAIR_DEPTHS depths within the hair layer's reach, over the body (|v_strip| ≤ 1) those in front of it
+// (SHADING.md §6)
 vec3 body_glow(float reach, float v_strip, vec3 n, vec3 b, vec3 w, vec3 albedo) {
     float wb = dot(w, b), wn = dot(w, n);
     float cos_l = sqrt(wb * wb + wn * wn);
@@ -93,9 +94,11 @@ vec3 body_glow(float reach, float v_strip, vec3 n, vec3 b, vec3 w, vec3 albedo) 
     wb /= cos_l;
     wn /= cos_l;
     float depth = sqrt(max(reach * reach - v_strip * v_strip, 0.0));
+    float front = abs(v_strip) <= 1.0 ? sqrt(1.0 - v_strip * v_strip) : -depth;  // the nearest depth seen there
     vec3 glow = vec3(0.0);
+    if (depth <= front) return glow;
     for (int k = 0; k < HAIR_DEPTHS; ++k) {
-        float z = depth * ((2.0 * float(k) + 1.0) / float(HAIR_DEPTHS) - 1.0);
+        float z = front + (depth - front) * (float(k) + 0.5) / float(HAIR_DEPTHS);
         float rho = sqrt(v_strip * v_strip + z * z);
         if (rho <= 1.0) continue;
         // yarn_bounce.lambert_pair: g(α) and g(π − α) from cos α
@@ -150,7 +153,7 @@ void main() {
         float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS));
         rgb += light_irradiance[l] * lit * hair_light(on_body, reach, v_strip, sp.t, sp.n, sp.b, w) * f
              * cos(theta_i_f);
-        if (use_glow != 0 && !on_body)  // the body's glow, lit as the hair is
+        if (use_glow != 0)  // the body's glow, lit as the hair is
             rgb += light_irradiance[l] * lit * body_glow(reach, v_strip, sp.n, sp.b, w, p.a_r + p.a_tt + p.a_d);
     }
     for (int j = 0; j < n_lobes; ++j) {
