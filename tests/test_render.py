@@ -23,8 +23,8 @@ from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render,
                                      strip_receivers)
-from knitrun.render.strip_shading import (HAIR_DEPTHS, _hair_light, body_glow, cylinder_solid_angle, resolve,
-                                          resolve_behind, shade_regular, variant_of)
+from knitrun.render.strip_shading import (HAIR_DEPTHS, _corrections, _hair_light, body_glow, cylinder_solid_angle,
+                                          resolve, resolve_behind, shade_regular, variant_of)
 from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor, shading_look
@@ -574,6 +574,36 @@ def test_the_bodys_glow_lights_the_hairs_under_directional_lights_only(tmp_path,
     sky = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY, name="sky")
     np.testing.assert_array_equal(_render(sky, pack).image,
                                   _render(sky, pack, features=Features(hair_glow=False)).image)
+
+
+def test_a_term_that_asks_for_one_xi_gets_what_asking_for_both_gives():
+    """``_corrections(single=…, multiple=…)``: the sky's lobes ask for single scattering's ξ, its cells for multiple
+    scattering's; each gets the value a call asking for both gives, and the other output is not written. Without
+    single scattering's own table its ξ is the one ξ, looked up even when only it is asked for."""
+    rng = np.random.default_rng(5)
+    ms, ss = rng.uniform(0.5, 2.0, (4, 3, 3, 4, 3)), rng.uniform(0.5, 2.0, (4, 3, 3, 4, 3))
+    t, n, b = np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), np.array([0, 1.0, 0])
+    w = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
+    out = {name: np.full(3, -1.0) for name in ("xi", "xi_s", "psi", "scratch")}
+
+    def ask(tables, **which):
+        for value in out.values():
+            value[:] = -1.0
+        _corrections(tables, 0.3, t, n, b, 0.2, w, out["xi"], out["xi_s"], out["psi"], out["scratch"], **which)
+        return out["xi"].copy(), out["xi_s"].copy()
+
+    apart = Corrections(no_full_table(), ones_factor(), ones_factor(), no_full_table(), ones_factor(), ones_factor(),
+                        ms, no_full_table(), ss)
+    xi, xi_s = ask(apart)
+    assert np.all(xi > 0) and np.all(xi_s > 0) and not np.allclose(xi, xi_s)
+    single, multiple = ask(apart, multiple=False), ask(apart, single=False)
+    np.testing.assert_array_equal(single[1], xi_s)
+    np.testing.assert_array_equal(single[0], -1.0)
+    np.testing.assert_array_equal(multiple[0], xi)
+    np.testing.assert_array_equal(multiple[1], -1.0)
+    whole = apart._replace(xi_single_view=no_view_table())
+    one, _ = ask(whole)
+    np.testing.assert_array_equal(ask(whole, multiple=False)[1], one)
 
 
 def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_crosses_it():

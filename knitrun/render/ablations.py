@@ -64,14 +64,14 @@ spreads what its fibers scatter, not the light that crosses between them (``yarn
 ``split_xi`` shades with ξ closed apart on single and multiple scattering (the pack's ``correction/xi_view_ss`` and
 ``_ms``, or the diagonal's ``xi_closed_ss``, ``_ms``; schema 2.5, baked by every quality preset since stop 56, before
 that with ``knitbake bake --split-xi``; ASSET_PACK.md §6 "Closure apart"): single scattering (the BCSDF f of the lit
-fibers, and the environment's I_M) takes the first, the dual-scattering terms of multiple scattering the second. A pack
-without them is shaded with the one closed ξ, and the render's facts say so. The default on both backends since stop 56,
-together with the standard pack's finer closure cells (17 × 17 × 9 instead of 8 × 8 × 8): one ξ closed on the sum of the
-two made up for the renderer's multiple scattering, about half the path tracer's on the lone yarn, with single
-scattering, so a red yarn's dark channels came out 1.23–1.28× too bright on the red patches; apart they are 1.02–1.07×,
-and the four patches' yarn-scale error over the instance floor falls from 1.51 / 1.57 / 1.38 / 1.86× to 1.41 / 1.54 /
-1.36 / 1.76× (directional, sky, grazing, simulated; BENCHMARKS.md, "Issue 13: ξ closed apart as the default"). The
-ablation ``whole_xi`` shades with the one ξ.
+fibers, and the environment's I_M) takes the first, the dual-scattering terms of multiple scattering the second. A
+pack without them is shaded with the one closed ξ, and the render's facts say so. The default on both backends since
+stop 56, with the standard pack's finer closure cells (17 × 17 × 9 instead of 8 × 8 × 8): one ξ closed on the sum of
+the two made up for the renderer's multiple scattering, about half the path tracer's on the lone yarn, with single
+scattering, and the red patches' dark channels came out 1.11–1.22× the reference's; apart they are 1.04–1.08×, and
+the four patches' yarn-scale error over the instance floor falls from 1.47 / 1.63 / 1.42 / 1.87× to 1.41 / 1.54 /
+1.36 / 1.76× (directional, sky, grazing, simulated; BENCHMARKS.md, "Issue 13: ξ closed apart as the default (stop
+56)"). The ablation ``whole_xi`` shades with the one ξ.
 
 ``two_blockers`` counts up to two yarns between a point and a directional light instead of one: a depth-peeled
 second shadow layer (``shadow_map``, ``behind``) gives V₂, the fraction of the light that at most one yarn blocks,

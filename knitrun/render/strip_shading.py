@@ -341,24 +341,29 @@ def _factored_or_full(full, m_tab, n_tab, v, theta, phi, out, scratch):
 
 
 @njit(cache=True, inline='always')
-def _corrections(tables, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch):
+def _corrections(tables, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, single=True, multiple=True):
     """ξ into ``xi``, the ξ of single scattering into ``xi_s`` and Ψ^Fiber_G(v, θ_i, φ) into ``psi`` (``tables``:
     ``shading_inputs.Corrections``) for light direction ω = ``w`` seen from θ_o (θ_i and φ by ``_strip_angles``):
     ξ(v, θ_i, θ_o, φ) from the view-closed table when it has cells, else ξ(v, θ_d, φ) with θ_d = (θ_o − θ_i)/2; the
     same from the single-scattering tables where they have cells (ξ closed apart on single and multiple scattering,
-    ``xi`` then being multiple scattering's), else ``xi_s`` = ``xi``."""
+    ``xi`` then being multiple scattering's), else ``xi_s`` = ``xi``. A term that uses one of the two asks for it
+    alone (``single``, ``multiple``): the other is then not looked up and its output is left as it was (the sky's
+    lobes are single scattering, its cells multiple: one 4-D lookup each instead of two)."""
     theta_i, phi = _strip_angles(w, t, n, b)
     theta_d = 0.5 * (theta_o - theta_i)
-    if tables.xi_view.shape[0] > 0:
-        _table_v4(tables.xi_view, v, theta_i, theta_o, phi, xi)
-    else:
-        _factored_or_full(tables.xi_full, tables.xi_m, tables.xi_n, v, theta_d, phi, xi, scratch)
-    if tables.xi_single_view.shape[0] > 0:
-        _table_v4(tables.xi_single_view, v, theta_i, theta_o, phi, xi_s)
-    elif tables.xi_single.shape[0] > 0:
-        _table_v3(tables.xi_single, v, theta_d, phi, xi_s)
-    else:
-        xi_s[0], xi_s[1], xi_s[2] = xi[0], xi[1], xi[2]
+    apart = tables.xi_single_view.shape[0] > 0 or tables.xi_single.shape[0] > 0
+    if multiple or not apart:
+        if tables.xi_view.shape[0] > 0:
+            _table_v4(tables.xi_view, v, theta_i, theta_o, phi, xi)
+        else:
+            _factored_or_full(tables.xi_full, tables.xi_m, tables.xi_n, v, theta_d, phi, xi, scratch)
+    if single:
+        if tables.xi_single_view.shape[0] > 0:
+            _table_v4(tables.xi_single_view, v, theta_i, theta_o, phi, xi_s)
+        elif tables.xi_single.shape[0] > 0:
+            _table_v3(tables.xi_single, v, theta_d, phi, xi_s)
+        else:
+            xi_s[0], xi_s[1], xi_s[2] = xi[0], xi[1], xi[2]
     _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, psi, scratch)
 
 
@@ -498,7 +503,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
                         continue
                     _copy_row(lobes.direction, j, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, multiple=False)
                     theta_j_f = longitudinal_angle(tf, w)
                     phi_f = azimuth_difference(tf, wo, w)
                     spread_params(params, spread2, phi_f, wide)
@@ -509,7 +514,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                         rgb[q, ch] += lobes.weight[j, ch] * vis * xi_s[ch] * psi[ch] * i_m[ch]  # single scattering
                 for c in range(ms.direction.shape[0]):  # multiple scattering: cells of the sky as distant lights
                     _copy_row(ms.direction, c, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
+                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, single=False)
                     vis = ms.visibility[c, q]
                     lit = vis * _fiber_lit(psi)
                     theta_c_f = longitudinal_angle(tf, w)
