@@ -225,7 +225,7 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
 def test_the_full_model_keeps_the_straight_yarns_brightness(tmp_path):
     """Brightness is the first thing a user sees: on the example straight yarn under the directional light, the full
     model's mean radiance stays within ±10 % of the path-traced reference's (cotton1 at standard quality, the
-    reference at the scene's spp; about a minute)."""
+    reference at the scene's spp; about a minute with the bake's stages in the cache, ~20 min without)."""
     scene = load_scene(EXAMPLES / "straight_yarn_directional.toml")
     pack = tmp_path / "cotton1.h5"
     bake(load_preset("cotton1"), pack, quality="standard")

@@ -96,7 +96,10 @@ light that body scatters (``strip_shading.body_glow``: the bounce's tube phase f
 transmittance, the tube's solid angle from the hair). In front light the rows beside the straight yarn's body hold 42 %
 light that the path-traced reference scatters more than once and the hairs' single scattering lacks (BENCHMARKS.md,
 "Issue 13: the flyaway draw"). The default on both backends since stop 52 (measured on the seven scenes in
-BENCHMARKS.md, stops 51–52); the ablation ``no_hair_glow`` leaves it out.
+BENCHMARKS.md, stops 51–52); the ablation ``no_hair_glow`` leaves it out. The hairs over the body took no glow until
+stop 56, though the reference's add twice the strips' light there (back-lit +24.4 against +11.1 %, in front light +6.2
+against +2.9 %); with it the back-lit yarn's brightness went from 0.909 to 0.929 of the reference's, the simulated
+patch's from 0.936 to 0.958 and the grazing patch's from 1.031 to 1.055 (BENCHMARKS.md, stop 56).
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ
@@ -132,7 +135,7 @@ class Features:
     # has it, else the one closed ξ
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
-    hair_glow: bool = True  # hairs beside a yarn lit by the light its body scatters (strip_shading.body_glow)
+    hair_glow: bool = True  # hairs beside and over a yarn lit by the light its body scatters (strip_shading.body_glow)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
