@@ -58,7 +58,7 @@ vec4 fly_sample(int layer, float level, float u, float v) {
 vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
     if (on_body) {
         vec3 xi, xi_s, psi;
-        corrections(v_strip, t, n, b, 0.0, w, xi, xi_s, psi);
+        corrections(v_strip, t, n, b, 0.0, w, false, false, xi, xi_s, psi);  // Ψ^Fiber_G alone
         return vec3(fiber_lit(psi));
     }
     float wb = dot(w, b), wn = dot(w, n);

@@ -116,7 +116,7 @@ void main() {
     vec3 xi, xi_s, psi, total, back_direct, f_scatter, single;
     for (int l = 0; l < n_lights; ++l) {
         vec3 w = light_dir[l];
-        corrections(v, t, n, b, theta_o, w, xi, xi_s, psi);
+        corrections(v, t, n, b, theta_o, w, true, true, xi, xi_s, psi);
         float vis = pcss(light_atlas, light_map[l], receiver, shadow_bias + own_strip_depth(offset, raster_t, w),
                          PCF_RADIUS);
         float phi_f = azimuth_difference(tf, wo, w);
@@ -132,7 +132,7 @@ void main() {
         lobe_vis[j] = vis;
         if (vis <= 0.0) continue;
         vec3 w = lobe_dir[j];
-        corrections(v, t, n, b, theta_o, w, xi, xi_s, psi);
+        corrections(v, t, n, b, theta_o, w, true, false, xi, xi_s, psi);
         float theta_j_f = clamped_asin(dot(tf, w));
         float phi_f = azimuth_difference(tf, wo, w);
         Params wide = spread_params(p, spread2, phi_f);
@@ -144,7 +144,7 @@ void main() {
     }
     for (int c = 0; c < n_clusters; ++c) {
         vec3 w = cluster_dir[c];
-        corrections(v, t, n, b, theta_o, w, xi, xi_s, psi);
+        corrections(v, t, n, b, theta_o, w, false, true, xi, xi_s, psi);
         float vis = 0.0;
         for (int j = 0; j < n_lobes; ++j)
             vis += texelFetch(cluster_weights, ivec2(j, c), 0).r * lobe_vis[j];

@@ -350,22 +350,31 @@ uniform int xi_single_n_theta;
 
 // strip_shading._corrections: ξ(v, θ_i, θ_o, φ) (view-closed) or ξ(v, θ_d, φ), the ξ of single scattering (xi_s: the
 // same from the single-scattering table where there is one, xi then being multiple scattering's; else xi) and
-// Ψ^Fiber_G(v, θ_i, φ) toward w, θ_i and φ against the strip frame
-void corrections(float v, vec3 t, vec3 n, vec3 b, float theta_o, vec3 w, out vec3 xi, out vec3 xi_s, out vec3 psi) {
+// Ψ^Fiber_G(v, θ_i, φ) toward w, θ_i and φ against the strip frame; a term asks for the ξ it uses (single, multiple),
+// the other is not looked up (left at 0)
+void corrections(float v, vec3 t, vec3 n, vec3 b, float theta_o, vec3 w, bool single, bool multiple, out vec3 xi,
+                 out vec3 xi_s, out vec3 psi) {
     float theta_i = clamped_asin(dot(w, t));
     float phi = -atan(dot(w, b), dot(w, n));
     float theta_d = 0.5 * (theta_o - theta_i);
-    if (use_xi_view != 0)
-        xi = table_v4(xi_view, xi_view_n_theta, v, theta_i, theta_o, phi);
-    else
-        xi = use_xi_full != 0 ? table_v3(xi_full, v, theta_d, phi)
-                              : table_v(xi_m, v, theta_d, -HALF_PI, HALF_PI, false) * table_v(xi_n, v, phi, -PI, PI, true);
-    if (xi_single_kind == 2)
-        xi_s = table_v4(xi_single, xi_single_n_theta, v, theta_i, theta_o, phi);
-    else if (xi_single_kind == 1)
-        xi_s = table_v3(xi_single, v, theta_d, phi);
-    else
-        xi_s = xi;
+    xi = vec3(0.0);
+    xi_s = vec3(0.0);
+    if (multiple || (single && xi_single_kind == 0)) {
+        if (use_xi_view != 0)
+            xi = table_v4(xi_view, xi_view_n_theta, v, theta_i, theta_o, phi);
+        else
+            xi = use_xi_full != 0 ? table_v3(xi_full, v, theta_d, phi)
+                                  : table_v(xi_m, v, theta_d, -HALF_PI, HALF_PI, false)
+                                    * table_v(xi_n, v, phi, -PI, PI, true);
+    }
+    if (single) {
+        if (xi_single_kind == 2)
+            xi_s = table_v4(xi_single, xi_single_n_theta, v, theta_i, theta_o, phi);
+        else if (xi_single_kind == 1)
+            xi_s = table_v3(xi_single, v, theta_d, phi);
+        else
+            xi_s = xi;
+    }
     psi = use_psi_full != 0 ? table_v3(psi_full, v, theta_i, phi)
                             : table_v(psi_gm, v, theta_i, -HALF_PI, HALF_PI, false) * table_v(psi_gn, v, phi, -PI, PI, true);
 }
