@@ -97,8 +97,8 @@ transmittance, the tube's solid angle from the hair). In front light the rows be
 light that the path-traced reference scatters more than once and the hairs' single scattering lacks (BENCHMARKS.md,
 "Issue 13: the flyaway draw"). The default on both backends since stop 52 (measured on the seven scenes in
 BENCHMARKS.md, stops 51–52); the ablation ``no_hair_glow`` leaves it out. The hairs over the body took no glow until
-stop 56, though the reference's add twice the strips' light there (back-lit +24.4 against +11.1 %, in front light +6.2
-against +2.9 %); with it the back-lit yarn's brightness went from 0.909 to 0.929 of the reference's, the simulated
+stop 56, though one reference draw's add twice the strips' light there (back-lit +24.4 against +11.1 %, in front light
++6.2 against +2.9 %); with it the back-lit yarn's brightness went from 0.909 to 0.929 of the reference's, the simulated
 patch's from 0.936 to 0.958 and the grazing patch's from 1.031 to 1.055 (BENCHMARKS.md, stop 56).
 
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
