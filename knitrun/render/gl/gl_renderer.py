@@ -315,18 +315,19 @@ class GLRenderer:
         def full(tab):
             return (_texture3d(ctx, tab), 1) if tab.shape[0] > 0 else (_texture3d(ctx, np.zeros((1, 1, 1, 3))), 0)
 
+        def view_rows(tab):  # a view-closed table (N_v, N_θ, N_θ, N_φ, 3) as texel (φ, θ_i·N_θ + θ_o, v)
+            return tab.reshape(tab.shape[0], tab.shape[1] * tab.shape[2], tab.shape[3], 3)
+
         xi_full, use_xi = full(corr.xi_full)
-        view = corr.xi_view  # (N_v, N_θ, N_θ, N_φ, 3) as texel (φ, θ_i·N_θ + θ_o, v)
-        xi_view, use_view = full(view.reshape(view.shape[0], view.shape[1] * view.shape[2], view.shape[3], 3))
+        view, single_view = corr.xi_view, corr.xi_single_view
+        xi_view, use_view = full(view_rows(view))
         psi_full, use_psi = full(corr.psi_full)
-        # ξ of single scattering (Features.split_xi; shading.glsl xi_single_kind): view-closed, a full table or none
-        single_view = corr.xi_single_view
+        # ξ of single scattering (Features.split_xi; shading.glsl xi_single_kind): view-closed (2), a full table (1)
+        # or none (0)
         if single_view.shape[0] > 0:
-            xi_single, single_kind = _texture3d(ctx, single_view.reshape(
-                single_view.shape[0], single_view.shape[1] * single_view.shape[2], single_view.shape[3], 3)), 2
+            xi_single, single_kind = full(view_rows(single_view))[0], 2
         else:
-            xi_single, used = full(corr.xi_single)
-            single_kind = 1 if used else 0
+            xi_single, single_kind = full(corr.xi_single)
         p = kernel_look.params
         albedo = (look.yarn_albedo or 0.0) if self.features.interreflection else 0.0
         uniforms = {
