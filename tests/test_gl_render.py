@@ -225,6 +225,24 @@ def test_the_bodys_glow_on_its_hairs_follows_the_cpu_renderer(tmp_path, pack):
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
 
 
+def test_the_hairs_behind_the_body_follow_the_cpu_renderer(tmp_path, pack):
+    """``Features.hairs_behind`` (the default) on the flyaway layer lit from behind the yarn: the GLSL share of the
+    hairs behind the body (read from the regular coverage texture) adds what the CPU's adds, to 2 % in the mean and
+    6 % per pixel, and nothing gets darker."""
+    backlit = """[[lights]]
+type = "directional"
+direction = [0.0, 0.3, -1.0]
+irradiance = [2.0, 2.0, 2.0]"""
+    path = write_scene(tmp_path, [straight()], camera=ORTHO, lights=backlit, name="behind")
+    gl, cpu = _both(path, pack)
+    front, front_cpu = _both(path, pack, Features(hairs_behind=False))
+    added_gl, added_cpu = gl - front, cpu - front_cpu
+    assert added_cpu.mean() > 0.01 * front_cpu.mean() and added_gl.min() >= -1e-6
+    assert abs(added_gl.mean() / added_cpu.mean() - 1) < 2e-2
+    assert np.abs(added_gl - added_cpu).mean() < 6e-2 * np.abs(added_cpu).mean()
+    assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
+
+
 def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
     many = "\n".join(SUN for _ in range(gl_renderer.MAX_LIGHTS + 1))
     with pytest.raises(FormatError, match="directional lights") as e:

@@ -23,8 +23,8 @@ from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render,
                                      strip_receivers)
-from knitrun.render.strip_shading import (HAIR_DEPTHS, _corrections, _hair_light, body_glow, cylinder_solid_angle,
-                                          resolve, resolve_behind, shade_regular, variant_of)
+from knitrun.render.strip_shading import (HAIR_DEPTHS, _corrections, _hair_light, behind_share, body_glow,
+                                          cylinder_solid_angle, resolve, resolve_behind, shade_regular, variant_of)
 from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor, shading_look
@@ -467,15 +467,17 @@ def test_flyaway_variant_hash_is_the_fixed_hash_and_uses_all_three():
     assert counts.min() > 0.25 * picks.size  # each variant about a third
 
 
-def _through_yarn(v, w_b, w_n, reach, a_f, n_cross, gap=0.0):
-    """The fraction of light reaching a hair beside a yarn (unit radius) from direction (w_b, w_n) in the yarn's
-    cross-section, by ray–circle intersection at each of the kernel's depths: the gap transmittance plus the rest
-    times a_f to the power n_cross times the chord inside the circle over its diameter."""
+def _through_yarn(v, w_b, w_n, reach, a_f, n_cross, gap=0.0, behind=False):
+    """The fraction of light reaching a hair beside a yarn (unit radius; ``behind``: behind its body) from direction
+    (w_b, w_n) in the yarn's cross-section, by ray–circle intersection at each of the kernel's depths (spread over
+    −d…d, d = √(reach² − v²); ``behind``: over −d…−√(1 − v²)): the gap transmittance plus the rest times a_f to the
+    power n_cross times the chord inside the circle over its diameter."""
     d = np.array([w_b, w_n]) / math.hypot(w_b, w_n)
     depth = math.sqrt(max(reach * reach - v * v, 0.0))
+    lo, hi = -depth, -math.sqrt(1.0 - v * v) if behind else depth
     out = np.zeros(3)
     for k in range(HAIR_DEPTHS):
-        p = np.array([v, depth * ((2 * k + 1) / HAIR_DEPTHS - 1)])
+        p = np.array([v, lo + (hi - lo) * (k + 0.5) / HAIR_DEPTHS])
         disc = (p @ d) ** 2 - (p @ p - 1.0)  # |p + s d| = 1: s = −p·d ± √disc
         crossed = disc > 0 and -(p @ d) - math.sqrt(disc) > 0
         out += gap + (1.0 - gap) * a_f ** (n_cross * math.sqrt(disc)) if crossed else 1.0
@@ -509,7 +511,7 @@ def test_the_bodys_glow_on_a_hair_is_the_tube_phase_over_the_tubes_solid_angle()
     reach, out = 2.2, np.empty(3)
 
     def glow(v, w, tube=tube):
-        body_glow(tube, albedo, reach, v, n, b, np.asarray(w, float) / np.linalg.norm(w), out)
+        body_glow(tube, albedo, reach, v, 0.0, n, b, np.asarray(w, float) / np.linalg.norm(w), out)
         return out.copy()
 
     def g(a):
@@ -531,36 +533,62 @@ def test_the_bodys_glow_on_a_hair_is_the_tube_phase_over_the_tubes_solid_angle()
     assert np.all(glow(1.4, w) > 0.0) and np.all(np.isfinite(glow(1.0001, w)))
 
 
-def test_a_hair_over_the_body_takes_the_glow_at_the_depths_in_front_of_it():
-    """Over the body (|v| ≤ 1) the hairs the camera sees lie in front of it: ``body_glow`` averages the same sum over
-    the depths √(1 − v²)…√(reach² − v²) alone (none behind the body, none inside it). Lit from behind (ω along −n)
-    such a hair sees the body's dark side, so it takes S_Y's glow and hardly R_Y's (under 1 %: the depths lie a few
-    degrees off the light's axis); where the reach ends inside the body, nothing."""
+def test_a_hair_over_the_body_takes_the_glow_at_the_depths_in_front_of_and_behind_it():
+    """Over the body (|v| ≤ 1) the hairs the camera sees lie in front of it, and a share ``behind`` behind it (seen
+    through its gaps): ``body_glow`` averages the same sum over the depths √(1 − v²)…√(reach² − v²) with weight
+    1 − behind and −√(reach² − v²)…−√(1 − v²) with weight behind (none inside the body). Lit from behind (ω along
+    −n) a hair in front sees the body's dark side, so it takes S_Y's glow and hardly R_Y's (under 1 %: the depths lie
+    a few degrees off the light's axis), and a hair behind the body sees its lit side: R_Y's glow and hardly S_Y's;
+    where the reach ends inside the body, nothing."""
     n, b = np.array([0, 0, 1.0]), np.array([0, 1.0, 0])
     albedo, reach, v, out = np.array([0.9, 0.8, 0.7]), 2.2, 0.5, np.empty(3)
 
-    def glow(tube, w, reach=reach):
-        body_glow(np.asarray(tube, float), albedo, reach, v, n, b, np.asarray(w, float) / np.linalg.norm(w), out)
+    def glow(tube, w, behind=0.0, reach=reach):
+        body_glow(np.asarray(tube, float), albedo, reach, v, behind, n, b, np.asarray(w, float) / np.linalg.norm(w),
+                  out)
         return out.copy()
 
     def g(a):
         return 0.25 * np.pi * (np.sin(a) + (np.pi - a) * np.cos(a))
 
+    def over(tube, w, lo, hi):
+        total = np.zeros(3)
+        for k in range(HAIR_DEPTHS):
+            z = lo + (hi - lo) * (k + 0.5) / HAIR_DEPTHS
+            rho = np.hypot(v, z)
+            alpha = np.arccos(np.clip((v * w[1] + z * w[2]) / rho, -1, 1))
+            total += ((tube[0] * g(alpha) + tube[1] * g(np.pi - alpha)) / np.pi ** 2 * 4 * np.arcsin(1 / rho)
+                      / (4 * np.pi) * albedo / HAIR_DEPTHS)
+        return total
+
     tube = np.array([[0.3, 0.25, 0.2], [0.2, 0.15, 0.1]])
     w = np.array([0.0, 0.6, 0.8])
     front, depth = np.sqrt(1 - v ** 2), np.sqrt(reach ** 2 - v ** 2)
-    expected = np.zeros(3)
-    for k in range(HAIR_DEPTHS):
-        z = front + (depth - front) * (k + 0.5) / HAIR_DEPTHS
-        rho = np.hypot(v, z)
-        alpha = np.arccos(np.clip((v * 0.6 + z * 0.8) / rho, -1, 1))
-        expected += ((tube[0] * g(alpha) + tube[1] * g(np.pi - alpha)) / np.pi ** 2 * 4 * np.arcsin(1 / rho)
-                     / (4 * np.pi) * albedo / HAIR_DEPTHS)
-    np.testing.assert_allclose(glow(tube, w), expected, rtol=1e-12)
-    behind = [0.0, 0.0, -1.0]
-    forward, back = glow([[0.0] * 3, [0.3] * 3], behind), glow([[0.3] * 3, [0.0] * 3], behind)
+    in_front, at_back = over(tube, w, front, depth), over(tube, w, -depth, -front)
+    np.testing.assert_allclose(glow(tube, w), in_front, rtol=1e-12)
+    np.testing.assert_allclose(glow(tube, w, behind=1.0), at_back, rtol=1e-12)
+    np.testing.assert_allclose(glow(tube, w, behind=0.3), 0.7 * in_front + 0.3 * at_back, rtol=1e-12)
+    from_behind = [0.0, 0.0, -1.0]
+    forward, back = glow([[0.0] * 3, [0.3] * 3], from_behind), glow([[0.3] * 3, [0.0] * 3], from_behind)
     assert np.all(forward > 0) and np.all(back < 1e-2 * forward)
-    np.testing.assert_allclose(glow(tube, w, reach=0.8), 0.0)  # √(0.8² − v²) < √(1 − v²): no hair in front
+    forward, back = (glow([[0.0] * 3, [0.3] * 3], from_behind, behind=1.0),
+                     glow([[0.3] * 3, [0.0] * 3], from_behind, behind=1.0))
+    assert np.all(back > 0) and np.all(forward < 1e-2 * back)
+    np.testing.assert_allclose(glow(tube, w, behind=0.5, reach=0.8), 0.0)  # the reach ends inside the body
+
+
+def test_the_share_of_the_hairs_behind_the_body_is_what_its_gaps_let_the_camera_see():
+    """``behind_share``: hairs as dense behind the body as in front, the camera sees all in front and the fraction
+    1 − c behind (c the body's coverage): drawn here as two equal random sets, the behind ones kept with probability
+    1 − c, the share of the kept ones that lie behind. None behind an opaque body, half behind an empty one; inputs
+    outside [0, 1] clamp."""
+    rng = np.random.default_rng(3)
+    for c in (0.0, 0.3, 0.8, 1.0):
+        seen_behind = (rng.random(200_000) >= c).sum()
+        drawn = seen_behind / (200_000 + seen_behind)
+        assert behind_share(c) == pytest.approx(drawn, abs=3e-3)
+    assert behind_share(1.0) == 0.0 and behind_share(0.0) == 0.5
+    assert behind_share(1.7) == 0.0 and behind_share(-0.4) == 0.5
 
 
 def test_the_bodys_glow_lights_the_hairs_under_directional_lights_only(tmp_path, pack):
@@ -574,6 +602,35 @@ def test_the_bodys_glow_lights_the_hairs_under_directional_lights_only(tmp_path,
     sky = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY, name="sky")
     np.testing.assert_array_equal(_render(sky, pack).image,
                                   _render(sky, pack, features=Features(hair_glow=False)).image)
+
+
+def test_hairs_seen_through_the_body_are_lit_past_it(tmp_path, pack):
+    """``Features.hairs_behind`` (the default): lit from behind the yarn (the camera at +z, the light toward −z) a
+    share of the hairs seen over the body lie behind it in the open, where those taken to lie in front of it get the
+    body's Ψ^Fiber_G, nearly 0 there: the image is brighter over the body and nowhere darker; the rows beside the body
+    are the same, bit for bit. Lit from the camera the same hairs lie in the body's shadow, lit through it (whether
+    that is more or less than the body's Ψ^Fiber_G depends on the yarn: this tiny pack's sparse yarn passes on more
+    than its surface fibers get, the standard cotton1 pack's less; ``_hair_light``'s test holds the values): the
+    image moves over the body alone."""
+    backlit = """[[lights]]
+type = "directional"
+direction = [0.0, 0.3, -1.0]
+irradiance = [2.0, 2.0, 2.0]"""
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=backlit, name="backlit")
+    radius = load_scene(path).yarns[0].radius
+    behind, front = _render(path, pack).image, _render(path, pack, features=Features(hairs_behind=False)).image
+    pixel = 2.0 * math.tan(math.radians(15.0)) / 48  # cm per pixel at the yarn (FRONT: fov 30°, 48 rows, 1 cm)
+    y = 24 * pixel - (np.arange(48) + 0.5) * pixel
+    beside, over = np.abs(y) > radius + 2 * pixel, np.abs(y) < radius - 2 * pixel
+    assert beside.sum() >= 8 and over.sum() >= 2
+    assert np.all(np.isfinite(behind)) and np.all(behind >= front - 1e-7)
+    assert behind[over].sum() > 1.02 * front[over].sum()
+    np.testing.assert_array_equal(behind[beside], front[beside])
+    lit = write_scene(tmp_path, [straight()], camera=FRONT, lights=backlit.replace("0.3, -1.0", "0.0, 1.0"),
+                      name="frontlit")
+    shadowed, front = _render(lit, pack).image, _render(lit, pack, features=Features(hairs_behind=False)).image
+    assert np.all(np.isfinite(shadowed)) and np.abs(shadowed[over] - front[over]).max() > 1e-3
+    np.testing.assert_array_equal(shadowed[beside], front[beside])
 
 
 def test_a_term_that_asks_for_one_xi_gets_what_asking_for_both_gives():
@@ -621,9 +678,9 @@ def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_cros
     out, scratch = np.empty(3), np.empty(3)
     reach, n_cross = 2.5, 6.0
 
-    def light(v, w, on_body=False, count=n_cross, gap=0.0):
-        _hair_light(on_body, tables, ds, count, gap, reach, v, t, n, b, np.asarray(w, float) / np.linalg.norm(w),
-                    out, scratch)
+    def light(v, w, on_body=False, count=n_cross, gap=0.0, behind=0.0):
+        _hair_light(on_body, behind, tables, ds, count, gap, reach, v, t, n, b,
+                    np.asarray(w, float) / np.linalg.norm(w), out, scratch)
         return out.copy()
 
     up = [0.0, 1.0, 0.3]  # from above (+b), a little in front
@@ -643,6 +700,15 @@ def test_a_hair_beside_its_yarn_is_in_the_yarns_shadow_only_where_the_light_cros
     assert np.all(gappy > below) and np.all(gappy >= 0.3)
     np.testing.assert_allclose(light(1.5, up, gap=0.3), 1.0)  # nothing to cross: unchanged
     np.testing.assert_allclose(light(0.5, up, on_body=True, gap=0.3), 0.25)  # the body's Ψ^Fiber_G: unchanged
+    # over the body a share ``behind`` lies behind it: past its own yarn over the depths behind the body
+    from_behind, from_front = [0.0, 0.1, -1.0], [0.0, 0.1, 1.0]
+    np.testing.assert_allclose(light(0.5, from_behind, on_body=True, behind=1.0), 1.0)  # in the open
+    shadowed = light(0.5, from_front, on_body=True, behind=1.0)  # in the body's shadow
+    np.testing.assert_allclose(shadowed, _through_yarn(0.5, 0.1, 1.0, reach, a_f, n_cross, behind=True), rtol=1e-12)
+    assert np.all(shadowed < 0.5)
+    np.testing.assert_allclose(light(0.5, from_front, on_body=True, behind=0.4), 0.6 * 0.25 + 0.4 * shadowed,
+                               rtol=1e-12)
+    np.testing.assert_allclose(light(0.5, [1.0, 0, 0], on_body=True, behind=0.4), 0.6 * 0.25 + 0.4)  # along t
 
 
 def test_resolve_weights_coverage_over_the_background():
@@ -846,13 +912,13 @@ def test_a_hair_takes_each_kind_of_light_whether_or_not_the_other_kind_is_compil
     seen = {}
     shade_kernel = pipeline.shade_flyaway
 
-    def shade(idx, points, look, corrections, flyaway, lights, glow, lobes, im, rgb, alpha, transmit):
-        shade_kernel(idx, points, look, corrections, flyaway, lights, glow, lobes, im, rgb, alpha, transmit)
+    def shade(idx, points, look, corrections, flyaway, coverage, lights, glow, lobes, im, rgb, alpha, transmit):
+        shade_kernel(idx, points, look, corrections, flyaway, coverage, lights, glow, lobes, im, rgb, alpha, transmit)
         n = len(rgb)
         parts = []
         for kinds in ((lights, glow, None, None), (None, None, lobes, im)):
             out = (np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)))
-            shade_kernel(idx, points, look, corrections, flyaway, *kinds, *out)
+            shade_kernel(idx, points, look, corrections, flyaway, coverage, *kinds, *out)
             parts.append(out)
         seen.update(both=(rgb[idx], alpha[idx], transmit[idx]), parts=[[a[idx] for a in out] for out in parts])
 

@@ -101,13 +101,21 @@ stop 56, though one reference draw's add twice the strips' light there (back-lit
 +6.2 against +2.9 %); with it the back-lit yarn's brightness went from 0.909 to 0.929 of the reference's, the simulated
 patch's from 0.936 to 0.958 and the grazing patch's from 1.031 to 1.055 (BENCHMARKS.md, stop 56).
 
+``hairs_behind`` (since stop 57) takes a share of the hairs seen over a yarn's body to lie behind it, seen through its
+gaps (``strip_shading.behind_share``: (1 − c)/(2 − c) where the body's coverage is c), lit past their own yarn
+rather than by the body's Ψ^Fiber_G: the baked hair coverage holds them, and lit from behind they lie in the open
+while Ψ^Fiber_G of the body's front is nearly 0. Both backends; the ablation ``no_hairs_behind`` takes every hair
+over the body to lie in front of it, as until stop 56 (measured in BENCHMARKS.md, "Issue 13: hairs seen through the
+body").
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ
 closed on the renderer (at every view), + flyaways (= the full model, the default); every rung draws the surface
 lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
 detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
 bounce, with the lookups on the axis plane, with one ξ closed on single and multiple scattering together, with two
-blocking yarns counted and without the body's glow on its hairs.
+blocking yarns counted, without the body's glow on its hairs and with every hair seen over a body taken to lie in
+front of it.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -136,6 +144,7 @@ class Features:
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
     hair_glow: bool = True  # hairs beside and over a yarn lit by the light its body scatters (strip_shading.body_glow)
+    hairs_behind: bool = True  # hairs seen through a body's gaps lie behind it (strip_shading.behind_share)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -157,6 +166,7 @@ ABLATIONS = {
     "whole_xi": Features(split_xi=False),
     "two_blockers": Features(two_blockers=True),
     "no_hair_glow": Features(hair_glow=False),
+    "no_hairs_behind": Features(hairs_behind=False),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -170,7 +180,8 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "whole_xi": "full with one ξ closed on single and multiple scattering together",
                    "two_blockers": "full with two blocking yarns counted",
-                   "no_hair_glow": "full without the body's glow on its hairs"}
+                   "no_hair_glow": "full without the body's glow on its hairs",
+                   "no_hairs_behind": "full with every hair seen over a body in front of it"}
 
 
 def combined(name: str) -> Features:

@@ -702,6 +702,7 @@ class Renderer:
                 environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1]), self.im_slices[k]) if len(lobe_dir) \
                     else (None, None)  # a kind of light the scene lacks is not compiled (``shade_flyaway``)
                 shade_flyaway(idx, hairs, *self.kernel_looks[k],
+                              looks[k].coverage if features.hairs_behind else None,
                               Lights(light_dir, light_e, light_vis[-1], light_beyond[-1]) if len(light_dir) else None,
                               hair_glow(looks[k]) if features.hair_glow and len(light_dir) else None,
                               *environment,

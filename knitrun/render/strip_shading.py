@@ -75,7 +75,13 @@ multiple-scattering terms), S = Ψ^Fiber_G(v_strip, ω_i) (mean RGB) where the h
 the transmittance of the hair's own yarn toward ω_i, τ_Y + (1 − τ_Y) ā_f(θ_i)^{n_rest·ℓ} where the ray crosses the
 tube on a chord ℓ diameters long, averaged over the depths the hair may have (``_hair_light``): without it a hair
 below a yarn lit from above shone as if in the open (the straight yarn under the sky: the hairs below the body at
-2.0× the reference's, BENCHMARKS.md "Issue 13: hairs in their own yarn's shadow").
+2.0× the reference's, BENCHMARKS.md "Issue 13: hairs in their own yarn's shadow"). Not every hair seen over the body
+lies in front of it: the baked coverage A also holds the hairs behind it that show through its gaps (between the
+plies, at its sparse edge), a share b = (1 − c)/(2 − c) of those seen where the regular coverage is c
+(``behind_share``), and those take the own-yarn transmittance over the depths behind the body in place of
+Ψ^Fiber_G (since stop 57): lit from behind they lie in the open, where Ψ^Fiber_G of the body's front is nearly 0
+(cotton1: 0.01–0.06 over v ∈ [−0.8, 0.6]), and lit from the front they lie in the body's shadow (BENCHMARKS.md,
+"Issue 13: hairs seen through the body").
 A hair is not an opaque film: of the radiance behind it (the yarn body, or the background) it passes on its forward
 fraction τ = ā_f(θ_o^f) (``dual_scattering.forward_fraction``; cotton ≈ 0.7), which a broad bright backdrop such as
 the body sends on toward the camera as it receives it. Without τ a hair over the body replaces the body's multiply
@@ -83,14 +89,14 @@ scattered radiance by its own single scattering and darkens it, where in the pat
 body add light.
 
 The body's glow on its hairs (``Features.hair_glow``, the default; ``body_glow``; GLSL ``body_glow``): a hair beside its
-yarn's body (|v_strip| > 1), or over it (in front of it, where the camera sees hairs; since stop 56), is also lit by the
-light the body scatters, which in front light is 42 % of what the path-traced reference shows beside the body (light
-that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13: the flyaway draw"). The body is the tube of
-``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal plane it sends toward a point at angle α (in the
-normal plane) from the light the radiance E V cos θ_L (R_Y g(α) + S_Y g(π − α))/π²; a hair at distance ρ radii from the
-axis sees the (infinite) tube over the solid angle Ω = 4 asin(1/ρ) and, taking its BCSDF's response to that extended
-source as its albedo a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the camera,
-averaged over the depths the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
+yarn's body (|v_strip| > 1), or over it (since stop 56; in front of it, and behind it with the share b since stop 57),
+is also lit by the light the body scatters, which in front light is 42 % of what the path-traced reference shows beside
+the body (light that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13: the flyaway draw"). The body is the
+tube of ``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal plane it sends toward a point at angle α
+(in the normal plane) from the light the radiance E V cos θ_L (R_Y g(α) + S_Y g(π − α))/π²; a hair at distance ρ radii
+from the axis sees the (infinite) tube over the solid angle Ω = 4 asin(1/ρ) and, taking its BCSDF's response to that
+extended source as its albedo a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the
+camera, averaged over the depths the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
 
 Zinke's density factors d_f, d_b come with the look (``Look.d_f``, ``d_b``: ``dual_scattering.D_F``, ``D_B``); both
 0 (``Features.multiple_scattering`` False) leave single scattering alone, the split that ``benchmarks/probe_split.py``
@@ -596,14 +602,25 @@ def cylinder_solid_angle(rho):
 
 
 @njit(cache=True)
-def body_glow(tube, albedo, reach, v, n, b, w, out):
+def behind_share(coverage):
+    """The share of the hairs seen at a point over a yarn's body (regular coverage c there, in [0, 1]) that lie
+    behind the body. The hair layer is as dense behind the body as in front of it, and its baked coverage counts
+    every hair the camera sees through the regular fibers (``knitbake.stages.textures``): all of those in front, and
+    of those behind the fraction 1 − c that the body's gaps let through. So (1 − c)/(2 − c): none where the body is
+    opaque, half where it is empty."""
+    c = min(max(coverage, 0.0), 1.0)
+    return (1.0 - c) / (2.0 - c)
+
+
+@njit(cache=True)
+def body_glow(tube, albedo, reach, v, behind, n, b, w, out):
     """out[:3] = the radiance toward the camera, per unit irradiance and visibility of a directional light from ``w``,
     that a hair at strip coordinate ``v`` (yarn radii from the axis, along b) returns of the light its own yarn's body
     scatters onto it (module docstring, "The body's glow on its hairs"), averaged over ``HAIR_DEPTHS`` depths z
     (along n, toward the camera) within ``reach`` radii: beside the body (|v| > 1) over −d…d, d = √(reach² − v²); over
-    it (|v| ≤ 1) over the front part √(1 − v²)…d, where the hairs the camera sees lie (those behind are hidden by the
-    body). ``tube`` (2, 3): the body's R_Y and S_Y (``yarn_bounce.tube_optics``), ``albedo`` (3,): the hair's
-    A_R + A_TT + A_D; n, b the strip frame."""
+    it (|v| ≤ 1) over the front part √(1 − v²)…d with weight 1 − ``behind`` and the back part −d…−√(1 − v²) with
+    weight ``behind`` (``behind_share``: hairs behind the body are seen through its gaps). ``tube`` (2, 3): the body's
+    R_Y and S_Y (``yarn_bounce.tube_optics``), ``albedo`` (3,): the hair's A_R + A_TT + A_D; n, b the strip frame."""
     out[0] = out[1] = out[2] = 0.0
     wb, wn = dot(w, b), dot(w, n)
     cos_l = math.sqrt(wb * wb + wn * wn)  # cos θ_L: the light's part normal to the yarn
@@ -611,29 +628,43 @@ def body_glow(tube, albedo, reach, v, n, b, w, out):
         return
     wb, wn = wb / cos_l, wn / cos_l
     depth = math.sqrt(max(reach * reach - v * v, 0.0))
-    front = math.sqrt(1.0 - v * v) if abs(v) <= 1.0 else -depth  # the nearest depth a hair seen there lies at
-    if depth <= front:
+    if abs(v) > 1.0:
+        _glow_between(tube, albedo, v, wb, wn, cos_l, -depth, depth, 1.0, out)
+        return
+    surface = math.sqrt(1.0 - v * v)
+    _glow_between(tube, albedo, v, wb, wn, cos_l, surface, depth, 1.0 - behind, out)
+    _glow_between(tube, albedo, v, wb, wn, cos_l, -depth, -surface, behind, out)
+
+
+@njit(cache=True, inline='always')
+def _glow_between(tube, albedo, v, wb, wn, cos_l, lo, hi, weight, out):
+    """Adds to out[:3] ``weight`` times ``body_glow``'s mean over ``HAIR_DEPTHS`` depths spread evenly over
+    lo…hi (nothing where the interval is empty or the weight is 0); (wb, wn): the light's unit part normal to t."""
+    if hi <= lo or weight <= 0.0:
         return
     for k in range(HAIR_DEPTHS):
-        z = front + (depth - front) * (k + 0.5) / HAIR_DEPTHS
+        z = lo + (hi - lo) * (k + 0.5) / HAIR_DEPTHS
         rho = math.sqrt(v * v + z * z)
         if rho <= 1.0:
             continue
         g, g_forward = lambert_pair((v * wb + z * wn) / rho)
-        share = cos_l * INV_PI2 * cylinder_solid_angle(rho) / (4.0 * math.pi) / HAIR_DEPTHS
+        share = weight * cos_l * INV_PI2 * cylinder_solid_angle(rho) / (4.0 * math.pi) / HAIR_DEPTHS
         for ch in range(3):
             out[ch] += share * (tube[0, ch] * g + tube[1, ch] * g_forward) * albedo[ch]
 
 
 @njit(parallel=True, cache=True)
-def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, im, rgb, alpha, transmit):
+def shade_flyaway(idx, points, look, corrections, flyaway, coverage, lights, glow, lobes, im, rgb, alpha, transmit):
     """Shade the flyaway-layer points ``idx`` of one yarn (the named tuples of ``knitrun.render.shading_inputs``;
     ``flyaway``: its three texture variants); writes rgb[idx], alpha[idx] and transmit[idx] (RGB, the hair's
     forward fraction ā_f(θ_o): what it passes on of the radiance behind it). ``lights`` is None without directional
     lights, ``lobes`` and ``im`` None without an environment: as in ``shade_regular``, a kind of light a scene lacks
     is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: about half this kernel's compile).
-    ``glow`` (2, 3): the body's R_Y and S_Y for its glow on the hairs beside it under the directional lights
-    (``body_glow``), or None: none (``Features.hair_glow`` off, or a pack without ρ_Y and T_Y)."""
+    ``glow`` (2, 3): the body's R_Y and S_Y for its glow on the hairs under the directional lights (``body_glow``),
+    or None: none (``Features.hair_glow`` off, or a pack without ρ_Y and T_Y). ``coverage``: the regular strip's
+    coverage texture (``shade_regular``'s), read at a hair over the body (|v_strip| ≤ 1, at the hair's own u, mip
+    level from the regular texels) for the share of the hairs seen there that lie behind the body (``behind_share``), or
+    None: every hair seen over the body lies in front of it (``Features.hairs_behind`` off)."""
     params, ds, period = look.params, look.ds, look.period
     half_width, radius, n_rest, gap = look.flyaway_half_width, look.radius, look.n_cross_rest, look.gap
     reach = half_width / radius  # the hair layer's half-width in yarn radii
@@ -641,6 +672,7 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, 
     texel_v = 2.0 * half_width / flyaway.rows[0, 0]
     for block in prange((idx.shape[0] + POINT_BLOCK - 1) // POINT_BLOCK):
         vec = np.empty((_N_VEC, 3))  # scratch owned by this block of points
+        cov = np.empty(1)
         t, wo, n, b, tf, ny = vec[_T], vec[_WO], vec[_N], vec[_B], vec[_TF], vec[_TEX]
         f, wl, psi, scratch, w, wo_l = vec[_XI], vec[_IM], vec[_PSI], vec[_SCRATCH], vec[_W], vec[_WO_L]
         texel, hair_albedo = np.empty(4), np.empty(3)
@@ -661,11 +693,18 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, 
                 continue
             wo_l[0], wo_l[1], wo_l[2] = dot(wo, tf), dot(wo, ny), 0.0
             spread2 = tangent_spread(texel[:3], texel[3])
-            # over the regular strip (|v| ≤ 1 in its units) a hair lies on the yarn's surface fibers: the fiber-level
-            # shadowing of that strip point applies to it; beyond it the hair sticks out, and its own yarn shadows it
-            # where the ray toward the light crosses the yarn (``_hair_light``)
+            # over the regular strip (|v| ≤ 1 in its units) a hair in front of the body lies on the yarn's surface
+            # fibers, and the fiber-level shadowing of that strip point applies to it; one behind the body or beside it
+            # sticks out, and its own yarn shadows it where the ray toward the light crosses the yarn (``_hair_light``)
             v_strip = v * half_width / radius
             on_body = abs(v_strip) <= 1.0
+            behind = 0.0  # the share of the hairs seen here that lie behind the body (``behind_share``)
+            if on_body:
+                if coverage is not None:
+                    level = mip_level(points.footprint[q], period / coverage.cols[0, 0],
+                                      2.0 * radius / coverage.rows[0, 0])
+                    sample_mip(coverage, 0, level, points.arclength[q] / period, v_strip, cov)
+                    behind = behind_share(cov[0])
             if lights is not None:
                 for light in range(lights.direction.shape[0]):
                     _copy_row(lights.direction, light, w)
@@ -674,14 +713,14 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, 
                     context_into(wide, wo_l, ctx, False)
                     evaluate(wide, ctx, wl, f)
                     cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
-                    _hair_light(on_body, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
+                    _hair_light(on_body, behind, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
                     lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap) * cos_i
                     for ch in range(3):
                         rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
                     if glow is not None:  # the body's glow (``body_glow``), lit as the hair is
                         for ch in range(3):
                             hair_albedo[ch] = params[P_A_R + ch] + params[P_A_TT + ch] + params[P_A_D + ch]
-                        body_glow(glow, hair_albedo, reach, v_strip, n, b, w, f)
+                        body_glow(glow, hair_albedo, reach, v_strip, behind, n, b, w, f)
                         body_lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap)
                         for ch in range(3):
                             rgb[q, ch] += lights.irradiance[light, ch] * body_lit * f[ch]
@@ -695,48 +734,55 @@ def shade_flyaway(idx, points, look, corrections, flyaway, lights, glow, lobes, 
                     r_lobe_context_into(wide, wo_l[0], ctx)
                     im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f,
                                     lobes.sharpness[j], f)
-                    _hair_light(on_body, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
+                    _hair_light(on_body, behind, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
                     for ch in range(3):
                         rgb[q, ch] += lobes.weight[j, ch] * lobes.visibility[j, q] * psi[ch] * f[ch]
 
 
 @njit(cache=True, inline='always')
-def _hair_light(on_body, tables, ds, n_rest, gap, reach, v, t, n, b, wi, out, scratch):
+def _hair_light(on_body, behind, tables, ds, n_rest, gap, reach, v, t, n, b, wi, out, scratch):
     """out[:3] = the fraction of the light from ω_i that reaches a hair at strip coordinate v (yarn radii from the
-    axis, along b) of a yarn with axis tangent t (strip frame n, b). Over the body (``on_body``, |v| ≤ 1): Ψ^Fiber_G
-    (mean RGB, clamped to [0, 1]) of the regular strip there. Beyond it the hair sticks out of its own yarn, which
-    shadows it where the ray toward the light crosses the tube. The strip does not say how far in front of or behind
-    the axis the hair lies, so the fraction is the mean over ``HAIR_DEPTHS`` depths z spread evenly over the hair
-    layer's reach (|(v, z)| ≤ ``reach`` radii). In the cross-section (b, n), with ŵ the unit part of ω_i normal to
-    t, a ray from p = (v, z) heading toward the axis (p·ŵ < 0) passes it at distance √(|p|² − (p·ŵ)²); where that is
-    below 1 the fraction τ_Y = ``gap`` passes between the fibers and the rest meets n_rest·ℓ fibers
-    (``Look.n_cross_rest``), ℓ = √(1 − distance²) its chord over the diameter: it keeps
+    axis, along b) of a yarn with axis tangent t (strip frame n, b). The strip does not say how far in front of or
+    behind the axis the hair lies, so the fraction is a mean over the depths z it may have (|(v, z)| ≤ ``reach``
+    radii). Beside the body (|v| > 1) the hair sticks out of its own yarn, which shadows it where the ray toward the
+    light crosses the tube: the mean over ``HAIR_DEPTHS`` depths spread evenly over −d…d, d = √(reach² − v²). Over the
+    body (``on_body``) a hair in front of it lies on its surface fibers and takes Ψ^Fiber_G (mean RGB, clamped to
+    [0, 1]) of the regular strip there, with weight 1 − ``behind``; one behind it (seen through the body's gaps,
+    ``behind_share``) takes, with weight ``behind``, the same crossing mean over the depths −d…−√(1 − v²) (lit from
+    behind, it lies in the open; from the front, in the body's shadow). The crossing: in the cross-section (b, n),
+    with ŵ the unit part of ω_i normal to t, a ray from p = (v, z) heading toward the axis (p·ŵ < 0) passes it at
+    distance √(|p|² − (p·ŵ)²); where that is below 1 the fraction τ_Y = ``gap`` passes between the fibers and the
+    rest meets n_rest·ℓ fibers (``Look.n_cross_rest``), ℓ = √(1 − distance²) its chord over the diameter: it keeps
     τ_Y + (1 − τ_Y) ā_f(θ_i)^{n_rest·ℓ} per channel (module docstring; at ℓ = 1 the yarn's transmittance T_Y)."""
-    out[0] = out[1] = out[2] = 1.0
+    depth = math.sqrt(max(reach * reach - v * v, 0.0))
+    surface, share, lo, hi = 0.0, 1.0, -depth, depth
     if on_body:
         theta_i, phi = _strip_angles(wi, t, n, b)
         _factored_or_full(tables.psi_full, tables.psi_gm, tables.psi_gn, v, theta_i, phi, out, scratch)
-        out[0] = out[1] = out[2] = _fiber_lit(out)
+        surface = (1.0 - behind) * _fiber_lit(out)
+        share, hi = behind, -math.sqrt(1.0 - v * v)
+    out[0] = out[1] = out[2] = surface
+    if share <= 0.0:
         return
     wb, wn = dot(wi, b), dot(wi, n)
     across = math.sqrt(wb * wb + wn * wn)
     if across < DEGENERATE:  # light along the yarn: the ray never nears the axis
+        for ch in range(3):
+            out[ch] += share
         return
     wb, wn = wb / across, wn / across
-    depth = math.sqrt(max(reach * reach - v * v, 0.0))
     forward_fraction(ds, longitudinal_angle(t, wi), scratch)
-    out[0] = out[1] = out[2] = 0.0
     for k in range(HAIR_DEPTHS):
-        z = depth * ((2.0 * k + 1.0) / HAIR_DEPTHS - 1.0)
+        z = lo + (hi - lo) * (k + 0.5) / HAIR_DEPTHS
         toward = v * wb + z * wn
         miss = v * v + z * z - toward * toward
         if toward >= 0.0 or miss >= 1.0:
             for ch in range(3):
-                out[ch] += 1.0 / HAIR_DEPTHS
+                out[ch] += share / HAIR_DEPTHS
             continue
         count = n_rest * math.sqrt(1.0 - miss)
         for ch in range(3):
-            out[ch] += (gap + (1.0 - gap) * scratch[ch] ** count) / HAIR_DEPTHS
+            out[ch] += share * (gap + (1.0 - gap) * scratch[ch] ** count) / HAIR_DEPTHS
 
 
 # --- resolve ---------------------------------------------------------------------------------------------------------

@@ -362,6 +362,7 @@ class GLRenderer:
             glow = pipeline.hair_glow(look) if self.features.hair_glow else None
             uniforms.update(use_glow=int(glow is not None), glow_back=np.zeros(3) if glow is None else glow[0],
                             glow_forward=np.zeros(3) if glow is None else glow[1])
+            uniforms.update(hairs_behind=int(self.features.hairs_behind))
             textures.update({f"fly_tex{v}": tex for v, (tex, _) in enumerate(flyaway)})
         assert len(textures) <= ATLAS_UNITS[0], "a yarn entry's textures would share units with the atlases"
         return uniforms, textures

@@ -17,6 +17,9 @@ uniform usampler2D fly_variant;     // variant of (period index − VARIANT_OFFS
 uniform int use_glow;               // the body's glow on its hairs (Features.hair_glow; strip_shading.body_glow)
 uniform vec3 glow_back;             // the body tube's R_Y and S_Y (yarn_bounce.tube_optics, the entry's colour)
 uniform vec3 glow_forward;
+uniform int hairs_behind;           // a share of the hairs seen over the body lie behind it (Features.hairs_behind)
+uniform sampler2D coverage_tex;     // the regular strip's coverage (regular.frag's), for that share
+uniform int texture_levels;
 const int VARIANT_OFFSET = 2;
 
 vec4 fly_fetch(int layer, ivec2 texel, int level) {
@@ -52,28 +55,27 @@ vec4 fly_sample(int layer, float level, float u, float v) {
     return out_;
 }
 
-// strip_shading._hair_light: the fraction of the light from w reaching a hair at v_strip: over the body Ψ^Fiber_G
-// (mean RGB) of the regular strip there; beyond it the hair's own yarn's transmittance where the ray toward the light
-// crosses the tube, τ_Y + (1 − τ_Y) a_f(θ_i)^(n_cross_rest·chord), averaged over HAIR_DEPTHS depths within the hair layer's reach
-vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
-    if (on_body) {
-        vec3 xi, xi_s, psi;
-        corrections(v_strip, t, n, b, 0.0, w, false, false, xi, xi_s, psi);  // Ψ^Fiber_G alone
-        return vec3(fiber_lit(psi));
-    }
+// strip_shading.behind_share: of the hairs seen over the body where its coverage is c, the share behind it
+float behind_share(float c) {
+    c = clamp(c, 0.0, 1.0);
+    return (1.0 - c) / (2.0 - c);
+}
+
+// the fraction of the light from w that reaches a hair at v_strip past its own yarn, where the ray toward the light
+// crosses the tube: τ_Y + (1 − τ_Y) a_f(θ_i)^(n_cross_rest·chord), averaged over HAIR_DEPTHS depths spread over lo…hi
+vec3 through_own_yarn(float v_strip, float lo, float hi, vec3 t, vec3 n, vec3 b, vec3 w) {
     float wb = dot(w, b), wn = dot(w, n);
     float across = sqrt(wb * wb + wn * wn);
     if (across < DEGENERATE) return vec3(1.0);
     wb /= across;
     wn /= across;
-    float depth = sqrt(max(reach * reach - v_strip * v_strip, 0.0));
     int i0, i1;
     float fr;
     axis_cell(clamped_asin(dot(t, w)), -HALF_PI, HALF_PI, textureSize(ds_table, 0).x, false, i0, i1, fr);
     vec3 a_f = clamp(ds_row(R_A_F, i0, i1, fr), 0.0, 1.0);
     vec3 through = vec3(0.0);
     for (int k = 0; k < HAIR_DEPTHS; ++k) {
-        float z = depth * ((2.0 * float(k) + 1.0) / float(HAIR_DEPTHS) - 1.0);
+        float z = lo + (hi - lo) * (float(k) + 0.5) / float(HAIR_DEPTHS);
         float toward = v_strip * wb + z * wn;
         float miss = v_strip * v_strip + z * z - toward * toward;
         through += (toward >= 0.0 || miss >= 1.0) ? vec3(1.0)
@@ -82,33 +84,54 @@ vec3 hair_light(bool on_body, float reach, float v_strip, vec3 t, vec3 n, vec3 b
     return through / float(HAIR_DEPTHS);
 }
 
-// strip_shading.body_glow: the radiance toward the camera, per unit irradiance and visibility of a directional light
-// from w, that a hair at v_strip returns of the light its own yarn's body scatters onto it: the tube's phase
-// (R_Y g(α) + S_Y g(π − α))/π² at the hair times the tube's solid angle 4 asin(1/ρ) over 4π times the hair's albedo,
-// averaged over HAIR_DEPTHS depths within the hair layer's reach, over the body (|v_strip| ≤ 1) those in front of it
-// (SHADING.md §6)
-vec3 body_glow(float reach, float v_strip, vec3 n, vec3 b, vec3 w, vec3 albedo) {
-    float wb = dot(w, b), wn = dot(w, n);
-    float cos_l = sqrt(wb * wb + wn * wn);
-    if (cos_l < DEGENERATE) return vec3(0.0);
-    wb /= cos_l;
-    wn /= cos_l;
+// strip_shading._hair_light: the fraction of the light from w reaching a hair at v_strip. Beside the body its own
+// yarn's transmittance over the depths −d…d; over the body Ψ^Fiber_G (mean RGB) of the regular strip there for the
+// share 1 − behind in front of it, and the transmittance over the depths −d…−√(1 − v²) for the share behind it
+vec3 hair_light(bool on_body, float behind, float reach, float v_strip, vec3 t, vec3 n, vec3 b, vec3 w) {
     float depth = sqrt(max(reach * reach - v_strip * v_strip, 0.0));
-    float front = abs(v_strip) <= 1.0 ? sqrt(1.0 - v_strip * v_strip) : -depth;  // the nearest depth seen there
+    if (!on_body) return through_own_yarn(v_strip, -depth, depth, t, n, b, w);
+    vec3 xi, xi_s, psi;
+    corrections(v_strip, t, n, b, 0.0, w, false, false, xi, xi_s, psi);  // Ψ^Fiber_G alone
+    vec3 light = vec3((1.0 - behind) * fiber_lit(psi));
+    if (behind > 0.0)
+        light += behind * through_own_yarn(v_strip, -depth, -sqrt(1.0 - v_strip * v_strip), t, n, b, w);
+    return light;
+}
+
+// strip_shading._glow_between: weight × the body's glow averaged over HAIR_DEPTHS depths spread over lo…hi
+vec3 glow_between(float v_strip, float wb, float wn, float cos_l, float lo, float hi, float weight, vec3 albedo) {
     vec3 glow = vec3(0.0);
-    if (depth <= front) return glow;
+    if (hi <= lo || weight <= 0.0) return glow;
     for (int k = 0; k < HAIR_DEPTHS; ++k) {
-        float z = front + (depth - front) * (float(k) + 0.5) / float(HAIR_DEPTHS);
+        float z = lo + (hi - lo) * (float(k) + 0.5) / float(HAIR_DEPTHS);
         float rho = sqrt(v_strip * v_strip + z * z);
         if (rho <= 1.0) continue;
         // yarn_bounce.lambert_pair: g(α) and g(π − α) from cos α
         float c = clamp((v_strip * wb + z * wn) / rho, -1.0, 1.0);
         float a = acos(c), s = sqrt(1.0 - c * c);
         float g = 0.25 * PI * (s + (PI - a) * c), g_forward = 0.25 * PI * (s - a * c);
-        float share = cos_l * INV_PI2 * 4.0 * asin(min(1.0 / rho, 1.0)) / (4.0 * PI) / float(HAIR_DEPTHS);
+        float share = weight * cos_l * INV_PI2 * 4.0 * asin(min(1.0 / rho, 1.0)) / (4.0 * PI) / float(HAIR_DEPTHS);
         glow += share * (glow_back * g + glow_forward * g_forward) * albedo;
     }
     return glow;
+}
+
+// strip_shading.body_glow: the radiance toward the camera, per unit irradiance and visibility of a directional light
+// from w, that a hair at v_strip returns of the light its own yarn's body scatters onto it: the tube's phase
+// (R_Y g(α) + S_Y g(π − α))/π² at the hair times the tube's solid angle 4 asin(1/ρ) over 4π times the hair's albedo,
+// averaged over HAIR_DEPTHS depths within the hair layer's reach; over the body (|v_strip| ≤ 1) over those in front
+// of it with weight 1 − behind and those behind it with weight behind (SHADING.md §6)
+vec3 body_glow(float reach, float v_strip, float behind, vec3 n, vec3 b, vec3 w, vec3 albedo) {
+    float wb = dot(w, b), wn = dot(w, n);
+    float cos_l = sqrt(wb * wb + wn * wn);
+    if (cos_l < DEGENERATE) return vec3(0.0);
+    wb /= cos_l;
+    wn /= cos_l;
+    float depth = sqrt(max(reach * reach - v_strip * v_strip, 0.0));
+    if (abs(v_strip) > 1.0) return glow_between(v_strip, wb, wn, cos_l, -depth, depth, 1.0, albedo);
+    float surface = sqrt(1.0 - v_strip * v_strip);
+    return glow_between(v_strip, wb, wn, cos_l, surface, depth, 1.0 - behind, albedo)
+         + glow_between(v_strip, wb, wn, cos_l, -depth, -surface, behind, albedo);
 }
 
 void main() {
@@ -143,6 +166,12 @@ void main() {
     float v_strip = sp.v * flyaway_half_width / radius;
     bool on_body = abs(v_strip) <= 1.0;
     float reach = flyaway_half_width / radius;
+    float behind = 0.0;  // the share of the hairs seen here that lie behind the body (behind_share)
+    if (on_body && hairs_behind != 0) {
+        ivec2 body0 = textureSize(coverage_tex, 0);
+        float body_level = mip_level(sp.footprint, period / float(body0.x), 2.0 * radius / float(body0.y));
+        behind = behind_share(sample_mip(coverage_tex, texture_levels, body_level, sp.u, v_strip).r);
+    }
     Params p = yarn_params();
     vec3 rgb = vec3(0.0);
     for (int l = 0; l < n_lights; ++l) {
@@ -151,10 +180,10 @@ void main() {
         float theta_i_f = clamped_asin(dot(tf, w));
         vec3 f = bcsdf_single(spread_params(p, spread2, phi_f), theta_i_f, theta_o_f, phi_f);
         float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS));
-        rgb += light_irradiance[l] * lit * hair_light(on_body, reach, v_strip, sp.t, sp.n, sp.b, w) * f
+        rgb += light_irradiance[l] * lit * hair_light(on_body, behind, reach, v_strip, sp.t, sp.n, sp.b, w) * f
              * cos(theta_i_f);
         if (use_glow != 0)  // the body's glow, lit as the hair is
-            rgb += light_irradiance[l] * lit * body_glow(reach, v_strip, sp.n, sp.b, w, p.a_r + p.a_tt + p.a_d);
+            rgb += light_irradiance[l] * lit * body_glow(reach, v_strip, behind, sp.n, sp.b, w, p.a_r + p.a_tt + p.a_d);
     }
     for (int j = 0; j < n_lobes; ++j) {
         float vis = lobe_visibility(j, sp.position, shadow_bias);
@@ -166,7 +195,7 @@ void main() {
         float mu_r = lobe_centre_at(wide.alpha_r, sigma_r, theta_o_f);
         vec3 i_m = im_kernel(wide, mu_r, sigma_r, cos2_normaliser(mu_r, sigma_r), theta_o_f, clamped_asin(dot(tf, w)),
                              -phi_f, lobe_lambda[j]);
-        rgb += lobe_weight[j] * vis * hair_light(on_body, reach, v_strip, sp.t, sp.n, sp.b, w) * i_m;
+        rgb += lobe_weight[j] * vis * hair_light(on_body, behind, reach, v_strip, sp.t, sp.n, sp.b, w) * i_m;
     }
     out_radiance = vec4(alpha * rgb, 1.0);
 }
