@@ -14,7 +14,7 @@ from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_scale_metrics
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.gl import gl_renderer
-from tests.helpers import FRONT, SKY, SUN, straight, write_scene
+from tests.helpers import BACKLIT, FRONT, SKY, SUN, straight, write_scene
 
 # orthographic, yarns along the image axes: the strips' edges then cross the same samples in both renderers (the
 # driver's 4× positions have the CPU pattern's x and y values), so the images agree to rounding
@@ -211,36 +211,33 @@ def test_the_flyaway_layer_follows_the_cpu_renderer(tmp_path, pack):
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
 
 
-def test_the_bodys_glow_on_its_hairs_follows_the_cpu_renderer(tmp_path, pack):
-    """``Features.hair_glow`` (the default) on the flyaway layer under the sun: GLSL ``body_glow`` adds what the CPU's
-    adds (2 % of this image), to 1 % in the mean and 4 % per pixel (the backends' shadow lookups differ on hairs whose
-    own single scattering is dim and hides it without the glow); a 5 % edit of the glow in the shader fails it."""
-    path = write_scene(tmp_path, [straight()], camera=ORTHO, lights=SUN, name="glow")
+def _term_follows_the_cpu(path, pack, without, mean=2e-2, per_pixel=6e-2):
+    """What the default model adds over ``without`` (Features) on both backends: the CPU's adds at least 1 % of the
+    image, the GL's is nowhere negative and agrees with it to ``mean`` in the mean and ``per_pixel`` per pixel; the
+    images agree to 0.5 % per pixel."""
     gl, cpu = _both(path, pack)
-    plain, plain_cpu = _both(path, pack, Features(hair_glow=False))
+    plain, plain_cpu = _both(path, pack, without)
     added_gl, added_cpu = gl - plain, cpu - plain_cpu
     assert added_cpu.mean() > 0.01 * plain_cpu.mean() and added_gl.min() >= -1e-7
-    assert abs(added_gl.mean() / added_cpu.mean() - 1) < 2e-2
-    assert np.abs(added_gl - added_cpu).mean() < 6e-2 * np.abs(added_cpu).mean()
+    assert abs(added_gl.mean() / added_cpu.mean() - 1) < mean
+    assert np.abs(added_gl - added_cpu).mean() < per_pixel * np.abs(added_cpu).mean()
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
+
+
+def test_the_bodys_glow_on_its_hairs_follows_the_cpu_renderer(tmp_path, pack):
+    """``Features.hair_glow`` (the default) on the flyaway layer under the sun: GLSL ``body_glow`` adds what the CPU's
+    adds (2 % of this image), to 2 % in the mean and 6 % per pixel (the backends' shadow lookups differ on hairs whose
+    own single scattering is dim and hides it without the glow); a 5 % edit of the glow in the shader fails it."""
+    _term_follows_the_cpu(write_scene(tmp_path, [straight()], camera=ORTHO, lights=SUN, name="glow"), pack,
+                          Features(hair_glow=False))
 
 
 def test_the_hairs_behind_the_body_follow_the_cpu_renderer(tmp_path, pack):
     """``Features.hairs_behind`` (the default) on the flyaway layer lit from behind the yarn: the GLSL share of the
     hairs behind the body (read from the regular coverage texture) adds what the CPU's adds, to 2 % in the mean and
-    6 % per pixel, and nothing gets darker."""
-    backlit = """[[lights]]
-type = "directional"
-direction = [0.0, 0.3, -1.0]
-irradiance = [2.0, 2.0, 2.0]"""
-    path = write_scene(tmp_path, [straight()], camera=ORTHO, lights=backlit, name="behind")
-    gl, cpu = _both(path, pack)
-    front, front_cpu = _both(path, pack, Features(hairs_behind=False))
-    added_gl, added_cpu = gl - front, cpu - front_cpu
-    assert added_cpu.mean() > 0.01 * front_cpu.mean() and added_gl.min() >= -1e-6
-    assert abs(added_gl.mean() / added_cpu.mean() - 1) < 2e-2
-    assert np.abs(added_gl - added_cpu).mean() < 6e-2 * np.abs(added_cpu).mean()
-    assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
+    6 % per pixel, and nothing gets darker; scaling the GLSL share by 0.9 fails it."""
+    _term_follows_the_cpu(write_scene(tmp_path, [straight()], camera=ORTHO, lights=BACKLIT, name="behind"), pack,
+                          Features(hairs_behind=False))
 
 
 def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):

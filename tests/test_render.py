@@ -34,7 +34,7 @@ from knitrun.shading.dual_scattering import D_B, D_F
 from knitrun.shading.equirect import texel_directions
 from knitrun.shading.im_lookup import im_slices, im_table_from
 from knitrun.shading.srbf_fit import fit_srbf
-from tests.helpers import FRONT, ROUGH, SKY, SUN, TEST_SHAPE, TINY, straight, write_scene
+from tests.helpers import BACKLIT, FRONT, ROUGH, SKY, SUN, TEST_SHAPE, TINY, straight, write_scene
 
 
 def _render(path, pack, **kw):
@@ -612,11 +612,7 @@ def test_hairs_seen_through_the_body_are_lit_past_it(tmp_path, pack):
     that is more or less than the body's Ψ^Fiber_G depends on the yarn: this tiny pack's sparse yarn passes on more
     than its surface fibers get, the standard cotton1 pack's less; ``_hair_light``'s test holds the values): the
     image moves over the body alone."""
-    backlit = """[[lights]]
-type = "directional"
-direction = [0.0, 0.3, -1.0]
-irradiance = [2.0, 2.0, 2.0]"""
-    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=backlit, name="backlit")
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=BACKLIT, name="backlit")
     radius = load_scene(path).yarns[0].radius
     behind, front = _render(path, pack).image, _render(path, pack, features=Features(hairs_behind=False)).image
     pixel = 2.0 * math.tan(math.radians(15.0)) / 48  # cm per pixel at the yarn (FRONT: fov 30°, 48 rows, 1 cm)
@@ -626,7 +622,7 @@ irradiance = [2.0, 2.0, 2.0]"""
     assert np.all(np.isfinite(behind)) and np.all(behind >= front - 1e-7)
     assert behind[over].sum() > 1.02 * front[over].sum()
     np.testing.assert_array_equal(behind[beside], front[beside])
-    lit = write_scene(tmp_path, [straight()], camera=FRONT, lights=backlit.replace("0.3, -1.0", "0.0, 1.0"),
+    lit = write_scene(tmp_path, [straight()], camera=FRONT, lights=BACKLIT.replace("0.3, -1.0", "0.0, 1.0"),
                       name="frontlit")
     shadowed, front = _render(lit, pack).image, _render(lit, pack, features=Features(hairs_behind=False)).image
     assert np.all(np.isfinite(shadowed)) and np.abs(shadowed[over] - front[over]).max() > 1e-3
