@@ -79,9 +79,8 @@ below a yarn lit from above shone as if in the open (the straight yarn under the
 lies in front of it: the baked coverage A also holds the hairs behind it that show through its gaps (between the
 plies, at its sparse edge), a share b = (1 − c)/(2 − c) of those seen where the regular coverage is c
 (``behind_share``), and those take the own-yarn transmittance over the depths behind the body in place of
-Ψ^Fiber_G (since stop 57): lit from behind they lie in the open, where Ψ^Fiber_G of the body's front is nearly 0
-(cotton1: 0.01–0.06 over v ∈ [−0.8, 0.6]), and lit from the front they lie in the body's shadow (BENCHMARKS.md,
-"Issue 13: hairs seen through the body").
+Ψ^Fiber_G (since stop 57): lit from behind they lie in the open, where Ψ^Fiber_G of the body's front is nearly 0,
+and lit from the camera's side mostly in the body's shadow (BENCHMARKS.md, "Issue 13: hairs seen through the body").
 A hair is not an opaque film: of the radiance behind it (the yarn body, or the background) it passes on its forward
 fraction τ = ā_f(θ_o^f) (``dual_scattering.forward_fraction``; cotton ≈ 0.7), which a broad bright backdrop such as
 the body sends on toward the camera as it receives it. Without τ a hair over the body replaces the body's multiply
