@@ -211,16 +211,16 @@ def test_the_flyaway_layer_follows_the_cpu_renderer(tmp_path, pack):
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
 
 
-def _term_follows_the_cpu(path, pack, without, mean=2e-2, per_pixel=6e-2):
+def _term_follows_the_cpu(path, pack, without):
     """What the default model adds over ``without`` (Features) on both backends: the CPU's adds at least 1 % of the
-    image, the GL's is nowhere negative and agrees with it to ``mean`` in the mean and ``per_pixel`` per pixel; the
-    images agree to 0.5 % per pixel."""
+    image, the GL's is nowhere negative and agrees with it to 2 % in the mean and 6 % per pixel; the images agree to
+    0.5 % per pixel."""
     gl, cpu = _both(path, pack)
     plain, plain_cpu = _both(path, pack, without)
     added_gl, added_cpu = gl - plain, cpu - plain_cpu
     assert added_cpu.mean() > 0.01 * plain_cpu.mean() and added_gl.min() >= -1e-7
-    assert abs(added_gl.mean() / added_cpu.mean() - 1) < mean
-    assert np.abs(added_gl - added_cpu).mean() < per_pixel * np.abs(added_cpu).mean()
+    assert abs(added_gl.mean() / added_cpu.mean() - 1) < 2e-2
+    assert np.abs(added_gl - added_cpu).mean() < 6e-2 * np.abs(added_cpu).mean()
     assert np.abs(gl - cpu).mean() < 5e-3 * cpu.mean()
 
 
