@@ -367,6 +367,14 @@ def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_
                    f"{summary['render_s']:.1f} s of rendering in all, {summary['rays'] / 1e6:.1f} M rays")
 
 
+def _bake_overrides(settings_path, whole_xi: bool) -> dict | None:
+    """The stage overrides of ``--settings`` (a file) and ``--whole-xi``."""
+    from knitbake.bake import load_settings, merge_overrides
+
+    return merge_overrides(load_settings(settings_path) if settings_path else None,
+                           {"closure": {"split": False}} if whole_xi else None)
+
+
 @main.command("bake")
 @click.argument("yarn_name", metavar="YARN")
 @click.option("-o", "--output", type=SuffixPath(".h5", ".hdf5"), required=True, help="The asset pack (.h5).")
@@ -385,8 +393,12 @@ def _distributed_reference(scene_path, scene, frames, outputs, spp, seed, fiber_
               help="Close one ξ for single and multiple scattering together, not also apart (what the ablation "
                    "whole_xi draws; the renderer's default reads the split tables): the closure takes about half "
                    "as long.")
+@click.option("--settings", "settings_path", type=click.Path(dir_okay=False), default=None,
+              help="A TOML file of per-stage settings that replace the preset's, e.g. '[correction]' then "
+                   "'n_theta = 9' (README, \"Bake settings\"); an unknown stage or setting is refused.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary (progress still goes to stderr).")
-def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no_cache, whole_xi, as_json):
+def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no_cache, whole_xi, settings_path,
+                 as_json):
     """Bake one yarn type into an asset pack: stage by stage, cached, with an error estimate for every table.
 
     Example: knitbake bake cotton1 -o cotton1.h5 --quality draft
@@ -395,8 +407,9 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
 
     from knitbake.bake import bake, cache_dir, scene_needs
 
-    check_outputs({"--output": output}, [yarn_name, scene_path])
+    check_outputs({"--output": output}, [yarn_name, scene_path, settings_path])
     spec = resolve_yarn(yarn_name)
+    overrides = _bake_overrides(settings_path, whole_xi)
     needs = None
     if scene_path:
         from data_formats.scene import load_scene
@@ -427,8 +440,7 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
     t0 = time.perf_counter()
     only_list = [o.strip() for o in only.split(",")] if only is not None else None
     summary = bake(spec, output, quality=quality, only=only_list, needs=needs, seed=seed, use_cache=not no_cache,
-                   on_stage=on_stage, progress_factory=progress_factory,
-                   overrides={"closure": {"split": False}} if whole_xi else None)
+                   on_stage=on_stage, progress_factory=progress_factory, overrides=overrides)
     for bar in bars.values():
         if not bar.finished:
             bar.__exit__(None, None, None)
@@ -463,9 +475,11 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
                    "Numba threads.")
 @click.option("--no-cache", is_flag=True, help="Recompute every stage instead of reusing cached ones.")
 @click.option("--whole-xi", is_flag=True, help="Close one ξ only, not also apart (as for bake).")
+@click.option("--settings", "settings_path", type=click.Path(dir_okay=False), default=None,
+              help="Per-stage settings that replace the preset's, for every yarn (as for bake).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, scheduler, workers, no_cache, whole_xi,
-                         as_json):
+                         settings_path, as_json):
     """Bake many yarn types at once on Dask: one task per stage of each yarn, the stage cache shared with bake.
 
     Runs on an embedded cluster sized to this machine, or on a Dask cluster given by --scheduler (README, "Running
@@ -484,6 +498,7 @@ def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, sch
     if not os.path.isdir(output_dir):
         raise FormatError(f"{output_dir}: output folder does not exist (--output-dir)")
     specs = [resolve_yarn(name) for name in names]
+    overrides = _bake_overrides(settings_path, whole_xi)
     seen = {}
     for name, spec in zip(names, specs):
         if spec.name in seen:
@@ -498,8 +513,7 @@ def bake_library_command(yarn_names, output_dir, all_presets, quality, seed, sch
             def on_task(done, total):
                 bar.length = total
                 bar.update(done - bar.pos)
-            results = bake_library(client, jobs, quality, seed, not no_cache, on_task,
-                                   {"closure": {"split": False}} if whole_xi else None)
+            results = bake_library(client, jobs, quality, seed, not no_cache, on_task, overrides)
     total = time.perf_counter() - t0
     failed = {name: exc for name, exc in results.items() if isinstance(exc, Exception)}
     if as_json:

@@ -40,6 +40,11 @@ import math
 import time
 from pathlib import Path
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib
+
 import numpy as np
 
 from data_formats.asset_pack import write_pack
@@ -47,6 +52,7 @@ from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.atomic import atomic_path
 from data_formats.cache_folders import cache_root
 from data_formats.errors import FormatError
+from data_formats.input_files import regular_file
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
 from knitbake.fibers.procedural_yarn import check_fiber_budget
 from knitbake.stages.closure import CLOSURE_INPUTS, bake_closure_stage, papers_xi_at_views
@@ -213,6 +219,62 @@ def _check_fiber_windows(spec: YarnSpec, stages) -> None:
         check_fiber_budget(spec, (flyaway_periods(spec) + 1) * spec.geometry.ply_pitch)
 
 
+def _check_setting(where: str, value, preset) -> None:
+    """``value`` may replace the preset's ``preset``: the same kind (a table with known keys, a yes/no, a count ≥ 1,
+    a list of as many counts)."""
+    if isinstance(preset, dict):
+        if not isinstance(value, dict):
+            raise FormatError(f"{where}: expected a table of {', '.join(preset)}, got {value!r}")
+        for key, item in value.items():
+            if key not in preset:
+                raise FormatError(f"{where}.{key}: unknown setting (known: {', '.join(preset)})")
+            _check_setting(f"{where}.{key}", item, preset[key])
+    elif isinstance(preset, bool):
+        if not isinstance(value, bool):
+            raise FormatError(f"{where} = {value!r}: expected true or false")
+    elif isinstance(preset, (tuple, list)):
+        if (not isinstance(value, (tuple, list)) or len(value) != len(preset)
+                or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value)):
+            raise FormatError(f"{where} = {value!r}: expected {len(preset)} integers ≥ 1")
+    elif isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise FormatError(f"{where} = {value!r}: expected an integer ≥ 1")
+
+
+def check_overrides(overrides: dict, quality: str = "draft") -> None:
+    """Refuse, in one line naming it, a stage override the preset ``quality`` has no setting for or a value of
+    another kind than the preset's (a misspelt key would otherwise bake the preset's value without a word)."""
+    if not isinstance(overrides, dict):
+        raise FormatError(f"bake settings: expected a table of stages, got {overrides!r}")
+    for stage, values in overrides.items():
+        if stage not in QUALITY[quality]:
+            raise FormatError(f"bake settings [{stage}]: unknown stage (known: {', '.join(QUALITY[quality])})")
+        _check_setting(stage, values, QUALITY[quality][stage])
+
+
+def load_settings(path) -> dict:
+    """The stage overrides of a bake settings file (TOML: one table per stage, e.g. ``[correction]`` with
+    ``n_theta = 9``), checked against the draft preset's settings (every preset has the same keys)."""
+    path = regular_file(path, "bake settings (.toml)")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise FormatError(f"{path}: cannot read bake settings ({exc.__class__.__name__}: {exc})") from None
+    try:
+        check_overrides(data)
+    except FormatError as exc:
+        raise FormatError(f"{path}: {exc}") from None
+    return data
+
+
+def merge_overrides(*parts: dict | None) -> dict | None:
+    """Stage overrides ``parts`` merged stage by stage, later ones winning; None when there are none."""
+    out = {}
+    for part in parts:
+        for stage, values in (part or {}).items():
+            out[stage] = {**out.get(stage, {}), **values}
+    return out or None
+
+
 def bake_plan(spec: YarnSpec, quality: str = "draft", only=None, needs=None, seed: int = 0,
               overrides=None) -> tuple[dict, list[str]]:
     """(settings per stage, stages to bake) of a bake (``bake`` explains the arguments), after checking the seed,
@@ -222,6 +284,7 @@ def bake_plan(spec: YarnSpec, quality: str = "draft", only=None, needs=None, see
                           f"seeds from it)")
     if quality not in QUALITY:
         raise FormatError(f"quality {quality!r} is not one of {', '.join(QUALITY)}")
+    check_overrides(overrides or {}, quality)
     settings = {k: {**v, **(overrides or {}).get(k, {})} for k, v in QUALITY[quality].items()}
     if needs is not None:
         for stage in ("textures", "flyaway"):

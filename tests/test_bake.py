@@ -11,6 +11,7 @@ from click.testing import CliRunner
 
 from cli.knitbake_cli import main as knitbake
 from data_formats.asset_pack import describe, read_pack, validate
+from data_formats.errors import FormatError
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import STAGE_ORDER, bake, bake_plan, scene_needs, stage_key, stages_for
 from tests.helpers import TINY
@@ -136,6 +137,40 @@ def test_cli_bake_inspect_export(tmp_path, monkeypatch):
                                         *flags]).exit_code == 0
     assert seen == [None, {"closure": {"split": False}}]
     assert all(stages["closure"]["split"] for stages in bake_module.QUALITY.values())
+
+
+def test_a_settings_file_replaces_the_presets_settings(tmp_path, monkeypatch):
+    """`knitbake bake --settings FILE`: its per-stage settings replace the preset's (the pack's provenance holds
+    them), merged with --whole-xi; a misspelt stage or setting or a value of another kind is refused in one line
+    that names it, before anything is baked."""
+    import tomli_w
+
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(tmp_path / "cache"))
+    settings = tmp_path / "settings.toml"
+    settings.write_text(tomli_w.dumps({**TINY, "shadowing": {**TINY["shadowing"], "n_theta": 3}}))
+    out = tmp_path / "p.h5"
+    runner = CliRunner()
+    result = runner.invoke(knitbake, ["bake", "silk1", "-o", str(out), "--only", "shadowing", "--settings",
+                                      str(settings), "--whole-xi"])
+    assert result.exit_code == 0, result.output
+    baked = read_pack(out).provenance["bake_settings"]["settings"]
+    assert baked["shadowing"] == {**TINY["shadowing"], "n_theta": 3}
+    assert baked["closure"]["split"] is False and baked["closure"]["iterations"] == TINY["closure"]["iterations"]
+    assert read_pack(out).tables["shadowing/psi_GM"].shape[1] == 3  # (N_v, N_theta, channel)
+    for text, named in (("[corection]\nn_v = 4\n", "[corection]: unknown stage"),
+                        ("[shadowing]\nn_thetas = 4\n", "shadowing.n_thetas: unknown setting"),
+                        ("[shadowing]\nn_theta = 0\n", "shadowing.n_theta = 0: expected an integer ≥ 1"),
+                        ("[shadowing]\nn_theta = '9'\n", "expected an integer"),
+                        ("[closure]\nsplit = 1\n", "closure.split = 1: expected true or false"),
+                        ("[correction.ds]\nn_phi = 3\n", "correction.ds.n_phi: unknown setting"),
+                        ("[environment]\nshape = [3, 3]\n", "expected 4 integers"),
+                        ("[shadowing\n", "cannot read bake settings")):
+        settings.write_text(text)
+        bad = runner.invoke(knitbake, ["bake", "silk1", "-o", str(tmp_path / "x.h5"), "--settings", str(settings)])
+        assert bad.exit_code == 1 and named in bad.stderr and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+        assert not (tmp_path / "x.h5").exists()
+    with pytest.raises(FormatError, match="textures.sample: unknown setting"):
+        bake_plan(small_yarn(), overrides={"textures": {"sample": 2}})
 
 
 @pytest.mark.slow

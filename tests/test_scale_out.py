@@ -6,6 +6,8 @@
 * a worker killed (SIGKILL, by the test) while it runs a stage loses nothing: Dask reruns the task elsewhere and
   the pack is still identical;
 * one yarn's failure is reported and the others finish.
+
+Every bake here runs at test-sized settings (``SMALL``): a real preset's closure takes minutes on one thread.
 """
 
 import dataclasses
@@ -20,6 +22,10 @@ from data_formats.asset_pack import read_pack
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
 from knitbake.scale_out import bake_library, dask_client, local_layout, submit_bake
+from tests.helpers import TINY
+
+# test-sized stage settings; the correction stage large enough (a few tenths of a second) to be caught running
+SMALL = {**TINY, "correction": {**TINY["correction"], "rows": 16, "n_theta": 4, "n_phi": 4, "spp": 2}}
 
 
 def _small(name="silk1", fibers=12):
@@ -51,7 +57,7 @@ def client():
 @pytest.fixture(scope="module")
 def serial_pack(tmp_path_factory):
     path = tmp_path_factory.mktemp("serial") / "silk1.h5"
-    bake(_small(), path, use_cache=False)
+    bake(_small(), path, use_cache=False, overrides=SMALL)
     return path
 
 
@@ -69,7 +75,8 @@ def test_the_workers_run_one_task_with_their_share_of_numba_threads(client):
 
 
 def test_a_distributed_bake_writes_the_serial_pack(client, serial_pack, tmp_path):
-    results = bake_library(client, [(_small(), str(tmp_path / "silk1.h5"))], use_cache=False)
+    results = bake_library(client, [(_small(), str(tmp_path / "silk1.h5"))], use_cache=False,
+                           overrides=SMALL)
     assert set(results["silk1"]) >= {"dual_scattering", "correction", "textures"}
     _assert_same_pack(serial_pack, tmp_path / "silk1.h5")
 
@@ -78,7 +85,8 @@ def test_a_worker_killed_mid_stage_loses_nothing(client, serial_pack, tmp_path):
     pids = client.run(os.getpid)
     victim = None
     for _ in range(5):  # a correction stage that ends between two looks is submitted again
-        pack, stages = submit_bake(client, _small(), tmp_path / "silk1.h5", use_cache=False)
+        pack, stages = submit_bake(client, _small(), tmp_path / "silk1.h5", use_cache=False,
+                                   overrides=SMALL)
         deadline = time.monotonic() + 120
         while victim is None and not pack.done() and time.monotonic() < deadline:
             for address, keys in client.processing().items():
@@ -96,18 +104,20 @@ def test_a_worker_killed_mid_stage_loses_nothing(client, serial_pack, tmp_path):
 
 def test_one_yarns_failure_does_not_stop_the_others(client, tmp_path):
     results = bake_library(client, [(_small(), str(tmp_path / "missing" / "silk1.h5")),
-                                    (_small("cotton1", 8), str(tmp_path / "cotton1.h5"))])
+                                    (_small("cotton1", 8), str(tmp_path / "cotton1.h5"))], overrides=SMALL)
     assert isinstance(results["silk1"], Exception) and "does not exist" in str(results["silk1"])
     assert isinstance(results["cotton1"], dict) and (tmp_path / "cotton1.h5").exists()
 
 
 def test_the_bake_library_command(tmp_path):
     """`knitbake bake-library`: refuses a missing folder or no yarn before starting a cluster; bakes spec files and
-    presets into DIR/NAME.h5 with a summary row per yarn."""
+    presets into DIR/NAME.h5 with a summary row per yarn, at the preset's settings but those of --settings."""
+    import tomli_w
     from click.testing import CliRunner
 
     from cli.knitbake_cli import main as knitbake
     from data_formats.yarn_spec import dumps_spec
+    from knitbake.bake import QUALITY
 
     runner = CliRunner()
     result = runner.invoke(knitbake, ["bake-library", "-o", str(tmp_path)])
@@ -116,10 +126,14 @@ def test_the_bake_library_command(tmp_path):
     assert result.exit_code == 1 and "output folder does not exist" in result.output
     spec_file = tmp_path / "small_silk.toml"
     spec_file.write_text(dumps_spec(_small()))
+    settings = tmp_path / "small.toml"
+    settings.write_text(tomli_w.dumps(SMALL))
     result = runner.invoke(knitbake, ["bake-library", str(spec_file), "-o", str(tmp_path), "--workers", "2",
-                                      "--no-cache"])
+                                      "--no-cache", "--settings", str(settings)])
     assert result.exit_code == 0, result.output
     assert "1 of 1 pack(s)" in result.output and (tmp_path / "silk1.h5").exists()
+    baked = read_pack(tmp_path / "silk1.h5").provenance["bake_settings"]["settings"]
+    assert baked["correction"] == {**QUALITY["draft"]["correction"], **SMALL["correction"]}
 
 
 def test_bake_library_passes_whole_xi_on(tmp_path, monkeypatch):
