@@ -70,9 +70,9 @@ STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyawa
 QUALITY = {
     "draft": {
         "dual_scattering": {"n_theta": 32},
-        "correction": {"n_v": 8, "n_theta": 4, "n_phi": 4, "rows": 16, "spp": 2, "batches": 2,
+        "correction": {"n_v": 8, "n_theta": 9, "n_phi": 5, "rows": 16, "spp": 2, "batches": 2,
                        "ds": {"n_theta": 32}},
-        "shadowing": {"n_v": 8, "n_theta": 4, "n_phi": 4, "rows": 16, "spp": 2, "batches": 2},
+        "shadowing": {"n_v": 8, "n_theta": 9, "n_phi": 5, "rows": 16, "spp": 2, "batches": 2},
         "textures": {"width": 128, "height": 32, "samples": 2, "ao_rays": 8},
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (12, 24, 12, 32)},
