@@ -7,7 +7,8 @@
   the pack is still identical;
 * one yarn's failure is reported and the others finish.
 
-Every bake here runs at test-sized settings (``SMALL``): a real preset's closure takes minutes on one thread.
+Every bake here runs at test-sized settings (``TINY``, ``SMALL``): a real preset's closure takes minutes on one
+thread.
 """
 
 import dataclasses
@@ -24,7 +25,8 @@ from knitbake.bake import bake
 from knitbake.scale_out import bake_library, dask_client, local_layout, submit_bake
 from tests.helpers import TINY
 
-# test-sized stage settings; the correction stage large enough (a few tenths of a second) to be caught running
+# for the killed worker: test-sized stage settings whose correction stage runs long enough (a few tenths of a second
+# on one thread, against 0.03 s at TINY) to be caught running; the other bakes here run at TINY (7 s a yarn)
 SMALL = {**TINY, "correction": {**TINY["correction"], "rows": 16, "n_theta": 4, "n_phi": 4, "spp": 2}}
 
 
@@ -54,10 +56,11 @@ def client():
         yield c
 
 
-@pytest.fixture(scope="module")
-def serial_pack(tmp_path_factory):
-    path = tmp_path_factory.mktemp("serial") / "silk1.h5"
-    bake(_small(), path, use_cache=False, overrides=SMALL)
+def _serial_pack(folder, overrides):
+    """The pack of ``_small()`` baked here at ``overrides``, in ``folder``/serial."""
+    (folder / "serial").mkdir()
+    path = folder / "serial" / "silk1.h5"
+    bake(_small(), path, use_cache=False, overrides=overrides)
     return path
 
 
@@ -74,14 +77,16 @@ def test_the_workers_run_one_task_with_their_share_of_numba_threads(client):
     assert set(client.nthreads().values()) == {1}
 
 
-def test_a_distributed_bake_writes_the_serial_pack(client, serial_pack, tmp_path):
+def test_a_distributed_bake_writes_the_serial_pack(client, tmp_path):
+    serial_pack = _serial_pack(tmp_path, TINY)
     results = bake_library(client, [(_small(), str(tmp_path / "silk1.h5"))], use_cache=False,
-                           overrides=SMALL)
+                           overrides=TINY)
     assert set(results["silk1"]) >= {"dual_scattering", "correction", "textures"}
     _assert_same_pack(serial_pack, tmp_path / "silk1.h5")
 
 
-def test_a_worker_killed_mid_stage_loses_nothing(client, serial_pack, tmp_path):
+def test_a_worker_killed_mid_stage_loses_nothing(client, tmp_path):
+    serial_pack = _serial_pack(tmp_path, SMALL)
     pids = client.run(os.getpid)
     victim = None
     for _ in range(5):  # a correction stage that ends between two looks is submitted again
@@ -104,7 +109,7 @@ def test_a_worker_killed_mid_stage_loses_nothing(client, serial_pack, tmp_path):
 
 def test_one_yarns_failure_does_not_stop_the_others(client, tmp_path):
     results = bake_library(client, [(_small(), str(tmp_path / "missing" / "silk1.h5")),
-                                    (_small("cotton1", 8), str(tmp_path / "cotton1.h5"))], overrides=SMALL)
+                                    (_small("cotton1", 8), str(tmp_path / "cotton1.h5"))], overrides=TINY)
     assert isinstance(results["silk1"], Exception) and "does not exist" in str(results["silk1"])
     assert isinstance(results["cotton1"], dict) and (tmp_path / "cotton1.h5").exists()
 
@@ -127,13 +132,13 @@ def test_the_bake_library_command(tmp_path):
     spec_file = tmp_path / "small_silk.toml"
     spec_file.write_text(dumps_spec(_small()))
     settings = tmp_path / "small.toml"
-    settings.write_text(tomli_w.dumps(SMALL))
+    settings.write_text(tomli_w.dumps(TINY))
     result = runner.invoke(knitbake, ["bake-library", str(spec_file), "-o", str(tmp_path), "--workers", "2",
                                       "--no-cache", "--settings", str(settings)])
     assert result.exit_code == 0, result.output
     assert "1 of 1 pack(s)" in result.output and (tmp_path / "silk1.h5").exists()
     baked = read_pack(tmp_path / "silk1.h5").provenance["bake_settings"]["settings"]
-    assert baked["correction"] == {**QUALITY["draft"]["correction"], **SMALL["correction"]}
+    assert baked["correction"] == {**QUALITY["draft"]["correction"], **TINY["correction"]}
 
 
 def test_bake_library_passes_whole_xi_on(tmp_path, monkeypatch):
