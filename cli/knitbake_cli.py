@@ -449,14 +449,15 @@ def bake_command(yarn_name, output, quality, only, scene_path, seed, threads, no
         if "cache_warning" in row:
             click.echo(f"warning: {stage}: {row['cache_warning']}", err=True)
     if as_json:
-        echo_json({"yarn": spec.name, "output": output, "quality": quality, "seed": seed, "seconds": total,
-                   "stages": summary, "needs": needs, "cache": str(cache_dir())})
+        echo_json({"yarn": spec.name, "output": output, "quality": quality, "overrides": overrides, "seed": seed,
+                   "seconds": total, "stages": summary, "needs": needs, "cache": str(cache_dir())})
         return
     click.echo(f"{'stage':<18}{'seconds':>9}  {'cached':<7}{'tables':>7}  error estimate (max)")
     for stage, row in summary.items():
         click.echo(f"{stage:<18}{row['seconds']:>9.2f}  {'yes' if row['cached'] else 'no':<7}{row['tables']:>7}  "
                    f"{row['error_estimate']:.3g}")
-    click.echo(f"{spec.name} → {output} ({quality}, {total:.1f} s)")
+    changed = f" with {settings_path}" if settings_path else ""
+    click.echo(f"{spec.name} → {output} ({quality}{changed}, {total:.1f} s)")
 
 
 @main.command("bake-library")

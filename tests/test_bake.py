@@ -153,6 +153,7 @@ def test_a_settings_file_replaces_the_presets_settings(tmp_path, monkeypatch):
     result = runner.invoke(knitbake, ["bake", "silk1", "-o", str(out), "--only", "shadowing", "--settings",
                                       str(settings), "--whole-xi"])
     assert result.exit_code == 0, result.output
+    assert f"(draft with {settings}," in result.stdout
     baked = read_pack(out).provenance["bake_settings"]["settings"]
     assert baked["shadowing"] == {**TINY["shadowing"], "n_theta": 3}
     assert baked["closure"]["split"] is False and baked["closure"]["iterations"] == TINY["closure"]["iterations"]
