@@ -9,7 +9,10 @@ regions by the front regular strips' MSAA coverage (``strip_raster.rasterize_vis
 the body (covered), at its edge (partly), beside it (not). Printed per scene, over the background and as shares of
 the image without flyaways (luminance-free: the mean of RGB): the flyaways' light in all and per region for the
 reference and the strips; and the strips without flyaways against the reference without them (mean ratio and
-yarn-scale rel L1), which says whether a scene's error lies in the regular fibers or in the hairs.
+yarn-scale rel L1), which says whether a scene's error lies in the regular fibers or in the hairs. A second table
+splits the same shares by how bright the yarns are there: the regular-only reference filtered to the yarn's projected
+diameter, its pixels with light (over 1 % of its largest) cut into four quarters from darkest to brightest, and the
+rest ("no yarn"). It says whether the hairs' light is wrong on the lit or the shadowed side of a knit.
 
 The full references are read from ``--reference-dir`` (``<scene>.exr``, as ``bench_floors.py`` writes them; the
 scene's spp and seed); the regular-only ones are traced at the same spp and seed and kept in ``--out``
@@ -29,7 +32,7 @@ import numpy as np
 
 from data_formats.images import read_exr, write_exr
 from data_formats.scene import load_scene
-from knitbake.compare.image_metrics import yarn_scale_metrics
+from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
 from knitrun.render import pipeline
@@ -41,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from probe_split import ROOT, SCENES, checked_models_and_scenes  # noqa: E402
 
 REGIONS = ("over the body", "at its edge", "beside it")
+QUARTERS = ("no yarn", "darkest quarter", "2nd", "3rd", "brightest quarter")
 
 
 def body_coverage(scene) -> np.ndarray:
@@ -51,6 +55,16 @@ def body_coverage(scene) -> np.ndarray:
     vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry,
                                scene_camera(scene), scene.render.msaa)
     return vis.coverage.mean(axis=-1)
+
+
+def brightness_classes(regular_light: np.ndarray, diameter_px: float) -> list[np.ndarray]:
+    """Masks of ``QUARTERS``: pixels by the brightness of the regular-only light (H, W) filtered to the yarn's
+    diameter; the quarters split the pixels over 1 % of its largest at its quartiles."""
+    smooth = yarn_filter(regular_light[..., None], diameter_px)[..., 0]
+    lit = smooth > 0.01 * smooth.max()
+    edges = np.quantile(smooth[lit], [0.25, 0.5, 0.75])
+    index = np.digitize(smooth, edges)
+    return [~lit] + [lit & (index == i) for i in range(4)]
 
 
 def main():
@@ -70,6 +84,7 @@ def main():
     print("| scene | flyaways add: reference | strips | " + " | ".join(f"{r}: ref / strips" for r in REGIONS) +
           " | strips / reference without flyaways: mean | yarn-scale rel L1 |")
     print("|---|---|---|" + "---|" * len(REGIONS) + "---|---|")
+    by_brightness = []
     for name in names:
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
         regular_path = out / f"{name}_regular.exr"
@@ -94,6 +109,13 @@ def main():
         alone = yarn_scale_metrics(drawn["closed"], regular, yarn_diameter_px(scene))
         print(f"| {name} | {100 * ref_add.sum() / ref_base:+.1f} % | {100 * strip_add.sum() / strip_base:+.1f} % | "
               f"{cells} | {alone['mean_ratio']:.3f} | {alone['rel_l1']:.3f} |", flush=True)
+        by_brightness.append(f"| {name} | " + " | ".join(
+            f"{100 * ref_add[m].sum() / ref_base:+.1f} / {100 * strip_add[m].sum() / strip_base:+.1f} %"
+            for m in brightness_classes(light(regular), yarn_diameter_px(scene))) + " |")
+    print("\nThe same, by the regular fibers' brightness at the yarn scale (reference / strips):\n")
+    print("| scene | " + " | ".join(QUARTERS) + " |")
+    print("|---|" + "---|" * len(QUARTERS))
+    print("\n".join(by_brightness))
 
 
 if __name__ == "__main__":
