@@ -79,7 +79,7 @@ QUALITY = {
         "flyaway": {"width": 128, "height": 32, "samples": 2},
         "environment": {"shape": (12, 24, 12, 32)},
         "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2, "n_colours": 17},
-        "closure": {"iterations": 4, "split": True},
+        "closure": {"iterations": 2, "split": True},
     },
     "standard": {
         "dual_scattering": {"n_theta": 64},
