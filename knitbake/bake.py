@@ -21,8 +21,9 @@ single and multiple scattering (closure setting ``split``; the renderer's defaul
 closure's time. The standard and final presets close ξ on cells of 10.6° × 10.6° × 40° (17 × 17 × 9, centres on
 θ = 0 and φ = 0; 8 × 8 × 8 until stop 56): between the coarser cells' centres the strips missed the path tracer by up
 to 23 % where the fibers' highlights end (BENCHMARKS.md, "Issue 13: where in a knit's shape the error starts"). The
-draft preset closes it on 20° × 72° cells (9 × 9 × 5): on 45° × 90° ones (4 × 4 × 4, until stop 58) the draft pack
-drew the example scenes at 0.70–1.16× the path tracer's brightness (BENCHMARKS.md, "the draft preset on 9 × 5 cells"). A
+draft preset closes it on 20° × 72° cells (9 × 9 × 5) in 2 iterations (the others in 4; more moved nothing at the
+yarn scale): on 45° × 90° ones (4 × 4 × 4, until stop 58) the draft pack drew the example scenes at 0.70–1.16× the
+path tracer's brightness (BENCHMARKS.md, "the draft preset on 9 × 5 cells"). A
 scene (``scene_needs``) removes stages it does not need and sets the texture resolution from the largest on-screen
 yarn width. Each finished stage
 is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed; the
