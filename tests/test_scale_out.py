@@ -26,8 +26,10 @@ from knitbake.scale_out import bake_library, dask_client, local_layout, submit_b
 from tests.helpers import TINY
 
 # for the killed worker: test-sized stage settings whose correction stage runs long enough (a few tenths of a second
-# on one thread, against 0.03 s at TINY) to be caught running; the other bakes here run at TINY (7 s a yarn)
-SMALL = {**TINY, "correction": {**TINY["correction"], "rows": 16, "n_theta": 4, "n_phi": 4, "spp": 2}}
+# on one thread, against 0.03 s at TINY) to be caught running, and whose closure (8 times TINY's bins) iterates once;
+# the other bakes here run at TINY (7 s a yarn)
+SMALL = {**TINY, "correction": {**TINY["correction"], "rows": 16, "n_theta": 4, "n_phi": 4, "spp": 2},
+         "closure": {**TINY["closure"], "iterations": 1}}
 
 
 def _small(name="silk1", fibers=12):
