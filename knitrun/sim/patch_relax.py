@@ -48,10 +48,16 @@ from knitrun.sim.template_relax import (EXCLUDE_RADII, MAX_ROUNDS, PAIR_RADII, S
 CONTEXT = ("eyelet", 8, 8)
 RELAXED_TYPES = (st.YARN_OVER, st.K2TOG, st.SSK)
 MAX_NFEV = 400  # solver steps per round at most (each pays a finite-difference Jacobian: one residual per unknown);
-# a round converges at SOLVER_TOL well before (the context's 6 rounds took 41 s on 2 cores)
+# a round converges at SOLVER_TOL well before (the context's 6 rounds take 45-60 s on 2 cores)
 KNOT_REACH = 0.1  # bounds: knot centres and axes move at most this far from the seed (face coordinates),
 LIFT_REACH = 2.0  # lifts s at most this far (radii),
 OUTER_REACH = 1.0  # and a decrease's outer-loop points' (a, c) at most this far (units of l and r)
+
+
+def _norms(v):
+    """Euclidean norms of the rows of an (n, 3) array (``np.linalg.norm(v, axis=1)`` without its overhead: the
+    residuals run once per unknown for every finite-difference Jacobian)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
 
 
 class _Patch:
@@ -77,6 +83,7 @@ class _Patch:
                     scale += [1.0, 1.0]
                     reach += [OUTER_REACH, OUTER_REACH]
         self.scale, self.reach = np.array(scale), np.array(reach)
+        self.slot_index = tuple(np.array(self.slots).T)  # TEMPLATE_FLOAT[slot_index] = the unknowns, in order
         plan = self.model.plan
         n_render = int(plan.offsets[-1])
         face_of_point = np.searchsorted(self.model.point_offset, np.arange(self.model.point_offset[-1]),
@@ -91,11 +98,14 @@ class _Patch:
         self.first[plan.offsets[:-1]] = True
         self.last = np.zeros(n_render, bool)
         self.last[plan.offsets[1:] - 1] = True
+        # the residuals' index sets, fixed: rendering points whose turning angle counts (inner points of such faces)
+        # and the first points of the segments whose length counts
+        self.bent = np.flatnonzero(self.active & ~self.first & ~self.last)
+        self.counted = np.flatnonzero(self.active[:-1] & ~self.last[:-1])
 
     def points(self, y):
         """Rendering points of the rest patch with the unknowns ``y`` installed in the packed templates."""
-        for (code, row, col), value in zip(self.slots, y):
-            st.TEMPLATE_FLOAT[code, row, col] = value
+        st.TEMPLATE_FLOAT[self.slot_index] = y
         m = self.mesh
         bad = np.zeros(len(m.stitch_type), np.int8)
         prepare_faces(m.vertices, m.face_offsets, m.face_vertices, m.stitch_type, st.TEMPLATE_INT, st.TEMPLATE_FLOAT,
@@ -114,18 +124,18 @@ class _Patch:
         return pairs[other & (self.active[p] | self.active[q])]
 
     def length(self, points):
-        seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
-        return float(seg[self.active[:-1] & ~self.last[:-1]].sum())
+        k = self.counted
+        return float(_norms(np.take(points, k + 1, axis=0) - np.take(points, k, axis=0)).sum())
 
     def residuals(self, y, pairs, seed, length0):
         pts = self.points(y)
         r = self.radius
-        d = np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1)
+        d = _norms(np.take(pts, pairs[:, 0], axis=0) - np.take(pts, pairs[:, 1], axis=0))
         contact = np.maximum(0.0, 2.0 * r - d) / r
-        inner = self.active & ~self.first & ~self.last
-        k = np.flatnonzero(inner)
-        e_in, e_out = pts[k] - pts[k - 1], pts[k + 1] - pts[k]
-        n_in, n_out = np.linalg.norm(e_in, axis=1), np.linalg.norm(e_out, axis=1)
+        k = self.bent
+        here = np.take(pts, k, axis=0)
+        e_in, e_out = here - np.take(pts, k - 1, axis=0), np.take(pts, k + 1, axis=0) - here
+        n_in, n_out = _norms(e_in), _norms(e_out)
         cos = np.einsum("ij,ij->i", e_in, e_out) / np.maximum(n_in * n_out, 1e-300)
         ds = np.maximum(0.5 * (n_in + n_out), 1e-12)
         bend = np.arccos(np.clip(cos, -1.0, 1.0)) * np.sqrt(r / ds)
