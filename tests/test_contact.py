@@ -73,6 +73,22 @@ def test_closed_loops_exclude_their_own_arc_either_way_round():
     np.testing.assert_allclose(ratios, 0.75, atol=1e-3)
 
 
+def test_asking_few_neighbours_first_gives_the_answer_of_one_query_of_the_whole_window(monkeypatch):
+    """``contact_ratios`` asks ``K_FIRST`` neighbours first and the whole exclusion window's only where those all lie
+    on the sample's own excluded stretch. On a tight coil (its own turns within the window crowd the nearest
+    samples), a loose yarn 3.5r from it and a touching pair, that is the answer of one query of the window's size."""
+    import knitrun.sim.contact as contact
+
+    s = np.linspace(0.0, 12 * math.pi, 600)
+    coil = np.column_stack([1.2 * R * np.cos(s), 1.2 * R * np.sin(s), 0.4 * R * s])  # turns 2.5r apart along z
+    yarns = curves(coil, line(3.5 * R, n=81), line(-2.0 * R, z=3.0 * R, n=81), line(-4.0 * R, z=3.0 * R, n=81))
+    two_pass = contact_ratios(yarns, R)
+    monkeypatch.setattr(contact, "K_FIRST", 10_000)  # one query of the window's size for every sample
+    one_pass = contact_ratios(yarns, R)
+    np.testing.assert_array_equal(two_pass, one_pass)
+    assert (two_pass < CAP).mean() > 0.5 and two_pass.min() < 1.0
+
+
 @pytest.mark.parametrize("radius", [0.0, -1.0, float("nan"), float("inf")])
 def test_bad_radius_is_a_one_line_error(radius):
     with pytest.raises(FormatError, match="radius"):

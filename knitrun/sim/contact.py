@@ -16,7 +16,9 @@ the low ones (the interpenetration) do not.
 ``contact_statistic`` returns percentiles of d / 2r over all samples (equal weight per unit length), the minimum and
 the fraction of samples below ``DEEP`` (sunk by more than a fifth of the diameter). Smooth curve types are evaluated
 to dense polylines first (``data_formats.curve_eval.dense_curve``). The nearest-neighbour search is scipy's cKDTree
-(queried in blocks, so memory stays bounded on large models).
+(queried in blocks, so memory stays bounded on large models; first for ``K_FIRST`` neighbours, then, for the samples
+whose ``K_FIRST`` nearest all lie on their own curve's excluded stretch, for the whole exclusion window's: the same
+answer as one query of the window's size, at a quarter of its cost on a knitted rib).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ CAP = 2.0  # d / 2r reported for samples with no other part within CAP · 2r
 DEEP = 0.8  # d / 2r below this counts as deep interpenetration
 PERCENTILES = (5, 25, 50, 75, 95)
 BLOCK = 65536  # samples per nearest-neighbour query block
+K_FIRST = 24  # neighbours asked first: the sample, its curve's ±8 samples within 2r, room for a touching yarn's
 
 
 def resample(xyz: np.ndarray, step: float, closed: bool):
@@ -82,27 +85,36 @@ def contact_ratios(curves, radius: float, frame: int = 0) -> np.ndarray:
     tree = cKDTree(points)
     bound = CAP * 2.0 * radius
     exclude = EXCLUDE_RADII * radius
-    k = min(len(points), int(2 * EXCLUDE_RADII / STEP_RADII) + 64)  # the exclusion window and the nearest beyond it
-    out = np.full(len(points), CAP)
-    for lo in range(0, len(points), BLOCK):
-        hi = min(lo + BLOCK, len(points))
-        dist, idx = tree.query(points[lo:hi], k=k, distance_upper_bound=bound)
-        dist, idx = np.atleast_2d(dist), np.atleast_2d(idx)
+    k_all = min(len(points), int(2 * EXCLUDE_RADII / STEP_RADII) + 64)  # the exclusion window and the nearest beyond
+
+    def nearest_other(rows, k):
+        """For the samples ``rows``: whether another part lies within ``bound`` among their k nearest samples, its
+        index and distance, and whether the k nearest were all within ``bound`` (then a larger k may find one)."""
+        dist, idx = tree.query(points[rows], k=k, distance_upper_bound=bound)
+        dist, idx = dist.reshape(len(rows), k), idx.reshape(len(rows), k)
         found = idx < len(points)
         j = np.where(found, idx, 0)
-        mine = curve_id[lo:hi, None]
-        along = np.abs(arc[j] - arc[lo:hi, None])
+        mine = curve_id[rows, None]
+        along = np.abs(arc[j] - arc[rows, None])
         loop = closed[mine] & found
         along = np.where(loop, np.minimum(along, lengths[mine] - along), along)
         other = found & ((curve_id[j] != mine) | (along > exclude))
-        has = other.any(axis=1)
         first = np.argmax(other, axis=1)  # the nearest candidate (query results are sorted by distance)
-        rows = np.flatnonzero(has)
+        pick = np.arange(len(rows))
+        return other.any(axis=1), j[pick, first], dist[pick, first], found[:, -1]
+
+    out = np.full(len(points), CAP)
+    for lo in range(0, len(points), BLOCK):
+        rows = np.arange(lo, min(lo + BLOCK, len(points)))
+        # most samples find another part among their nearest few; the rest are asked again with the window's k
+        has, near, best, full = nearest_other(rows, min(k_all, K_FIRST))
+        again = np.flatnonzero(~has & full) if K_FIRST < k_all else np.zeros(0, np.int64)
+        if again.size:
+            has[again], near[again], best[again], _ = nearest_other(rows[again], k_all)
+        rows, near, best = rows[has], near[has], best[has]
         if not rows.size:
             continue
-        near = j[rows, first[rows]]
-        p = points[lo + rows]
-        best = dist[rows, first[rows]]
+        p = points[rows]
         c = curve_id[near]
         for step_to in (-1, 1):  # the nearest sample's two segments on its own polyline
             nb = near + step_to
@@ -111,7 +123,7 @@ def contact_ratios(curves, radius: float, frame: int = 0) -> np.ndarray:
             nb = np.where(nb < first_of, np.where(wrap, last_of, near), nb)
             nb = np.where(nb > last_of, np.where(wrap, first_of, near), nb)
             best = np.minimum(best, _segment_distance(p, points[near], points[nb]))
-        out[lo + rows] = np.minimum(best / (2.0 * radius), CAP)
+        out[rows] = np.minimum(best / (2.0 * radius), CAP)
     return out
 
 
