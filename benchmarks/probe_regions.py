@@ -8,8 +8,15 @@ on the 512² knit-patch scenes the defaults split off the first course (the loop
 last course's open loops (bottom) and the courses between (interior). A box where the floor itself is far from 1
 is one where fiber instances differ, not a model's error.
 
+With ``--regular-dir`` (the reference traced with its regular fibers alone, ``<scene>_regular.exr``, as
+``probe_flyaway_light.py`` keeps them) a second table splits each box between the regular fibers and the hairs: the
+regular-only reference over the full one, the strips without their flyaway layer (``closed``) over the regular-only
+reference, and the light the hairs add (over the full reference's light in the box) in the reference and in the
+strips (``full`` less ``closed``).
+
     .venv/bin/python benchmarks/probe_regions.py --compare-dir out/compare57all \\
-        --scenes knit_patch_grazing,knit_patch_directional [--box top=60:130:30:480 ...]
+        --scenes knit_patch_grazing,knit_patch_directional [--box top=60:130:30:480 ...] \\
+        [--regular-dir out/bench/regular_refs]
 """
 
 from __future__ import annotations
@@ -56,6 +63,26 @@ def region_table(folder: Path, boxes) -> list[str]:
     return lines
 
 
+def hair_split_table(folder: Path, regular_path: Path, boxes) -> list[str]:
+    """Lines of one scene's regular/hair split per box (module docstring); needs ``strip_closed`` and ``strip_full``."""
+    def light(path):
+        return read_exr(path)[..., :3].mean(axis=-1)
+
+    reference, regular = light(folder / "reference.exr"), light(regular_path)
+    closed, full = light(folder / "strip_closed.exr"), light(folder / "strip_full.exr")
+    lines = ["| box | regular-only reference / reference | closed / regular-only reference | hairs add: reference | "
+             "hairs add: strips |", "|---|---|---|---|---|"]
+    for name, (y0, y1, x0, x1) in [("all", (0, reference.shape[0], 0, reference.shape[1])), *boxes]:
+        box = (slice(y0, y1), slice(x0, x1))
+        ref, reg = float(reference[box].sum()), float(regular[box].sum())
+        if ref <= 0.0 or reg <= 0.0:
+            lines.append(f"| {name} | no light in the box | | | |")
+            continue
+        lines.append(f"| {name} | {reg / ref:.3f} | {float(closed[box].sum()) / reg:.3f} | {(ref - reg) / ref:+.3f} | "
+                     f"{float(full[box].sum() - closed[box].sum()) / ref:+.3f} |")
+    return lines
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--compare-dir", type=Path, required=True, help="a bench_compare.py --out folder")
@@ -63,6 +90,8 @@ def main(argv=None) -> int:
                         help="comma-separated scene folders in --compare-dir")
     parser.add_argument("--box", action="append", default=None,
                         help="name=y0:y1:x0:x1, repeatable (default: the knit patches' top, interior, bottom)")
+    parser.add_argument("--regular-dir", type=Path, default=None,
+                        help="regular-only references (<scene>_regular.exr): split each box between fibers and hairs")
     args = parser.parse_args(argv)
     boxes = [parse_box(b) for b in (args.box or PATCH_BOXES)]
     for scene in args.scenes.split(","):
@@ -72,6 +101,14 @@ def main(argv=None) -> int:
             return 1
         print(f"\n{scene}\n")
         print("\n".join(region_table(folder, boxes)))
+        if args.regular_dir is not None:
+            regular = args.regular_dir / f"{scene}_regular.exr"
+            missing = [p.name for p in (regular, folder / "strip_closed.exr", folder / "strip_full.exr")
+                       if not p.is_file()]
+            if missing:
+                print(f"\n(no regular/hair split: {', '.join(missing)} missing)")
+            else:
+                print("\n" + "\n".join(hair_split_table(folder, regular, boxes)))
     return 0
 
 
