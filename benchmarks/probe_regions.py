@@ -44,16 +44,21 @@ def parse_box(text: str):
     return name, (y0, y1, x0, x1)
 
 
-def region_table(folder: Path, boxes) -> list[str]:
+def _light(path: Path) -> np.ndarray:
+    """An image's light per pixel: the mean of its RGB."""
+    return read_exr(path)[..., :3].mean(axis=-1)
+
+
+def _boxes_and_all(shape, boxes):
+    return [("all", (0, shape[0], 0, shape[1])), *boxes]
+
+
+def region_table(reference: np.ndarray, light: dict, boxes) -> list[str]:
     """Lines of one scene's table: per box, its share of the reference's light and each image's light over it."""
-    images = {"floor_instance": folder / "floor_instance.exr"}
-    images.update({p.stem[len("strip_"):]: p for p in sorted(folder.glob("strip_*.exr"))})
-    reference = read_exr(folder / "reference.exr")[..., :3].mean(axis=-1)
-    light = {name: read_exr(path)[..., :3].mean(axis=-1) for name, path in images.items() if path.exists()}
     total = float(reference.sum())
     lines = ["| box | share of the reference's light | " + " | ".join(light) + " |",
              "|---|---|" + "---|" * len(light)]
-    for name, (y0, y1, x0, x1) in [("all", (0, reference.shape[0], 0, reference.shape[1])), *boxes]:
+    for name, (y0, y1, x0, x1) in _boxes_and_all(reference.shape, boxes):
         ref = float(reference[y0:y1, x0:x1].sum())
         if ref <= 0.0:
             lines.append(f"| {name} | 0 (no light: box outside the image or on the background) |" + " |" * len(light))
@@ -63,16 +68,12 @@ def region_table(folder: Path, boxes) -> list[str]:
     return lines
 
 
-def hair_split_table(folder: Path, regular_path: Path, boxes) -> list[str]:
-    """Lines of one scene's regular/hair split per box (module docstring); needs ``strip_closed`` and ``strip_full``."""
-    def light(path):
-        return read_exr(path)[..., :3].mean(axis=-1)
-
-    reference, regular = light(folder / "reference.exr"), light(regular_path)
-    closed, full = light(folder / "strip_closed.exr"), light(folder / "strip_full.exr")
+def hair_split_table(reference, regular, closed, full, boxes) -> list[str]:
+    """Lines of one scene's regular/hair split per box (module docstring): the light of the reference, the
+    regular-only reference and the strips without and with their flyaway layer."""
     lines = ["| box | regular-only reference / reference | closed / regular-only reference | hairs add: reference | "
              "hairs add: strips |", "|---|---|---|---|---|"]
-    for name, (y0, y1, x0, x1) in [("all", (0, reference.shape[0], 0, reference.shape[1])), *boxes]:
+    for name, (y0, y1, x0, x1) in _boxes_and_all(reference.shape, boxes):
         box = (slice(y0, y1), slice(x0, x1))
         ref, reg = float(reference[box].sum()), float(regular[box].sum())
         if ref <= 0.0 or reg <= 0.0:
@@ -99,16 +100,22 @@ def main(argv=None) -> int:
         if not (folder / "reference.exr").is_file():
             print(f"{folder}: no reference.exr (run bench_compare.py --out {args.compare_dir} first)", file=sys.stderr)
             return 1
+        reference = _light(folder / "reference.exr")
+        paths = {"floor_instance": folder / "floor_instance.exr"}
+        paths.update({p.stem[len("strip_"):]: p for p in sorted(folder.glob("strip_*.exr"))})
+        light = {name: _light(path) for name, path in paths.items() if path.exists()}
         print(f"\n{scene}\n")
-        print("\n".join(region_table(folder, boxes)))
+        print("\n".join(region_table(reference, light, boxes)))
         if args.regular_dir is not None:
             regular = args.regular_dir / f"{scene}_regular.exr"
-            missing = [p.name for p in (regular, folder / "strip_closed.exr", folder / "strip_full.exr")
-                       if not p.is_file()]
+            needed = ((regular.name, regular.is_file()), ("strip_closed.exr", "closed" in light),
+                      ("strip_full.exr", "full" in light))
+            missing = [name for name, there in needed if not there]
             if missing:
                 print(f"\n(no regular/hair split: {', '.join(missing)} missing)")
             else:
-                print("\n" + "\n".join(hair_split_table(folder, regular, boxes)))
+                split = hair_split_table(reference, _light(regular), light["closed"], light["full"], boxes)
+                print("\n" + "\n".join(split))
     return 0
 
 
