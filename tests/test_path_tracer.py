@@ -301,6 +301,62 @@ def test_a_reference_without_its_flyaways_keeps_the_same_regular_fibers(tmp_path
     assert not np.allclose(image, reference.trace_reference(scene, 2, seed=3)[0])
 
 
+def test_light_by_the_surface_seen_first_splits_the_image():
+    """``first_seen``: two parallel fibers of two types, lit and seen from above, the second beside the first and
+    lower, so each blocks and lights the other. The images of complementary masks hold the same paths and random
+    numbers: they sum to the full image, each is nowhere brighter than it and each holds light; a mask of the wrong
+    length and the tubes' tracer are refused with one line."""
+    two = FiberSet(np.array([[0.0, -2.0, 0.0], [0.0, 2.0, 0.0], [0.12, -2.0, -0.15], [0.12, 2.0, -0.15]]),
+                   np.array([0, 2, 4]), np.array([0.1, 0.1]), np.zeros(2, np.int8), np.zeros(2, np.int16))
+    light = dict(light_dirs=np.array([[0.3, 0.0, 1.0]]), light_irradiance=np.array([[1.0, 1.0, 1.0]]))
+    scene = TracerScene(None, np.array([0, 1], np.int32), np.stack([LOSSLESS, LOSSLESS]), fibers=two, **light)
+    cam = top_camera(32, 32, ortho=0.8)
+
+    def seen(mask):
+        return render_samples(scene, cam, 0, 8, seed=5, first_seen=mask)[0]
+
+    full, first, second = seen(None), seen([True, False]), seen([False, True])
+    assert np.allclose(first + second, full, rtol=1e-12, atol=1e-12)
+    for part in (first, second):
+        assert np.all(part <= full + 1e-12) and 0.05 * full.sum() < part.sum() < 0.95 * full.sum()
+    assert np.array_equal(seen([True, True]), full)
+    with pytest.raises(ValueError, match="2 fiber types"):
+        seen([True])
+    tubes = TracerScene(tessellate_fibers(two, sides=8), np.array([0, 1], np.int32), np.stack([LOSSLESS, LOSSLESS]),
+                        **light)
+    with pytest.raises(ValueError, match="curves"):
+        render_samples(tubes, cam, 0, 1, first_seen=[True, False])
+
+
+def test_a_reference_split_by_the_surface_seen_first(tmp_path):
+    """``trace_reference(seen=...)`` on a yarn with flyaways: the flyaways trace as a type of their own with the same
+    optics, the regular and the flyaway parts sum to the full reference with the same seeds (each holds the background
+    where camera rays miss), the flyaways' part holds light, and the facts say which part; an unknown ``seen`` is refused with one line."""
+    from data_formats.errors import FormatError
+    from data_formats.scene import load_scene
+    from knitbake.trace.reference import build_reference, trace_reference
+    from tests.helpers import FRONT, SUN, straight, write_scene
+
+    scene = load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN))
+    built = build_reference(scene, seed=3, seen="regular")
+    assert built.first_seen.tolist() == [True, False]
+    assert np.array_equal(built.tracer.params[0], built.tracer.params[1])
+    assert sorted(np.unique(built.tracer.fiber_type)) == [0, 1]
+    full, facts = trace_reference(scene, 2, seed=3)
+    regular, regular_facts = trace_reference(scene, 2, seed=3, seen="regular")
+    hairs, hair_facts = trace_reference(scene, 2, seed=3, seen="flyaways")
+    assert "seen" not in facts and regular_facts["seen"] == "regular" and hair_facts["seen"] == "flyaways"
+    # every part holds the background where camera rays miss: the parts sum to the full image plus a fraction m of
+    # the background (0.1, 0.2, 0.3) per pixel, the share of its samples that missed
+    missed = (regular + hairs - full) / np.array([0.1, 0.2, 0.3])
+    assert np.allclose(missed, missed[..., :1], atol=1e-5) and missed.min() > -1e-5 and missed.max() < 1 + 1e-5
+    assert missed.max() > 0.5 and missed.min() < 1e-5  # the yarn and the background are both in view
+    hair_light, regular_light = full - regular, full - hairs  # the light leaving each kind of fiber
+    assert 0.02 < hair_light.sum() / (hair_light + regular_light).sum() < 0.6 and regular_light.min() > -1e-6
+    with pytest.raises(FormatError, match="seen 'hair'"):
+        build_reference(scene, seen="hair")
+
+
 def test_curves_are_deterministic_across_threads_and_batching():
     scene = yarn_scene(ABSORBING, geometry="curves", env=uniform_env([1.0, 0.5, 0.2]),
                        light_dirs=np.array([[1.0, 0.3, 0.2]]), light_irradiance=np.array([[2.0, 2.0, 2.0]]))

@@ -235,6 +235,21 @@ def test_ablations_change_the_image(tmp_path, pack):
         assert not np.array_equal(images["full"], images[other]), other
 
 
+def test_the_split_by_the_surface_seen_first_draws_opaque_black_hairs(tmp_path, pack):
+    """``Features(hair_light=False)`` draws the hairs opaque and black (the counterpart of the reference traced with
+    ``seen="regular"``): per pixel never brighter than the full image (the hairs add no light and pass none of the
+    body's), darker where hairs are drawn, the background where they are not; without the flyaway layer it changes
+    nothing (the GL backend refuses it: ``tests/test_gl_render.py``)."""
+    sun = write_scene(tmp_path, [straight()], camera=FRONT, lights=SKY + "\n" + SUN, name="sun")
+    full = _render(sun, pack).image
+    split = _render(sun, pack, features=Features(hair_light=False)).image
+    assert np.all(split <= full + 1e-6 * np.abs(full).max())
+    darker = (full - split).sum(axis=2) > 1e-4
+    assert darker.sum() > 50  # the hairs over and beside the body
+    assert np.array_equal(_render(sun, pack, features=Features(flyaways=False, hair_light=False)).image,
+                          _render(sun, pack, features=Features(flyaways=False)).image)
+
+
 def test_the_single_scattering_split_is_darker_and_blind_to_what_crosses_yarns(tmp_path, pack):
     """``Features(multiple_scattering=False)`` keeps single scattering alone: never brighter than the full image
     under the sun and the sky, clearly darker over the yarns, not black; and, its DS density factors being 0, blind

@@ -28,7 +28,11 @@ Design
   than ``reach`` of σ away (another part of a yarn that loops back: the strip renderer's yarn-level bounce counts
   those as neighbours, ``knitrun.render.yarn_bounce``). The light the yarns send each other is left out; they still
   block every shadow ray. The full image less this one is the light that reached the seen yarn through scattering
-  by other yarns.
+  by other yarns. ``first_seen`` (a bool per fiber type) is the "light by the surface seen first" diagnostic: a path
+  whose camera ray first hits a fiber of a type it marks False ends there and counts nothing, so the image holds the
+  light leaving the fibers of the other types toward the camera (a camera ray that misses sees the background in
+  every image); the images of complementary masks sum to the full image and the background where camera rays miss
+  (the same paths and random numbers). ``knitbake.trace.reference`` gives the flyaways their own types for it.
 * Threads: ``_trace_curves`` runs ``prange`` over blocks of ``PATH_BLOCK`` paths, each block with its own scratch
   arrays (``scatter_scratch``; per-path arrays made the allocator 8 % of the render). Hot loops copy rows of the
   shared inputs (the BCSDF parameters, a light's direction) instead of taking views of them: a view bumps the
@@ -417,11 +421,12 @@ def _shade(seed, depth, scatter, path_id, org, dirs, hit_t, hit_prim, throughput
 def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, params, light_dirs, light_irr, has_env,
                   env_rad, env_row, env_col, env_prob, background, camera_background, pos, fwd, right, up, width,
                   height, tan_half, ortho_h, seed, first_sample, n_samples, max_depth, rr_depth, yarn_only_r2,
-                  own_yarn, own_sigma, own_reach, radiance, rays):
+                  own_yarn, own_sigma, own_reach, first_seen, radiance, rays):
     """Whole paths over the fibers as Embree curves (``embree_curves``), one path per iteration, shadow rays traced
     as they are made: no Python between rays. Path n = sample·pixels + pixel writes ``radiance[n]`` and
     ``rays[n]`` (rays it traced). The same events and random numbers as the tube tracer's waves. ``own_yarn``: the
-    yarn of each fiber, or empty; ``own_sigma`` the σ of each vertex, ``own_reach`` (module docstring)."""
+    yarn of each fiber, or empty; ``own_sigma`` the σ of each vertex, ``own_reach`` (module docstring). ``first_seen``
+    (types,) bool: paths whose camera ray first hits a type marked False end there (module docstring)."""
     n_pix = width * height
     n_paths = n_samples * n_pix
     n_shadow = light_dirs.shape[0] + (1 if has_env else 0)
@@ -475,6 +480,8 @@ def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, par
                     t[k] /= norm
                 shadow_val[:] = 0.0
                 ft = fiber_type[segment_fiber[prim]]
+                if depth == 0 and not first_seen[ft]:  # the "surface seen first" diagnostic (module docstring)
+                    break
                 for k in range(p.shape[0]):  # a copy, not a view of the shared array (module docstring, "Threads")
                     p[k] = params[ft, k]
                 pb = _scatter(seed, pid, depth, hit, d, a, t, float(vertices[v, 3]) * 1.0001, p, light_dirs,
@@ -509,16 +516,24 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
 
 def render_samples(scene: TracerScene, camera: Camera, first_sample: int, spp: int, seed: int = 0,
                    max_depth: int = 16, rr_depth: int = 3, yarn_only_radius: float = 0.0,
-                   samples_per_pass: int | None = None, progress=None, own_yarn=None):
+                   samples_per_pass: int | None = None, progress=None, own_yarn=None, first_seen=None):
     """The sum (H, W, 3) float64 of samples ``first_sample`` … ``first_sample + spp − 1`` of every pixel, added in
     sample order, and RenderStats: ``render`` is this over samples 0 … spp − 1, divided by spp. A sample's random
     numbers depend only on (seed, its index, pixel), so batches of samples can run anywhere (``knitbake.scale_out``).
     ``progress(done, spp)`` after every pass. ``own_yarn`` = (yarn of each fiber (F,), σ of each fiber point (P,),
-    reach): no light between yarns (module docstring; fibers as curves only)."""
+    reach): no light between yarns (module docstring; fibers as curves only). ``first_seen`` (types,) bool or None (all
+    True): only the light of paths whose camera ray first hits a fiber of a type marked True (module docstring;
+    fibers as curves only)."""
     if spp < 1 or max_depth < 1 or first_sample < 0:
         raise ValueError(f"spp = {spp}, max_depth = {max_depth} must be ≥ 1, first_sample = {first_sample} ≥ 0")
     if own_yarn is not None and scene.curves is None:
         raise ValueError("own_yarn (no light between yarns) needs the fibers as curves, not tubes")
+    n_types = scene.params.shape[0]
+    seen = np.ones(n_types, np.bool_) if first_seen is None else np.asarray(first_seen, np.bool_).reshape(-1)
+    if seen.shape[0] != n_types:
+        raise ValueError(f"first_seen has {seen.shape[0]} entries for {n_types} fiber types")
+    if not seen.all() and scene.curves is None:
+        raise ValueError("first_seen (light by the surface seen first) needs the fibers as curves, not tubes")
     own = (np.zeros(0, np.int32), np.zeros(0), 0.0) if own_yarn is None else \
         (np.ascontiguousarray(own_yarn[0], np.int32), np.ascontiguousarray(own_yarn[1], np.float64),
          float(own_yarn[2]))
@@ -549,7 +564,7 @@ def render_samples(scene: TracerScene, camera: Camera, first_sample: int, spp: i
                           scene.light_irradiance, has_env, *env_arrays, background, camera_background,
                           np.asarray(camera.position, float), fwd, right, up, w, h, tan_half,
                           float(camera.ortho_height), seed, done, n_s, max_depth, rr_depth,
-                          float(yarn_only_radius) ** 2, *own, radiance, rays)
+                          float(yarn_only_radius) ** 2, *own, seen, radiance, rays)
             stats.rays += int(rays.sum())
             for sample_image in radiance.reshape(n_s, n_pix, 3):  # in sample order, as below
                 accum += sample_image

@@ -43,6 +43,7 @@ from knitrun.shading.fiber_bcsdf import params_from_optics, tinted
 
 TUBE_SIDES = 6
 GEOMETRIES = ("curves", "tubes")
+SEEN = ("all", "regular", "flyaways")  # ``build_reference``'s ``seen``: the fibers whose light the image holds
 
 
 @dataclass
@@ -51,19 +52,29 @@ class ReferenceScene:
     camera: Camera
     facts: dict  # fibers, segments, triangles, build timings
     own_yarn: tuple | None  # (yarn of each fiber, σ of each fiber point, reach): ``build_reference``'s ``own_yarn``
+    first_seen: np.ndarray | None = None  # (types,) bool: ``path_tracer.render_samples``' ``first_seen``, or None
 
 
 def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_yarn: bool = False,
-                    flyaways: bool = True) -> ReferenceScene:
+                    flyaways: bool = True, seen: str = "all") -> ReferenceScene:
     """Explicit-fiber tracer scene of ``scene`` at frame ``scene.render.frame``; ``seed`` draws the fibers;
     ``geometry``: ``GEOMETRIES``. ``flyaways`` False: the regular fibers alone, the loop and hair fibers drawn and
     dropped (the regular ones are those of the full draw; a diagnostic: the full reference less this one is the light
     the flyaways add). ``own_yarn``: also what the tracer's "no light between yarns" diagnostic reads
     (``path_tracer`` module docstring): the yarn (the scene's curves, numbered over its entries) of each fiber, the
     rest arc length σ of each fiber point (that of the nearest point of its curve's dense polyline) and the reach,
-    the strip renderer's (``yarn_bounce.REACH_RADII`` yarn radii, the largest entry's)."""
+    the strip renderer's (``yarn_bounce.REACH_RADII`` yarn radii, the largest entry's). ``seen`` (``SEEN``): "all", or
+    the diagnostic "light by the surface seen first" (``path_tracer`` module docstring): "regular" keeps the light of
+    the paths whose camera ray first hits a regular fiber (the flyaways still block, scatter and shadow), "flyaways"
+    that of the paths that first hit a loop or hair fiber; both see the background where camera rays miss, so "all"
+    less "regular" is the light leaving the flyaways. The flyaways of entry k then
+    trace as fiber type k + len(scene.yarns), with entry k's parameters."""
     if geometry not in GEOMETRIES:
         raise FormatError(f"geometry {geometry!r}: expected one of {', '.join(GEOMETRIES)}")
+    if seen not in SEEN:
+        raise FormatError(f"seen {seen!r}: expected one of {', '.join(SEEN)}")
+    if seen != "all" and (geometry != "curves" or not flyaways):
+        raise ValueError("build_reference: seen needs the fibers as curves, with their flyaways")
     if own_yarn and not flyaways:  # the yarn of each fiber comes from the full draw's fiber ranges
         raise ValueError("build_reference: own_yarn and flyaways=False do not combine (one diagnostic at a time)")
     t0 = time.perf_counter()
@@ -80,7 +91,8 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_y
         if not flyaways:
             fibers = fibers.select(fibers.kind == KIND_REGULAR)
         parts.append(fibers)
-        types.append(np.full(fibers.n_fibers, k, np.int32))
+        flyaway = (fibers.kind != KIND_REGULAR) & (seen != "all")
+        types.append(np.where(flyaway, k + len(scene.yarns), k).astype(np.int32))
         if own_yarn:
             yarn, sigma = _yarn_and_sigma(drawn, scene.render.frame, fibers, next_yarn)
             yarns.append(yarn)
@@ -98,6 +110,10 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_y
         image = environment_image(e)
         env = env_from_image(image, e.scale)
     params = np.stack([tinted(params_from_optics(e.spec.optics), e.color) for e in scene.yarns])
+    first_seen = None
+    if seen != "all":
+        params = np.concatenate([params, params])
+        first_seen = np.repeat([seen == "regular", seen == "flyaways"], len(scene.yarns))
     n_fibers, n_segments = fibers.n_fibers, fibers.n_segments
     curve_scene = None
     if mesh is None:  # the fibers' float64 points are dropped before Embree builds: the build sets the peak
@@ -115,7 +131,7 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_y
     own = None
     if own_yarn:
         own = (np.concatenate(yarns), np.concatenate(sigmas), REACH_RADII * max(e.radius for e in scene.yarns))
-    return ReferenceScene(tracer, camera, facts, own)
+    return ReferenceScene(tracer, camera, facts, own, first_seen)
 
 
 def _yarn_and_sigma(curves, frame, fibers, first_yarn):
@@ -141,7 +157,7 @@ def sample_batches(spp: int, batch_spp: int | None) -> list[tuple[int, int]]:
 
 def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None,
                     fiber_seed: int | None = None, geometry: str = "curves", batch_spp: int | None = None,
-                    inter_yarn: bool = True, flyaways: bool = True):
+                    inter_yarn: bool = True, flyaways: bool = True, seen: str = "all"):
     """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``seed`` drives the
     path sampling and, unless ``fiber_seed`` is given, the fibers too: another fiber seed draws another instance of
     the same yarns (the fiber-instance floor of a comparison), another sampling seed another estimate of the same
@@ -153,9 +169,12 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
     tessellate_s, embree_build_s) and mean_rgb. ``inter_yarn`` False: no light between yarns, a diagnostic
     (``path_tracer`` module docstring: paths end where they would scatter off another yarn than the one seen; the
     full image less this one is the light the yarns send each other); facts then say ``inter_yarn: false``.
-    ``flyaways`` False: the regular fibers alone (``build_reference``); facts then say ``flyaways: false``."""
+    ``flyaways`` False: the regular fibers alone (``build_reference``); facts then say ``flyaways: false``. ``seen``
+    "regular" or "flyaways": the light of the paths that first hit those fibers (``build_reference``); facts then
+    say ``seen``."""
     fiber_seed = seed if fiber_seed is None else fiber_seed
-    built = build_reference(scene, seed=fiber_seed, geometry=geometry, own_yarn=not inter_yarn, flyaways=flyaways)
+    built = build_reference(scene, seed=fiber_seed, geometry=geometry, own_yarn=not inter_yarn, flyaways=flyaways,
+                            seen=seen)
     if on_built is not None:
         on_built(built.facts)
     total, seconds, rays = None, 0.0, 0
@@ -163,7 +182,7 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
         part, stats = render_samples(built.tracer, built.camera, first, count, seed=seed, max_depth=max_depth,
                                      progress=None if progress is None else
                                      (lambda done, _, first=first: progress(first + done, spp)),
-                                     own_yarn=built.own_yarn)
+                                     own_yarn=built.own_yarn, first_seen=built.first_seen)
         total = part if total is None else total + part
         seconds, rays = seconds + stats.seconds, rays + stats.rays
     image = total / spp
@@ -172,6 +191,7 @@ def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, 
              "render_s": seconds, "rays": rays,
              "rays_per_s": rays / seconds if seconds > 0 else 0.0, **built.facts,
              **({} if inter_yarn else {"inter_yarn": False}), **({} if flyaways else {"flyaways": False}),
+             **({} if seen == "all" else {"seen": seen}),
              "mean_rgb": image.reshape(-1, 3).mean(axis=0).tolist()}
     return image, facts
 

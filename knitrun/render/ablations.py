@@ -108,6 +108,13 @@ while Ψ^Fiber_G of the body's front is nearly 0. Both backends; the ablation ``
 over the body to lie in front of it, as until stop 56 (measured in BENCHMARKS.md, "Issue 13: hairs seen through the
 body").
 
+``hair_light`` False draws the flyaway layer's hairs opaque and black: the image holds the light of the regular
+fibers seen between the hairs. It is no rung of the ladder but a split, as ``multiple_scattering``: the reference
+traced with ``seen="regular"`` (``knitbake.trace.reference.build_reference``: the light of the paths whose camera ray
+first hits a regular fiber) is its counterpart, and the full image less it is the light the hairs send the camera,
+what they scatter of the light and what they pass on of the yarn behind them (``benchmarks/probe_first_surface.py``).
+CPU renderer only.
+
 ``ABLATIONS`` names the combinations as a ladder, each adding one term to the one before (``ABLATION_ORDER``):
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ
 closed on the renderer (at every view), + flyaways (= the full model, the default); every rung draws the surface
@@ -145,6 +152,7 @@ class Features:
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
     hair_glow: bool = True  # hairs beside and over a yarn lit by the light its body scatters (strip_shading.body_glow)
     hairs_behind: bool = True  # hairs seen through a body's gaps lie behind it (strip_shading.behind_share)
+    hair_light: bool = True  # False: the hairs opaque and black, the regular fibers' light between them (a split)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs

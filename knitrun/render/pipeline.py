@@ -707,6 +707,9 @@ class Renderer:
                               hair_glow(looks[k]) if features.hair_glow and len(light_dir) else None,
                               *environment,
                               fly_rgb, fly_alpha, fly_transmit)
+            if not features.hair_light:  # the split of ``Features.hair_light``: opaque black hairs
+                fly_rgb[:] = 0.0
+                fly_transmit[:] = 0.0
         lap("shade")
 
         background = np.asarray(scene.background, np.float64)

@@ -258,6 +258,9 @@ class GLRenderer:
         if not features.multiple_scattering:
             raise FormatError("the GL backend draws the full light transport; Features.multiple_scattering=False "
                               "(single scattering alone) is drawn by the CPU renderer")
+        if not features.hair_light:
+            raise FormatError("the GL backend draws the hairs' light; Features.hair_light=False (the split by the "
+                              "surface seen first) is the CPU renderer's")
         if features.two_blockers:
             raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
                               "counts two")
