@@ -253,6 +253,9 @@ def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
     with pytest.raises(FormatError, match="two_blockers") as e:
         gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(two_blockers=True))
     assert "\n" not in str(e.value)
+    with pytest.raises(FormatError, match="hair_canopy") as e:
+        gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(hair_canopy=True))
+    assert "\n" not in str(e.value)
     with pytest.raises(FormatError, match="hair_light") as e:
         gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(hair_light=False))
     assert "\n" not in str(e.value)

@@ -250,6 +250,26 @@ def test_the_split_by_the_surface_seen_first_draws_opaque_black_hairs(tmp_path, 
                           _render(sun, pack, features=Features(flyaways=False)).image)
 
 
+def test_other_yarns_hair_layers_dim_the_directional_lights(tmp_path, pack):
+    """``Features(hair_canopy=True)`` (``hair_canopy``): a lone yarn keeps its image bit for bit (its own layer is the
+    lone yarn's); a yarn in the hair layer of another between it and the sun is darker, nowhere brighter; the
+    switch changes nothing without flyaways."""
+    lone = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="lone")
+    assert np.array_equal(_render(lone, pack, features=Features(hair_canopy=True)).image, _render(lone, pack).image)
+    # the sun (0.3, 0.6, 1.0): the upper yarn 2.6 radii along it from the lower one, their bodies clear of each other
+    # and the lower one inside the upper one's hair layer
+    r = 0.03
+    step = 2.6 * r * np.array([0.3, 0.6, 1.0]) / np.linalg.norm([0.3, 0.6, 1.0])
+    pair = write_scene(tmp_path, [straight(), straight() + step], camera=FRONT, lights=SUN, name="pair")
+    full = _render(pair, pack).image
+    dimmed = _render(pair, pack, features=Features(hair_canopy=True)).image
+    assert np.all(dimmed <= full + 1e-6 * np.abs(full).max())
+    assert (full - dimmed).sum(axis=2).max() > 1e-3
+    bare = dict(flyaways=False)
+    assert np.array_equal(_render(pair, pack, features=Features(hair_canopy=True, **bare)).image,
+                          _render(pair, pack, features=Features(**bare)).image)
+
+
 def test_the_single_scattering_split_is_darker_and_blind_to_what_crosses_yarns(tmp_path, pack):
     """``Features(multiple_scattering=False)`` keeps single scattering alone: never brighter than the full image
     under the sun and the sky, clearly darker over the yarns, not black; and, its DS density factors being 0, blind

@@ -55,6 +55,9 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    is interpolated to the regular points. With ``Features.two_blockers`` (an ablation) each directional light's map
    also draws the second yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks,
    goes to the kernels as ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
+   With ``Features.hair_canopy`` (an ablation) every receiver's visibility of each directional light (and the
+   bounce vertices') is multiplied by the fraction the other yarns' hair layers let through (``hair_canopy``),
+   computed at the polyline points and interpolated along the curves (``_canopy``).
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
    (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
    frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
@@ -95,6 +98,7 @@ from data_formats.scene import EnvironmentLight, Scene, read_curves
 from knitrun.render.ablations import Features
 from knitrun.render.camera import scene_camera
 from knitrun.render.compile_ahead import start_compile_ahead
+from knitrun.render.hair_canopy import canopy_grid, canopy_transmittance
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
 from knitrun.render.shading_inputs import Lights, Lobes, Points
@@ -421,6 +425,35 @@ def receiver_bias(receivers: Receivers, direction) -> np.ndarray:
     return receivers.bias + own_strip_depth(receivers.offset, receivers.tangent, direction)
 
 
+def _canopy(lines, looks, direction, sets, where, at_bounce) -> list:
+    """The hair canopy's transmittance toward ``direction`` (``hair_canopy``) for each receiver set of a frame's shadow
+    pass (``Renderer`` order: the point sets at ``where``, then the bounce's polyline points ``at_bounce`` if any):
+    computed at every polyline point's tube surface toward the light and interpolated along the curves by rest arc
+    length, as the bounce. The canopy varies over the hair layers' size (a few yarn radii) and the shading points
+    are many per polyline point: at every shading point it took 0.5 s a frame under the grazing light, here it costs
+    nothing measurable (BENCHMARKS.md, stop 60)."""
+    radius = np.array([looks[k].radius for k in lines.entry], np.float64)
+    grid = canopy_grid(lines, radius, [looks[k].hair_shells for k in lines.entry], direction)
+    point_curve = np.repeat(np.arange(len(lines.offsets) - 1), np.diff(lines.offsets))
+    # each polyline point's tube surface toward the light, where its lit fibers lie: a ray from the axis runs a
+    # radius deeper through the neighbours' layers (nearly twice the traced canopy in the grazing patch's interior,
+    # BENCHMARKS.md, stop 60)
+    tangent = vertex_tangents(lines.points, lines.offsets)
+    d = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+    across = d - (tangent @ d)[:, None] * tangent
+    norm = np.linalg.norm(across, axis=1, keepdims=True)
+    across = np.divide(across, norm, out=np.zeros_like(across), where=norm > 1e-9)
+    lit_side = lines.points + across * np.repeat(radius, np.diff(lines.offsets))[:, None]
+    vertex = canopy_transmittance(grid, lit_side, point_curve, lines.rest)[:, None]
+    out = []
+    for s, at in zip(sets, where):
+        values = np.empty((len(s["weight"]), 1))
+        bounce_at_points(np.ascontiguousarray(s["segment"], np.int64), np.ascontiguousarray(s["arclength"], np.float64),
+                         lines.rest, vertex, values)
+        out.append(values[at, 0])
+    return out + ([vertex[at_bounce, 0]] if len(at_bounce) else [])
+
+
 def _visibility(lines, radius_of_curve, direction, size, angular_radius, receivers, depth_maps, two_layers=False):
     """Yarn-level visibility of each set of ``Receivers`` toward ``direction``; the shadow map's depth is drawn into
     ``depth_maps[size]`` (kept there for the next map of that size). With ``two_layers``, (visibility, the fraction
@@ -627,9 +660,13 @@ class Renderer:
         vertex_receivers = [axis_receivers(lines, looks, at_bounce)] if bounce_on else []
         vertex_vis = np.ones((len(light_dir), len(at_bounce)))
         vertex_beyond = np.ones((len(light_dir), len(at_bounce)))
+        canopy = features.hair_canopy and features.flyaways and len(light_dir) > 0
         for i, d in enumerate(light_dir):
             found = _visibility(lines, radius, d, size, 0.0, receivers + vertex_receivers, self.shadow_depth,
                                 features.two_blockers)
+            if canopy:  # other yarns' hair layers (``hair_canopy``) dim what the bodies let through
+                through = _canopy(lines, looks, d, sets, where, at_bounce)
+                found = [tuple(x * t for x in v) if features.two_blockers else v * t for v, t in zip(found, through)]
             pairs = found if features.two_blockers else [(vis, None) for vis in found]
             for out, beyond, at, (vis, past_one) in zip(light_vis, light_beyond, where, pairs):
                 out[i, at] = vis

@@ -316,11 +316,12 @@ def _vertex_bounce(yarns, senders, reach_radii, out, covered):
 
 @njit(parallel=True, cache=True)
 def bounce_at_points(segment, arclength, rest, vertex, out):
-    """out[k] (N, 3): the per-vertex ``vertex`` (P, 3) values interpolated at shading point k by rest arc length along
-    its polyline segment ``segment[k]`` (vertex index of its start)."""
+    """out[k] (N, C): the per-vertex ``vertex`` (P, C) values interpolated at shading point k by rest arc length along
+    its polyline segment ``segment[k]`` (vertex index of its start). The bounce's radiance (C = 3), and any other
+    per-vertex value (``hair_canopy``'s transmittance, C = 1)."""
     for k in prange(segment.shape[0]):
         i = segment[k]
         ds = rest[i + 1] - rest[i]
         f = min(max((arclength[k] - rest[i]) / ds, 0.0), 1.0) if ds > 0.0 else 0.0
-        for ch in range(3):
+        for ch in range(vertex.shape[1]):
             out[k, ch] = (1.0 - f) * vertex[i, ch] + f * vertex[i + 1, ch]

@@ -43,6 +43,7 @@ from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.conventions import CM_PER_UNIT, LUMINANCE
 from data_formats.errors import FormatError
 from data_formats.yarn_spec import loads_spec
+from knitrun.render.hair_canopy import hair_shells
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.shading_inputs import Corrections, Look
 from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
@@ -90,6 +91,7 @@ class YarnLook:
     radius: float  # drawn yarn radius = regular strip half-width
     period: float  # texture period along the rest arc length
     flyaway_half_width: float
+    hair_shells: tuple | None  # (edges, σ) of the hair layer (``hair_canopy.hair_shells``), None without flyaways
     n_cross: float  # fibers a beam crossing another yarn meets (``transmittance_count`` or geometric)
     n_cross_rest: float  # the count of what a crossing beam does not pass between the fibers (τ_Y split out)
     gap: float  # τ_Y: fraction of a beam crossing a yarn that passes between its fibers (``gap_transmittance``)
@@ -306,6 +308,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         flyaway=mip_stack([[level[k] for level in fly] for k in range(3)]) if fly else None,
         radius=entry.radius, period=float(pack.yarn["period"]) * to_scene * scale,
         flyaway_half_width=(_half_width(pack, "textures/flyaway") * to_scene * scale) if fly else entry.radius,
+        hair_shells=hair_shells(np.asarray(fly[0])[..., 3].mean(axis=(0, 2)),
+                                _half_width(pack, "textures/flyaway") / _half_width(pack, "textures/coverage"))
+        if fly else None,
         n_cross=n_cross, n_cross_rest=n_cross_rest, gap=gap, n_cross_from=n_cross_from, n_occluded=n_occluded,
         d_f=D_F, d_b=D_B, xi_from=xi_from,
         warnings=warnings,

@@ -261,6 +261,9 @@ class GLRenderer:
         if not features.hair_light:
             raise FormatError("the GL backend draws the hairs' light; Features.hair_light=False (the split by the "
                               "surface seen first) is the CPU renderer's")
+        if features.hair_canopy:
+            raise FormatError("the GL backend leaves other yarns' hair layers out of its lights (Features.hair_canopy); "
+                              "the CPU renderer draws them")
         if features.two_blockers:
             raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
                               "counts two")
