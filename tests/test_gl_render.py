@@ -247,18 +247,12 @@ def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
                                {"cotton1": str(pack)})
     assert "\n" not in str(e.value)
     one = load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="one"))
-    with pytest.raises(FormatError, match="single scattering") as e:
-        gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(multiple_scattering=False))
-    assert "\n" not in str(e.value)
-    with pytest.raises(FormatError, match="two_blockers") as e:
-        gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(two_blockers=True))
-    assert "\n" not in str(e.value)
-    with pytest.raises(FormatError, match="hair_canopy") as e:
-        gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(hair_canopy=True))
-    assert "\n" not in str(e.value)
-    with pytest.raises(FormatError, match="hair_light") as e:
-        gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, Features(hair_light=False))
-    assert "\n" not in str(e.value)
+    for features, says in [(Features(multiple_scattering=False), "single scattering"),
+                           (Features(two_blockers=True), "two_blockers"), (Features(hair_canopy=True), "hair_canopy"),
+                           (Features(hair_light=False), "hair_light")]:
+        with pytest.raises(FormatError, match=says) as e:
+            gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, features)
+        assert "\n" not in str(e.value)
 
 
 def test_a_machine_without_egl_gets_a_one_line_reason(monkeypatch):

@@ -135,11 +135,11 @@ def canopy_grid(lines, radius_of_curve, shells, direction) -> CanopyGrid | None:
     cell = max(0.5 * grow, float(np.ptp(xy, axis=0).max() + 2.0 * grow) / MAX_CELLS)
     size = np.minimum(np.ceil((xy.max(axis=0) + grow - lo) / cell).astype(np.int64) + 1, MAX_CELLS + 2)
     counts = np.zeros(size[0] * size[1] + 1, np.int64)
-    _bin_counts(xy, first, seg_curve, reach, lo, cell, size, counts)
+    _bin(xy, first, seg_curve, reach, lo, cell, size, counts, np.zeros(0, np.int64), False)
     start = np.zeros_like(counts)
     np.cumsum(counts[:-1], out=start[1:])
     members = np.empty(int(start[-1]), np.int64)
-    _bin_fill(xy, first, seg_curve, reach, lo, cell, size, start.copy(), members)
+    _bin(xy, first, seg_curve, reach, lo, cell, size, start.copy(), members, True)
     # each cell's segments nearest the light first: a receiver stops at the first one wholly behind it
     toward = points @ d
     top = np.maximum(toward[first], toward[first + 1]) + reach[seg_curve]
@@ -179,27 +179,17 @@ def _cells_of(xy, a, b, grow, lo, cell, size):
 
 
 @njit(cache=True)
-def _bin_counts(xy, first, seg_curve, reach, lo, cell, size, counts):
-    """Segments per cell (serial: cells are shared)."""
+def _bin(xy, first, seg_curve, reach, lo, cell, size, cursor, members, fill):
+    """Bin then scatter (serial: cells are shared): without ``fill``, cursor[c] += the segments of cell c; with it,
+    each cell's segments into members from cursor[c] on, in segment order."""
     for s in range(first.shape[0]):
         a, grow = first[s], reach[seg_curve[s]]
         i0, i1, j0, j1 = _cells_of(xy, a, a + 1, grow, lo, cell, size)
         for i in range(i0, i1 + 1):
             for j in range(j0, j1 + 1):
                 if _cell_near(xy, a, grow, lo, cell, i, j):
-                    counts[i * size[1] + j] += 1
-
-
-@njit(cache=True)
-def _bin_fill(xy, first, seg_curve, reach, lo, cell, size, cursor, members):
-    """Each cell's segments, in segment order (serial)."""
-    for s in range(first.shape[0]):
-        a, grow = first[s], reach[seg_curve[s]]
-        i0, i1, j0, j1 = _cells_of(xy, a, a + 1, grow, lo, cell, size)
-        for i in range(i0, i1 + 1):
-            for j in range(j0, j1 + 1):
-                if _cell_near(xy, a, grow, lo, cell, i, j):
-                    members[cursor[i * size[1] + j]] = s
+                    if fill:
+                        members[cursor[i * size[1] + j]] = s
                     cursor[i * size[1] + j] += 1
 
 
