@@ -67,8 +67,8 @@ def build_reference(scene: Scene, seed: int = 0, geometry: str = "curves", own_y
     the diagnostic "light by the surface seen first" (``path_tracer`` module docstring): "regular" keeps the light of
     the paths whose camera ray first hits a regular fiber (the flyaways still block, scatter and shadow), "flyaways"
     that of the paths that first hit a loop or hair fiber; both see the background where camera rays miss, so "all"
-    less "regular" is the light leaving the flyaways. The flyaways of entry k then
-    trace as fiber type k + len(scene.yarns), with entry k's parameters."""
+    less "regular" is the light leaving the flyaways. The flyaways of entry k then trace as fiber type
+    k + len(scene.yarns), with entry k's parameters."""
     if geometry not in GEOMETRIES:
         raise FormatError(f"geometry {geometry!r}: expected one of {', '.join(GEOMETRIES)}")
     if seen not in SEEN:

@@ -134,8 +134,8 @@ closed on the renderer (at every view), + flyaways (= the full model, the defaul
 lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
 detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
 bounce, with the lookups on the axis plane, with one ξ closed on single and multiple scattering together, with two
-blocking yarns counted, without the body's glow on its hairs and with every hair seen over a body taken to lie in
-front of it.
+blocking yarns counted, without the body's glow on its hairs, with every hair seen over a body taken to lie in
+front of it and with other yarns' hair layers dimming the directional lights.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
