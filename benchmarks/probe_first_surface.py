@@ -44,7 +44,7 @@ from knitrun.render import pipeline
 from knitrun.render.ablations import combined
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from probe_regions import PATCH_BOXES, parse_box  # noqa: E402
+from probe_regions import PATCH_BOXES, boxes_and_all, parse_box  # noqa: E402
 from probe_split import SCENES  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -54,7 +54,7 @@ def split_table(ref_all, ref_regular, strip_all, strip_regular, boxes) -> list[s
     """Lines of one scene's table (module docstring) from the four (H, W) light images."""
     lines = ["| box | reference: on hairs | on regular fibers | strips / reference: hairs | regular fibers | whole |",
              "|---|---|---|---|---|---|"]
-    for name, (y0, y1, x0, x1) in [("all", (0, ref_all.shape[0], 0, ref_all.shape[1])), *boxes]:
+    for name, (y0, y1, x0, x1) in boxes_and_all(ref_all.shape, boxes):
         box = (slice(y0, y1), slice(x0, x1))
         ref, ref_reg = float(ref_all[box].sum()), float(ref_regular[box].sum())
         strip, strip_reg = float(strip_all[box].sum()), float(strip_regular[box].sum())
@@ -115,7 +115,7 @@ def main(argv=None) -> int:
                                     light["strip_regular"], boxes)))
         if args.without_hairs:
             print("\n| box | regular fibers between the hairs / without hairs: reference | strips |\n|---|---|---|")
-            for box, (y0, y1, x0, x1) in [("all", (0, 10 ** 9, 0, 10 ** 9)), *boxes]:
+            for box, (y0, y1, x0, x1) in boxes_and_all(light["reference"].shape, boxes):
                 at = (slice(y0, y1), slice(x0, x1))
                 ratio = [float(light[a][at].sum()) / max(float(light[b][at].sum()), 1e-300)
                          for a, b in (("reference_regular", "reference_bare"), ("strip_regular", "strip_bare"))]

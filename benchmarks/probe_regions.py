@@ -49,7 +49,8 @@ def _light(path: Path) -> np.ndarray:
     return read_exr(path)[..., :3].mean(axis=-1)
 
 
-def _boxes_and_all(shape, boxes):
+def boxes_and_all(shape, boxes):
+    """The whole image as box "all", then ``boxes`` (name, (y0, y1, x0, x1))."""
     return [("all", (0, shape[0], 0, shape[1])), *boxes]
 
 
@@ -58,7 +59,7 @@ def region_table(reference: np.ndarray, light: dict, boxes) -> list[str]:
     total = float(reference.sum())
     lines = ["| box | share of the reference's light | " + " | ".join(light) + " |",
              "|---|---|" + "---|" * len(light)]
-    for name, (y0, y1, x0, x1) in _boxes_and_all(reference.shape, boxes):
+    for name, (y0, y1, x0, x1) in boxes_and_all(reference.shape, boxes):
         ref = float(reference[y0:y1, x0:x1].sum())
         if ref <= 0.0:
             lines.append(f"| {name} | 0 (no light: box outside the image or on the background) |" + " |" * len(light))
@@ -73,7 +74,7 @@ def hair_split_table(reference, regular, closed, full, boxes) -> list[str]:
     regular-only reference and the strips without and with their flyaway layer."""
     lines = ["| box | regular-only reference / reference | closed / regular-only reference | hairs add: reference | "
              "hairs add: strips |", "|---|---|---|---|---|"]
-    for name, (y0, y1, x0, x1) in _boxes_and_all(reference.shape, boxes):
+    for name, (y0, y1, x0, x1) in boxes_and_all(reference.shape, boxes):
         box = (slice(y0, y1), slice(x0, x1))
         ref, reg = float(reference[box].sum()), float(regular[box].sum())
         if ref <= 0.0 or reg <= 0.0:
