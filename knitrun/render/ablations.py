@@ -118,8 +118,8 @@ hairs are that much darker than the strips' (``benchmarks/probe_first_surface.py
 brightness goes from 1.060 to 1.006 of the reference's and its yarn-scale error from 1.38 to 1.30× the instance
 floor, the directional patch's from 0.997 to 0.980 and 1.38 to 1.37×, the simulated patch's from 0.957 to 0.944
 (out of [0.95, 1.05]) at 1.74×; the lone yarns and the sky (no directional light) do not change; it costs no
-measurable time (BENCHMARKS.md, stop 60). Not the default because the GL backend does not draw it (it refuses the
-switch); CPU renderer only.
+measurable time (BENCHMARKS.md, stop 60). Both backends since stop 61 (the GL one reads the canopy at the polyline
+points from a texture, as the bounce).
 
 ``hair_light`` False draws the flyaway layer's hairs opaque and black: the image holds the light of the regular
 fibers seen between the hairs. It is no rung of the ladder but a split, as ``multiple_scattering``: the reference

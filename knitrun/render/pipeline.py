@@ -425,26 +425,31 @@ def receiver_bias(receivers: Receivers, direction) -> np.ndarray:
     return receivers.bias + own_strip_depth(receivers.offset, receivers.tangent, direction)
 
 
-def _canopy(lines, looks, direction, sets, where, at_bounce) -> list:
-    """The hair canopy's transmittance toward ``direction`` (``hair_canopy``) for each receiver set of a frame's shadow
-    pass (``Renderer`` order: the point sets at ``where``, then the bounce's polyline points ``at_bounce`` if any):
-    computed at every polyline point's tube surface toward the light and interpolated along the curves by rest arc
-    length, as the bounce. The canopy varies over the hair layers' size (a few yarn radii) and the shading points
-    are many per polyline point: at every shading point it took 0.5 s a frame under the grazing light, here it costs
-    nothing measurable (BENCHMARKS.md, stop 60)."""
+def canopy_at_vertices(lines, looks, direction) -> np.ndarray:
+    """(P,) the hair canopy's transmittance toward unit ``direction`` (``hair_canopy``) at each polyline point of
+    ``lines``, taken on its tube surface toward the light, where its lit fibers lie: a ray from the axis runs a
+    radius deeper through the neighbours' layers (nearly twice the traced canopy in the grazing patch's interior,
+    BENCHMARKS.md, stop 60). Both backends interpolate it along the curves by rest arc length, as the bounce
+    (``_canopy``; the GL backend's canopy texture)."""
     radius = np.array([looks[k].radius for k in lines.entry], np.float64)
     grid = canopy_grid(lines, radius, [looks[k].hair_shells for k in lines.entry], direction)
     point_curve = np.repeat(np.arange(len(lines.offsets) - 1), np.diff(lines.offsets))
-    # each polyline point's tube surface toward the light, where its lit fibers lie: a ray from the axis runs a
-    # radius deeper through the neighbours' layers (nearly twice the traced canopy in the grazing patch's interior,
-    # BENCHMARKS.md, stop 60)
     tangent = vertex_tangents(lines.points, lines.offsets)
     d = np.asarray(direction, np.float64) / np.linalg.norm(direction)
     across = d - (tangent @ d)[:, None] * tangent
     norm = np.linalg.norm(across, axis=1, keepdims=True)
     across = np.divide(across, norm, out=np.zeros_like(across), where=norm > 1e-9)
     lit_side = lines.points + across * np.repeat(radius, np.diff(lines.offsets))[:, None]
-    vertex = canopy_transmittance(grid, lit_side, point_curve, lines.rest)[:, None]
+    return canopy_transmittance(grid, lit_side, point_curve, lines.rest)
+
+
+def _canopy(lines, looks, direction, sets, where, at_bounce) -> list:
+    """The hair canopy's transmittance toward ``direction`` (``hair_canopy``) for each receiver set of a frame's shadow
+    pass (``Renderer`` order: the point sets at ``where``, then the bounce's polyline points ``at_bounce`` if any):
+    ``canopy_at_vertices`` interpolated along the curves by rest arc length, as the bounce. The canopy varies over
+    the hair layers' size (a few yarn radii) and the shading points are many per polyline point: at every shading
+    point it took 0.5 s a frame under the grazing light, here it costs nothing measurable (BENCHMARKS.md, stop 60)."""
+    vertex = canopy_at_vertices(lines, looks, direction)[:, None]
     out = []
     for s, at in zip(sets, where):
         values = np.empty((len(s["weight"]), 1))

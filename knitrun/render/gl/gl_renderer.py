@@ -31,7 +31,7 @@ is shaded twice, each weighted by its own coverage); the shadow maps are rasteri
 of a shadow map is the nearest projected polyline point. ``tests/test_gl_render.py`` holds the two renderers
 together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
 
-Three terms of the default model read more than a fragment's own attributes: ``Features.surface_shadows`` looks
+Four terms read more than a fragment's own attributes: ``Features.surface_shadows`` looks
 the lights up on the tube surface seen (the fragment's position moved r √(1 − v²) toward the camera,
 ``pipeline.strip_receivers``); ``Features.parallax`` walks the frame's polylines (a texture of points, rest arc
 lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from the fragment's segment as
@@ -40,7 +40,9 @@ segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way;
 light the neighbouring yarns scatter onto each polyline point, is computed on the CPU (``pipeline.frame_bounce``,
 the lights' visibility at the points from the CPU twin's shadow maps: one more map per directional light and
 frame) and uploaded as a texture of the points (``_bounce_texture``), which a fragment interpolates along its
-segment by rest arc length as ``yarn_bounce.bounce_at_points`` does.
+segment by rest arc length as ``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each
+directional light that other yarns' hair layers let through, likewise (``pipeline.canopy_at_vertices`` on the CPU,
+one texture of the points per frame, ``_canopy_texture``), read by both passes where they take a light's visibility.
 
 The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
 textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
@@ -75,8 +77,9 @@ MAX_LIGHTS = 8  # directional lights a scene may have on this backend
 MAX_LOBES = 64  # SRBF lobes (the scene format's largest srbf_count)
 NO_YARN = 3.0e38  # depth of a shadow-map texel no yarn covers
 PCF_RADIUS = 1.5  # texels (shadow_map.shadow_visibility's default)
-ATLAS_UNITS = (24, 25, 26, 27, 28, 29, 30)  # texture units of the light atlas, lobe atlas, cluster weights, flyaway
-# variants, the axial parallax's polyline and curve bounds, and the yarn-level bounce at the polyline points
+ATLAS_UNITS = (23, 24, 25, 26, 27, 28, 29, 30)  # texture units of the light atlas, lobe atlas, cluster weights,
+# flyaway variants, the axial parallax's polyline and curve bounds, the yarn-level bounce and the hair canopy at the
+# polyline points; not 31, moderngl's ``default_texture_unit``, where it binds each texture it creates or writes
 POLYLINE_ROW = 1024  # polyline points per row of the parallax's texture (regular.frag)
 PARALLAX_STEPS = 64  # segments the parallax walks at most each way (the CPU walks to the curve's end)
 # (a yarn entry's own textures take units 0, 1, … in the order of ``_upload_look``)
@@ -261,9 +264,6 @@ class GLRenderer:
         if not features.hair_light:
             raise FormatError("the GL backend draws the hairs' light; Features.hair_light=False (the split by the "
                               "surface seen first) is the CPU renderer's")
-        if features.hair_canopy:
-            raise FormatError("the GL backend leaves other yarns' hair layers out of its lights (Features.hair_canopy); "
-                              "the CPU renderer draws them")
         if features.two_blockers:
             raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
                               "counts two")
@@ -292,6 +292,7 @@ class GLRenderer:
         self.light_dir = np.array([light.unit_direction for light in lights], np.float64).reshape(-1, 3)
         self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)
         self.bounce = pipeline.bounce_drawn(features, self.cpu.looks, len(self.light_dir))
+        self.canopy = features.hair_canopy and features.flyaways and len(self.light_dir) > 0
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1,
                                 hair_layers=1)
@@ -403,7 +404,11 @@ class GLRenderer:
         tangent = vertex_tangents(lines.points, lines.offsets)
         draws = self._upload_segments(lines, tangent)
         polyline = _polyline_textures(ctx, lines, tangent) if self.features.parallax else ()
-        bounce = self._bounce_texture(lines, camera, facts) if self.bounce else ()
+        # the hair canopy at the polyline points, per light (pipeline.canopy_at_vertices); ones without it
+        canopy = np.array([pipeline.canopy_at_vertices(lines, self.cpu.looks, d) for d in self.light_dir]) \
+            if self.canopy else np.ones((len(self.light_dir), len(lines.points)))
+        bounce = self._bounce_texture(lines, camera, canopy, facts) if self.bounce else ()
+        canopy_tex = self._canopy_texture(lines, canopy) if self.canopy else ()
         lap("load")
 
         radius = np.array([self.cpu.looks[k].radius for k in lines.entry])
@@ -442,6 +447,11 @@ class GLRenderer:
             _set(self.regular, "bounce_tex", ATLAS_UNITS[6])
         fly_entries = [d for d in draws if "fly_tex0" in self.looks[d[0]][1]]
         for program in (self.regular, self.flyaway) if fly_entries else (self.regular,):
+            _set(program, "hair_canopy", int(self.canopy))
+            for tex in canopy_tex:
+                tex.use(location=ATLAS_UNITS[7])
+                _set(program, "canopy_tex", ATLAS_UNITS[7])
+                _set(program, "canopy_rows", -(-len(lines.points) // POLYLINE_ROW))
             self._camera_uniforms(program, camera, near, far)
             _set(program, "image_height", int(h))
             _set(program, "samples", int(samples))
@@ -482,7 +492,7 @@ class GLRenderer:
                 source.release()
             fly_radiance, fly_cover = resolved
             image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
-        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers, *polyline, *bounce):
+        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers, *polyline, *bounce, *canopy_tex):
             obj.release()
         for _, arrays, _ in draws:
             for obj in arrays:
@@ -493,17 +503,18 @@ class GLRenderer:
         facts["residuals"] = {look.name: look.residuals for look in self.cpu.looks}
         return pipeline.RenderResult(image, timings, facts)
 
-    def _bounce_texture(self, lines, camera, facts):
+    def _bounce_texture(self, lines, camera, canopy, facts):
         """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce``, on the CPU: the lights'
-        visibility there from the CPU twin's shadow maps) as a one-texture tuple for ``regular.frag``: point i at
-        (i mod POLYLINE_ROW, i // POLYLINE_ROW), (bounce RGB, rest arc length)."""
+        visibility there from the CPU twin's shadow maps, times the hair canopy ``canopy`` (L, P) at the points) as a
+        one-texture tuple for ``regular.frag``: point i at (i mod POLYLINE_ROW, i // POLYLINE_ROW), (bounce RGB, rest
+        arc length)."""
         cpu = self.cpu
         radius = np.array([cpu.looks[k].radius for k in lines.entry])
         at = pipeline.bounce_vertices(lines, cpu.looks)
         receivers = [pipeline.axis_receivers(lines, cpu.looks, at)]
         size = self.scene.render.shadow_map_size
         vis = np.array([pipeline._visibility(lines, radius, d, size, 0.0, receivers, cpu.shadow_depth)[0]
-                        for d in self.light_dir])
+                        for d in self.light_dir]) * canopy[:, at]
         vertex, covered = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at, vis,
                                                 np.ones_like(vis))
         facts["yarn_bounce"] = pipeline.bounce_facts(vertex, covered)
@@ -511,6 +522,15 @@ class GLRenderer:
         data = np.zeros((-(-n // POLYLINE_ROW) * POLYLINE_ROW, 4), np.float32)
         data[:n, :3], data[:n, 3] = vertex, lines.rest
         return (_texture2d(self.ctx, data.reshape(-1, POLYLINE_ROW, 4)),)
+
+    def _canopy_texture(self, lines, canopy):
+        """The hair canopy ``canopy`` (L, P) at the frame's polyline points as a one-texture tuple for both passes:
+        light l's point i at (i mod POLYLINE_ROW, l · rows + i // POLYLINE_ROW), (transmittance, rest arc length),
+        rows = ⌈P / POLYLINE_ROW⌉."""
+        n = len(lines.points)
+        data = np.zeros((len(canopy), -(-n // POLYLINE_ROW) * POLYLINE_ROW, 2), np.float32)
+        data[:, :n, 0], data[:, :n, 1] = canopy, lines.rest
+        return (_texture2d(self.ctx, data.reshape(-1, POLYLINE_ROW, 2)),)
 
     def _upload_segments(self, lines, tangent):
         """One vertex array of segments with their neighbours (GL_LINES_ADJACENCY: previous point, the segment's two,

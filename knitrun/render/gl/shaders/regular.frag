@@ -85,7 +85,8 @@ void axial_parallax(inout StripPoint sp) {
 
 void main() {
     StripPoint sp = strip_point();
-    float bounce_s = sp.s;  // the bounce is read where the point lies, before the parallax (as on the CPU)
+    float bounce_s = sp.s;  // the bounce and the canopy are read where the point lies, before the parallax (as on
+                            // the CPU)
     vec3 raster_t = sp.t;  // and the lights' bias takes the rasterizer's tangent (pipeline.strip_receivers)
     if (parallax != 0 && sp.drawn)
         axial_parallax(sp);
@@ -118,7 +119,7 @@ void main() {
         vec3 w = light_dir[l];
         corrections(v, t, n, b, theta_o, w, true, true, xi, xi_s, psi);
         float vis = pcss(light_atlas, light_map[l], receiver, shadow_bias + own_strip_depth(offset, raster_t, w),
-                         PCF_RADIUS);
+                         PCF_RADIUS) * canopy_at(l, fin.segment, bounce_s);
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), clamped_asin(dot(tf, w)), theta_o_f, phi_f,
                   n_occluded + (1.0 - vis) * n_cross_rest, past_blockers(vis) * fiber_lit(psi), true, total, back_direct,

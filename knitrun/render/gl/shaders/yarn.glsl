@@ -24,6 +24,11 @@ uniform vec3 light_dir[MAX_LIGHTS];
 uniform vec3 light_irradiance[MAX_LIGHTS];
 uniform ShadowMapInfo light_map[MAX_LIGHTS];
 uniform sampler2D light_atlas;
+// the hair canopy (Features.hair_canopy; pipeline.canopy_at_vertices, computed on the CPU): per light and polyline
+// point one texel (transmittance, rest arc length), light l's points from row l · canopy_rows, POLYLINE_ROW a row
+uniform int hair_canopy;
+uniform int canopy_rows;
+uniform sampler2D canopy_tex;
 
 // SRBF lobes and the multiple-scattering lights, cells of the sky (ms_lights.ms_cells: weights (C, J) in a texture)
 uniform int n_lobes;
@@ -45,6 +50,17 @@ Params yarn_params() {
 // strip_shading.past_blockers: a directional light's light past the other yarns unscattered, V + (1 − V) τ_Y
 float past_blockers(float vis) {
     return vis + (1.0 - vis) * gap;
+}
+
+// light l's hair canopy interpolated by rest arc length s along segment i, as yarn_bounce.bounce_at_points; 1
+// without the canopy
+float canopy_at(int l, int i, float s) {
+    if (hair_canopy == 0) return 1.0;
+    int row = l * canopy_rows;
+    vec2 a = texelFetch(canopy_tex, ivec2(i % POLYLINE_ROW, row + i / POLYLINE_ROW), 0).rg;
+    vec2 b = texelFetch(canopy_tex, ivec2((i + 1) % POLYLINE_ROW, row + (i + 1) / POLYLINE_ROW), 0).rg;
+    float ds = b.y - a.y;
+    return mix(a.x, b.x, ds > 0.0 ? clamp((s - a.y) / ds, 0.0, 1.0) : 0.0);
 }
 
 // T̃_j: lobe j's PCSS visibility at a receiver of that bias, raised by the yarn-level inter-reflection
