@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numba
 
-from data_formats.scene import load_scene
+from data_formats.scene import RENDER_FIELDS, load_scene
 from data_formats.yarn_curves import write_yarn_curves
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
@@ -61,7 +61,7 @@ LIGHTS = {"directional": 'type = "directional"\ndirection = [0.4, 0.6, 1.0]\nirr
 
 
 def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", layers=2, features=Features(),
-               hair_layers=2):
+               hair_layers=RENDER_FIELDS["hair_layers"][0]):
     """(median seconds per frame, its timings, facts, set-up seconds): one renderer set up once (``Renderer`` or
     ``GLRenderer``) with ``features``, then its frames (what a viewer pays per frame)."""
     write_yarn_curves(folder / "patch.h5", stockinette_curves(rows, 21))
@@ -97,8 +97,9 @@ def main():
                         help="gl: the OpenGL backend, plus the paper's 200K-point size under the sky")
     parser.add_argument("--layers", type=int, choices=(1, 2), default=2,
                         help="render.layers: 2 (default) draws the depth-peeled strips behind the front ones")
-    parser.add_argument("--hair-layers", type=int, default=2, choices=range(1, 9), metavar="K",
-                        help="render.hair_layers: the flyaway strips composited per sample (default 2)")
+    parser.add_argument("--hair-layers", type=int, default=RENDER_FIELDS["hair_layers"][0], choices=range(1, 9),
+                        metavar="K", help="render.hair_layers: the flyaway strips composited per sample (default: "
+                                          "the scene format's)")
     parser.add_argument("--ablation", default="full", help="the model timed: an ablation or a combination a+b")
     args = parser.parse_args()
     try:

@@ -48,9 +48,10 @@ def captured_calls(pack, light, layers):
 
     folder = Path(tempfile.mkdtemp(prefix="knit_profile_"))
     write_yarn_curves(folder / "patch.h5", stockinette_curves(60, 21))
+    hair_layers = bench_render.RENDER_FIELDS["hair_layers"][0]
     (folder / "scene.toml").write_text(bench_render.SCENE.format(width=1280, height=960,
                                                                  light=bench_render.LIGHTS[light],
-                                                                 layers=layers, hair_layers=2))
+                                                                 layers=layers, hair_layers=hair_layers))
     original, pipeline.shade_regular = pipeline.shade_regular, capture
     try:
         pipeline.render(load_scene(folder / "scene.toml"), {"cotton1": str(pack)})

@@ -242,7 +242,7 @@ def test_the_hairs_behind_the_body_follow_the_cpu_renderer(tmp_path, pack):
 
 
 def test_the_hair_canopy_follows_the_cpu_renderer(tmp_path, pack, monkeypatch):
-    """``Features.hair_canopy``: both backends take the canopy at the polyline points from ``pipeline.
+    """``Features.hair_canopy`` (the default): both backends take the canopy at the polyline points from ``pipeline.
     canopy_at_vertices`` (the canopy itself is the CPU tests', ``tests/test_hair_canopy.py``) and read it where they
     take a light's visibility, interpolated along the curves by rest arc length. The tiny pack's hair layer keeps
     too little off to compare (0.15 % of this image), so the points carry a canopy that runs 0.3 → 1 along each
@@ -258,8 +258,8 @@ def test_the_hair_canopy_follows_the_cpu_renderer(tmp_path, pack, monkeypatch):
     monkeypatch.setattr(pipeline, "canopy_at_vertices", canopy)
     path = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.03, 0], straight(z=0.07) @ ALONG_Y.T],
                        camera=ORTHO, lights=SUN, name="canopy")
-    gl, cpu = _both(path, pack, Features(hair_canopy=True))
-    plain, plain_cpu = _both(path, pack)
+    gl, cpu = _both(path, pack)
+    plain, plain_cpu = _both(path, pack, Features(hair_canopy=False))
     taken_gl, taken_cpu = plain - gl, plain_cpu - cpu
     assert taken_cpu.mean() > 0.1 * plain_cpu.mean() and taken_gl.min() >= -1e-7
     assert abs(taken_gl.mean() / taken_cpu.mean() - 1) < 2e-2

@@ -251,23 +251,24 @@ def test_the_split_by_the_surface_seen_first_draws_opaque_black_hairs(tmp_path, 
 
 
 def test_other_yarns_hair_layers_dim_the_directional_lights(tmp_path, pack):
-    """``Features(hair_canopy=True)`` (``hair_canopy``): a lone yarn keeps its image bit for bit (its own layer is the
-    lone yarn's); a yarn in the hair layer of another between it and the sun is darker, nowhere brighter; the
-    switch changes nothing without flyaways."""
+    """``Features.hair_canopy`` (the default; ``no_hair_canopy`` leaves it out): a lone yarn keeps its image bit for
+    bit (its own layer is the lone yarn's); a yarn in the hair layer of another between it and the sun is darker,
+    nowhere brighter; the switch changes nothing without flyaways."""
+    without = Features(hair_canopy=False)
     lone = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="lone")
-    assert np.array_equal(_render(lone, pack, features=Features(hair_canopy=True)).image, _render(lone, pack).image)
+    assert np.array_equal(_render(lone, pack).image, _render(lone, pack, features=without).image)
     # the sun (0.3, 0.6, 1.0): the upper yarn 2.6 radii along it from the lower one, their bodies clear of each other
     # and the lower one inside the upper one's hair layer
     r = 0.03
     step = 2.6 * r * np.array([0.3, 0.6, 1.0]) / np.linalg.norm([0.3, 0.6, 1.0])
     pair = write_scene(tmp_path, [straight(), straight() + step], camera=FRONT, lights=SUN, name="pair")
-    full = _render(pair, pack).image
-    dimmed = _render(pair, pack, features=Features(hair_canopy=True)).image
+    full = _render(pair, pack, features=without).image
+    dimmed = _render(pair, pack).image
     assert np.all(dimmed <= full + 1e-6 * np.abs(full).max())
     assert (full - dimmed).sum(axis=2).max() > 1e-3
     bare = dict(flyaways=False)
-    assert np.array_equal(_render(pair, pack, features=Features(hair_canopy=True, **bare)).image,
-                          _render(pair, pack, features=Features(**bare)).image)
+    assert np.array_equal(_render(pair, pack, features=Features(**bare)).image,
+                          _render(pair, pack, features=Features(hair_canopy=False, **bare)).image)
 
 
 def test_the_single_scattering_split_is_darker_and_blind_to_what_crosses_yarns(tmp_path, pack):
@@ -932,6 +933,31 @@ irradiance = [2.0, 2.0, 2.0]"""  # from the camera: neither yarn shadows the gap
     b_hairs = np.abs(b_alone[gap] - (0.1, 0.2, 0.3)).sum(axis=-1)
     assert b_hairs.max() > 0.02 and np.abs(two[gap] - one[gap]).sum(axis=-1).max() > 0.5 * b_hairs.max()
     assert transmit_a[gap].min() < 0.95  # A's hairs are there too
+
+
+def test_the_hair_cover_is_the_share_of_each_pixel_the_hairs_take(tmp_path, pack):
+    """``Renderer.hair_cover`` (``benchmarks/probe_hair_coverage.py``'s strip side), two parallel yarns under the sun
+    and the sky: the hairs drawn opaque and black (``Features.hair_light`` False) leave (1 − cover) of the image
+    without them, in every pixel (the regular strips' shading does not depend on the hairs once the canopy is
+    off); the cover lies in [0, 1], grows with ``render.hair_layers`` (the farther yarn's hairs in the gap) and is 0
+    without flyaways."""
+    radius = 0.03
+    curves = [straight(z=0.1) + [0.0, 1.5 * radius, 0.0], straight() - [0.0, 1.5 * radius, 0.0]]
+    scene = load_scene(write_scene(tmp_path, curves, camera=FRONT, lights=SUN + "\n" + SKY, name="cover"))
+    packs = {"cotton1": str(pack)}
+
+    def at(layers, features=Features(hair_canopy=False)):
+        return Renderer(dataclasses.replace(scene, render=dataclasses.replace(scene.render, hair_layers=layers)),
+                        packs, features)
+
+    one, two = at(1).hair_cover(), at(2).hair_cover()
+    assert one.shape == (scene.camera.height, scene.camera.width)
+    assert one.min() >= 0.0 and two.max() <= 1.0 and np.all(two >= one - 1e-12)
+    assert (two - one).max() > 0.05 and two.mean() > 0.02
+    split = at(2, Features(hair_canopy=False, hair_light=False)).render().image.astype(np.float64)
+    bare = at(2, Features(hair_canopy=False, flyaways=False)).render().image.astype(np.float64)
+    np.testing.assert_allclose(split, (1.0 - two)[..., None] * bare, rtol=1e-5, atol=1e-6)
+    assert not np.any(at(2, Features(flyaways=False)).hair_cover())
 
 
 def test_a_hair_takes_each_kind_of_light_whether_or_not_the_other_kind_is_compiled(tmp_path, pack, monkeypatch):

@@ -108,7 +108,7 @@ while Ψ^Fiber_G of the body's front is nearly 0. Both backends; the ablation ``
 over the body to lie in front of it, as until stop 56 (measured in BENCHMARKS.md, "Issue 13: hairs seen through the
 body").
 
-``hair_canopy`` (since stop 60, not the default) dims each directional light by the hair layers of the other yarns
+The hair canopy (since stop 60, the default on both backends since stop 61) dims each directional light by the hair layers of the other yarns
 between a point and the light (``knitrun.render.hair_canopy``: shells of hair density from the pack's flyaway
 coverage, other yarns' layers crossed by the beam, evaluated at the polyline points' tube surface toward the light and
 interpolated along the curves). The shadow maps draw the yarns' bodies alone; traced on the reference's fibers the
@@ -118,8 +118,9 @@ hairs are that much darker than the strips' (``benchmarks/probe_first_surface.py
 brightness goes from 1.060 to 1.006 of the reference's and its yarn-scale error from 1.38 to 1.30× the instance
 floor, the directional patch's from 0.997 to 0.980 and 1.38 to 1.37×, the simulated patch's from 0.957 to 0.944
 (out of [0.95, 1.05]) at 1.74×; the lone yarns and the sky (no directional light) do not change; it costs no
-measurable time (BENCHMARKS.md, stop 60). Both backends since stop 61 (the GL one reads the canopy at the polyline
-points from a texture, as the bounce).
+measurable time (BENCHMARKS.md, stop 60). It became the default with the GL backend drawing it (the canopy at the
+polyline points in a texture, as the bounce) and ``render.hair_layers`` 3 (stop 61): the ablation
+``no_hair_canopy`` leaves it out.
 
 ``hair_light`` False draws the flyaway layer's hairs opaque and black: the image holds the light of the regular
 fibers seen between the hairs. It is no rung of the ladder but a split, as ``multiple_scattering``: the reference
@@ -135,7 +136,7 @@ lookups and the parallax. Then the full model without the tables, with the paper
 detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
 bounce, with the lookups on the axis plane, with one ξ closed on single and multiple scattering together, with two
 blocking yarns counted, without the body's glow on its hairs, with every hair seen over a body taken to lie in
-front of it and with other yarns' hair layers dimming the directional lights.
+front of it and without other yarns' hair layers dimming the directional lights.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -166,7 +167,7 @@ class Features:
     hair_glow: bool = True  # hairs beside and over a yarn lit by the light its body scatters (strip_shading.body_glow)
     hairs_behind: bool = True  # hairs seen through a body's gaps lie behind it (strip_shading.behind_share)
     hair_light: bool = True  # False: the hairs opaque and black, the regular fibers' light between them (a split)
-    hair_canopy: bool = False  # other yarns' hair layers dim the directional lights (``hair_canopy``)
+    hair_canopy: bool = True  # other yarns' hair layers dim the directional lights (``knitrun.render.hair_canopy``)
 
 
 _PAPERS = dict(closed_xi=False, flyaways=False)  # the rungs below the closure: the paper's ξ, no hairs
@@ -189,7 +190,7 @@ ABLATIONS = {
     "two_blockers": Features(two_blockers=True),
     "no_hair_glow": Features(hair_glow=False),
     "no_hairs_behind": Features(hairs_behind=False),
-    "hair_canopy": Features(hair_canopy=True),
+    "no_hair_canopy": Features(hair_canopy=False),
 }
 ABLATION_ORDER = tuple(ABLATIONS)
 ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowing": "+ fiber-level shadowing",
@@ -205,7 +206,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "two_blockers": "full with two blocking yarns counted",
                    "no_hair_glow": "full without the body's glow on its hairs",
                    "no_hairs_behind": "full with every hair seen over a body in front of it",
-                   "hair_canopy": "full with other yarns' hair layers dimming the directional lights"}
+                   "no_hair_canopy": "full without other yarns' hair layers dimming the directional lights"}
 
 
 def combined(name: str) -> Features:

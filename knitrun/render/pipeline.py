@@ -55,7 +55,7 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    is interpolated to the regular points. With ``Features.two_blockers`` (an ablation) each directional light's map
    also draws the second yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks,
    goes to the kernels as ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
-   With ``Features.hair_canopy`` (an ablation) every receiver's visibility of each directional light (and the
+   With ``Features.hair_canopy`` (the default) every receiver's visibility of each directional light (and the
    bounce vertices') is multiplied by the fraction the other yarns' hair layers let through (``hair_canopy``),
    computed at the polyline points and interpolated along the curves (``_canopy``).
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
@@ -595,6 +595,22 @@ class Renderer:
         image = self._light_and_shade(lines, camera, raster, facts, lap)
         facts["residuals"] = {look.name: look.residuals for look in looks}
         return RenderResult(image, timings, facts)
+
+    def hair_cover(self, frame: int | None = None) -> np.ndarray:
+        """(H, W) the fraction of each pixel of ``frame`` (default: the scene's) that the flyaway layers cover: their
+        points' hair coverage α composited as the resolve composites them, every hair opaque (the share of the pixel
+        where a camera ray's first surface is a hair); zeros without flyaways. A diagnostic, not part of a frame:
+        its counterpart on the reference is the share of camera rays whose first hit is a loop or hair fiber
+        (``benchmarks/probe_hair_coverage.py``, which sets ``render.hair_layers`` by it)."""
+        lines = _polylines(self.scene, self.curves, self.frame_index(frame), self.samples_per_segment)
+        camera = scene_camera(self.scene)
+        out = np.zeros((camera.height * camera.width, 3))
+        raster = self._raster(lines, camera) if len(lines.entry) else None
+        if raster is not None and raster.fly_points is not None:
+            alpha = self._hair_coverage(raster.hairs, raster.fly_points["yarn"], raster.drawn_fly)
+            resolve(raster.fly_points["layer_start"], raster.fly_points["weight"], np.ones((len(alpha), 3)), alpha,
+                    np.zeros((len(alpha), 3)), out, out)
+        return out[:, 0].reshape(camera.height, camera.width)
 
     def _raster(self, lines, camera) -> _FrameRaster:
         """The ``raster`` pass of a frame's polylines (module docstring)."""
