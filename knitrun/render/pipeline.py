@@ -55,9 +55,10 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    is interpolated to the regular points. With ``Features.two_blockers`` (an ablation) each directional light's map
    also draws the second yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks,
    goes to the kernels as ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
-   With ``Features.hair_canopy`` (the default) every receiver's visibility of each directional light (and the
+   With ``Features.hair_canopy`` (the default) every receiver's visibility V of each directional light (and the
    bounce vertices') is multiplied by the fraction the other yarns' hair layers let through (``hair_canopy``),
-   computed at the polyline points and interpolated along the curves (``_canopy``).
+   computed at the polyline points and interpolated along the curves (``_canopy``); V₂ of ``two_blockers`` is not,
+   so the light the canopy keeps off passes at τ_Y as under one blocker, with or without that ablation.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
    (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
    frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
@@ -687,7 +688,9 @@ class Renderer:
                                 features.two_blockers)
             if canopy:  # other yarns' hair layers (``hair_canopy``) dim what the bodies let through
                 through = _canopy(lines, looks, d, sets, where, at_bounce)
-                found = [tuple(x * t for x in v) if features.two_blockers else v * t for v, t in zip(found, through)]
+                # V only: with ``two_blockers`` the light the canopy keeps off passes the bodies as under one
+                # blocker (τ_Y), as it does without, not as behind a second yarn
+                found = [(v[0] * t, v[1]) if features.two_blockers else v * t for v, t in zip(found, through)]
             pairs = found if features.two_blockers else [(vis, None) for vis in found]
             for out, beyond, at, (vis, past_one) in zip(light_vis, light_beyond, where, pairs):
                 out[i, at] = vis
