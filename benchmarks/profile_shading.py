@@ -88,7 +88,7 @@ def main():
         idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, bounce, rgb, alpha = call
         n = len(points.view_dir)
         off = no_lights(n)
-        no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)))
+        no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)), np.zeros(4))
         print(f"## {light}, {layer} layer: shade_regular on {len(idx)} shading points ({_count(lights)} directional, "
               f"{_count(lobes)} SRBF lobes, {_count(ms)} multiple-scattering clusters)")
         base = call[:7]

@@ -17,7 +17,8 @@ from data_formats.yarn_spec import load_preset
 from knitbake.stages.yarn_hull import (BY_COLOUR, TABLE, TRANSMITTANCE_TABLE, bake_yarn_hull, colour_scales,
                                        hemisphere_env, hull_radiance)
 from knitrun.render.ablations import Features
-from knitrun.render.interreflection import interreflected_visibility
+from knitrun.render.interreflection import channel_visibility, interreflected_visibility
+from knitrun.render.pipeline import Renderer
 from knitrun.render.yarn_look import gap_transmittance, hull_colour, load_look
 from knitrun.shading.dual_scattering import transmittance_count
 from knitrun.shading.table_lookup import lookup_theta
@@ -37,6 +38,49 @@ def test_visibility_limits_and_fixed_point():
         np.testing.assert_allclose(w, v + (1 - v) * neighbour, rtol=1e-12)
         np.testing.assert_allclose(neighbour, rho * w, rtol=1e-12)
     assert np.all(np.isfinite(interreflected_visibility([-1.0, 2.0, 0.0], [2.0, -1.0, 1.0])))
+
+
+def test_each_channel_takes_its_own_albedo_from_the_luminance_visibility():
+    """``channel_visibility``: from V' inter-reflected with the luminance ρ, channel c's V'_c is the visibility
+    inter-reflected with ρ_c directly; ρ_c = ρ gives V' back, ρ = 0 (no inter-reflection) V itself; ρ = 1 leaves V'
+    (1, whatever V was); out-of-range inputs stay finite and in [0, 1]."""
+    v = np.linspace(0.0, 1.0, 11)
+    for rho, rho_c in ((0.743, 0.785), (0.743, 0.641), (0.3, 0.9), (0.9, 0.0)):
+        inter = interreflected_visibility(v, rho)
+        got = np.array([channel_visibility(x, rho, rho_c) for x in inter])
+        np.testing.assert_allclose(got, interreflected_visibility(v, rho_c), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose([channel_visibility(x, rho, rho) for x in inter], inter, rtol=0, atol=0)
+    np.testing.assert_allclose([channel_visibility(x, 0.0, 0.0) for x in v], v)
+    assert channel_visibility(1.0, 1.0, 0.5) == 1.0
+    odd = [channel_visibility(a, b, c) for a in (-1.0, 0.5, 2.0) for b in (-0.5, 0.5, 1.5) for c in (-0.5, 0.5, 1.5)]
+    assert np.all(np.isfinite(odd)) and min(odd) >= 0.0 and max(odd) <= 1.0
+
+
+def test_the_skys_light_between_yarns_takes_each_channels_albedo(tmp_path, pack):
+    """Under the sky, the light the neighbours pass on takes the yarn's colour once per bounce: a crossing drawn with
+    its hull albedo ρ_Y (per channel, in the entry's colour) against the same yarn with a grey ρ_Y of the same
+    luminance (the model until stop 61) is brighter in the channel whose ρ_Y is above the luminance and darker in
+    the one below it; a grey ρ_Y changes nothing against the luminance's own, and the shadows' inter-reflection
+    switched off takes the colour dependence with it."""
+    crossing = [straight(z=0.0), straight(z=0.12)[:, [1, 0, 2]]]
+    scene = load_scene(write_scene(tmp_path, crossing, camera=FRONT, lights=SKY, name="crossing"))
+    packs = {"cotton1": str(pack)}
+
+    def draw(albedo=None, features=Features()):
+        renderer = Renderer(scene, packs, features)
+        if albedo is not None:
+            renderer.looks = [dataclasses.replace(look, hull_albedo=np.asarray(albedo(look), np.float64))
+                              for look in renderer.looks]
+        return renderer.render().image.astype(np.float64)
+
+    coloured = lambda look: np.array([1.15, 1.0, 0.8]) * look.yarn_albedo / (np.array([1.15, 1.0, 0.8]) @ LUMINANCE)
+    grey = lambda look: np.full(3, look.yarn_albedo)
+    warm, flat = draw(coloured), draw(grey)
+    ratio = warm.sum(axis=(0, 1)) / flat.sum(axis=(0, 1))
+    assert ratio[0] > 1.002 and ratio[2] < 0.998, ratio
+    assert np.all(warm.sum(axis=(0, 1)) > 0.0)
+    off = Features(interreflection=False)
+    np.testing.assert_array_equal(draw(coloured, off), draw(grey, off))
 
 
 def _lossless(spec):

@@ -189,7 +189,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64))
         look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, D_F, D_B)
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
-                      Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n))), no_lights(n),
+                      Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n)), np.zeros(4)), no_lights(n),
                       im_slices(i_m, fit.sharpness), None, rgb, alpha)
         theta_o = np.arcsin(np.sum(view * tangent, axis=1))
         direct = np.zeros((n, 3))
@@ -1179,7 +1179,7 @@ def test_the_directional_lights_take_the_first_detail_and_the_environment_the_se
 
     def shaded(detail, directional, environment):
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
-        lobes = Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((4, n))) if environment else None
+        lobes = Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((4, n)), np.zeros(4)) if environment else None
         shade_regular(np.arange(n), points, look, off, flat, full, detail, sun if directional else None, lobes,
                       cells if environment else None, im_slices(i_m, fit.sharpness) if environment else None, None,
                       rgb, alpha)

@@ -19,8 +19,13 @@ multiple-scattering lights. It is not applied to directional lights: there V is 
 blocked light reaches the receiver from the lit side of the blocker, a different light path this term does not
 model; the part of it the blocker lets through enters the dual-scattering estimate instead, through the fiber count
 for light crossing a yarn (``dual_scattering.transmittance_count``, from the pack's transmittance T_Y). ρ_Y is the
-yarn's in the scene colour (``yarn_look.hull_colour``), and one ρ per receiver, its luminance, scales every
-channel.
+yarn's in the scene colour (``yarn_look.hull_colour``). The shadow pass inter-reflects each lobe's visibility with
+its luminance ρ (one value per lobe and point, which the multiple-scattering lights mix, ``ms_lights``); the shading
+kernels take each channel's V'_c = V / (1 − ρ_c (1 − V)) from it (``channel_visibility``: V recovered from V' and ρ),
+and scale a multiple-scattering light's term by V'_c / V' of its mixed visibility. Light that bounces between yarns
+takes their colour once per bounce: white cotton's ρ_Y is (0.785, 0.741, 0.641), and with its luminance on every
+channel the knit patch under the sky came out 0.958 / 1.005 / 1.112 of the reference per channel (BENCHMARKS.md,
+stop 61).
 """
 
 from __future__ import annotations
@@ -47,6 +52,19 @@ def _flat(a, shape):
     if a.shape == shape and a.flags.c_contiguous and a.flags.writeable:
         return a.reshape(-1)
     return np.array(np.broadcast_to(a, shape)).reshape(-1)
+
+
+@njit(cache=True, inline='always')
+def channel_visibility(inter, rho, rho_channel):
+    """V'_c = V / (1 − ρ_c (1 − V)) of the visibility V whose V' = V / (1 − ρ (1 − V)) is ``inter`` (ρ the
+    luminance ``rho``, ρ_c ``rho_channel``; module docstring): V = V' (1 − ρ) / (1 − ρ V'). ``inter`` itself where
+    ρ ≥ 1 (V' is then 1 whatever V was) or ρ_c = ρ."""
+    vp, r, rc = min(max(inter, 0.0), 1.0), min(max(rho, 0.0), 1.0), min(max(rho_channel, 0.0), 1.0)
+    if r >= 1.0 or rc == r:
+        return vp
+    v = min(vp * (1.0 - r) / (1.0 - r * vp), 1.0)
+    denominator = 1.0 - rc * (1.0 - v)
+    return min(v / denominator, 1.0) if denominator > 0.0 else 1.0
 
 
 @njit(parallel=True, cache=True)

@@ -720,6 +720,10 @@ class Renderer:
             np.zeros(len(looks))
         if len(lobe_dir) and albedo.any():
             lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :]) for v, s in zip(lobe_vis, sets)]
+        # per yarn, the ρ the lobes were inter-reflected with and ρ_Y per channel, which the kernels take each
+        # channel's visibility by (``interreflection.channel_visibility``)
+        lobe_albedo = [np.concatenate([[a], np.reshape(look.hull_albedo, 3)]) if a > 0.0 else np.zeros(4)
+                       for look, a in zip(looks, albedo)]
         if self.environment:
             facts["interreflection"] = {
                 look.name: "off (Features.interreflection)" if not features.interreflection else
@@ -747,7 +751,7 @@ class Renderer:
             for k, look in enumerate(looks):
                 idx = np.flatnonzero(layer["yarn"] == k)
                 kernel_look, corrections, _ = self.kernel_looks[k]
-                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m]),
+                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m], lobe_albedo[k]),
                                Lights(ms_dir, ms_e, ms_vis[m], np.zeros((len(ms_dir), 0))),
                                self.im_slices[k]) if len(lobe_dir) else (None, None, None)
                 shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
@@ -760,7 +764,8 @@ class Renderer:
             fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
             for k in drawn_fly:
                 idx = np.flatnonzero((fly_points["yarn"] == k) & covered)
-                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1]), self.im_slices[k]) if len(lobe_dir) \
+                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1], lobe_albedo[k]), self.im_slices[k]) \
+                    if len(lobe_dir) \
                     else (None, None)  # a kind of light the scene lacks is not compiled (``shade_flyaway``)
                 shade_flyaway(idx, hairs, *self.kernel_looks[k],
                               looks[k].coverage if features.hairs_behind else None,

@@ -87,6 +87,7 @@ class Lobes(NamedTuple):
     sharpness: np.ndarray
     weight: np.ndarray
     visibility: np.ndarray
+    albedo: np.ndarray  # (4,): the ρ ``visibility`` was inter-reflected with, then ρ_Y per channel (zeros: none)
 
 
 def no_lights(n_points: int) -> Lights:

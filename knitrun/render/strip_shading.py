@@ -122,6 +122,7 @@ from numba import njit, prange
 
 from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
+from knitrun.render.interreflection import channel_visibility
 from knitrun.render.strip_raster import sample_attributes
 from knitrun.render.texture_sampling import mip_level, sample_mip
 from knitrun.render.yarn_bounce import INV_PI2, lambert_pair
@@ -515,8 +516,9 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     # the R lobe of the fiber-frame view, for I_M's R rule
                     r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
                     im_slice_kernel(im, j, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
-                    for ch in range(3):
-                        rgb[q, ch] += lobes.weight[j, ch] * vis * xi_s[ch] * psi[ch] * i_m[ch]  # single scattering
+                    for ch in range(3):  # single scattering, each channel's inter-reflected visibility
+                        vis_ch = channel_visibility(vis, lobes.albedo[0], lobes.albedo[1 + ch])
+                        rgb[q, ch] += lobes.weight[j, ch] * vis_ch * xi_s[ch] * psi[ch] * i_m[ch]
                 for c in range(ms.direction.shape[0]):  # multiple scattering: cells of the sky as distant lights
                     _copy_row(ms.direction, c, w)
                     _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, single=False)
@@ -530,7 +532,10 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
                     cos_c = math.cos(theta_c_f)
                     for ch in range(3):
                         multiple = (lit * d_b * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
-                        rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple
+                        # the channel's share of the light past the neighbours (``interreflection`` docstring)
+                        tint = channel_visibility(vis, lobes.albedo[0], lobes.albedo[1 + ch]) / vis if vis > 0.0 \
+                            else 1.0
+                        rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple * tint
             for ch in range(3):
                 ambient[ch] = rgb[q, ch] - ambient[ch]
             if bounce is not None:  # light the neighbouring yarns scatter onto this one (``yarn_bounce``)
@@ -734,8 +739,9 @@ def shade_flyaway(idx, points, look, corrections, flyaway, coverage, lights, glo
                     im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f,
                                     lobes.sharpness[j], f)
                     _hair_light(on_body, behind, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
-                    for ch in range(3):
-                        rgb[q, ch] += lobes.weight[j, ch] * lobes.visibility[j, q] * psi[ch] * f[ch]
+                    for ch in range(3):  # each channel's inter-reflected visibility (``channel_visibility``)
+                        vis = channel_visibility(lobes.visibility[j, q], lobes.albedo[0], lobes.albedo[1 + ch])
+                        rgb[q, ch] += lobes.weight[j, ch] * vis * psi[ch] * f[ch]
 
 
 @njit(cache=True, inline='always')

@@ -347,6 +347,7 @@ class GLRenderer:
             "n_occluded": float(kernel_look.n_occluded), "n_cross": float(kernel_look.n_cross),
             "n_cross_rest": float(kernel_look.n_cross_rest), "gap": float(kernel_look.gap),
             "twist_sign": float(look.twist_sign), "yarn_albedo": float(albedo),
+            "yarn_albedo_rgb": np.reshape(look.hull_albedo, 3).astype(float) if albedo > 0.0 else np.zeros(3),
             "shadow_bias": float(pipeline.SHADOW_BIAS_RADII * look.radius), "texture_levels": int(levels),
             "detail_levels": int(detail_levels),
             "use_xi_full": use_xi, "use_psi_full": use_psi, "use_xi_view": use_view,

@@ -141,7 +141,7 @@ void main() {
         float mu_r = lobe_centre_at(wide.alpha_r, sigma_r, theta_o_f);
         vec3 i_m = im_kernel(wide, mu_r, sigma_r, cos2_normaliser(mu_r, sigma_r), theta_o_f, theta_j_f, -phi_f,
                              lobe_lambda[j]);
-        ambient += lobe_weight[j] * vis * xi_s * psi * i_m;  // single scattering
+        ambient += lobe_weight[j] * channel_visibility(vis) * xi_s * psi * i_m;  // single scattering
     }
     for (int c = 0; c < n_clusters; ++c) {
         vec3 w = cluster_dir[c];
@@ -154,7 +154,9 @@ void main() {
         float phi_f = azimuth_difference(tf, wo, w);
         ds_kernel(spread_params(p, spread2, phi_f), theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross,
                   lit, false, total, back_direct, f_scatter, single);
-        ambient += cluster_irradiance[c] * xi * (lit * D_B * back_direct + f_scatter) * cos(theta_c_f);
+        // the channel's share of the light past the neighbours (interreflection's docstring)
+        vec3 tint = vis > 0.0 ? channel_visibility(vis) / vis : vec3(1.0);
+        ambient += cluster_irradiance[c] * xi * (lit * D_B * back_direct + f_scatter) * cos(theta_c_f) * tint;
     }
     if (yarn_bounce != 0)
         rgb += bounce_at(fin.segment, bounce_s);

@@ -15,7 +15,8 @@ uniform float n_occluded;
 uniform float n_cross;
 uniform float n_cross_rest;    // n_cross with τ_Y split out (directional lights, hairs; SHADING.md §3)
 uniform float gap;             // τ_Y: light past a blocking yarn between its fibers (yarn_look.gap_transmittance)
-uniform float yarn_albedo;     // ρ_Y of the yarn-level inter-reflection, 0 without it
+uniform float yarn_albedo;     // ρ_Y's luminance: the yarn-level inter-reflection's ρ, 0 without it
+uniform vec3 yarn_albedo_rgb;  // ρ_Y per channel (zeros without it): each channel's visibility (channel_visibility)
 uniform float shadow_bias;     // SHADOW_BIAS_RADII · radius
 
 // directional lights
@@ -61,6 +62,18 @@ float canopy_at(int l, int i, float s) {
     vec2 b = texelFetch(canopy_tex, ivec2((i + 1) % POLYLINE_ROW, row + (i + 1) / POLYLINE_ROW), 0).rg;
     float ds = b.y - a.y;
     return mix(a.x, b.x, ds > 0.0 ? clamp((s - a.y) / ds, 0.0, 1.0) : 0.0);
+}
+
+// interreflection.channel_visibility: V'_c of the visibility whose V' (inter-reflected with yarn_albedo) is vp
+vec3 channel_visibility(float vp) {
+    float r = clamp(yarn_albedo, 0.0, 1.0);
+    vec3 rc = clamp(yarn_albedo_rgb, 0.0, 1.0);
+    vp = clamp(vp, 0.0, 1.0);
+    if (r <= 0.0 || r >= 1.0) return vec3(vp);
+    float v = min(vp * (1.0 - r) / (1.0 - r * vp), 1.0);
+    vec3 den = 1.0 - rc * (1.0 - v);
+    return min(vec3(den.x > 0.0 ? v / den.x : 1.0, den.y > 0.0 ? v / den.y : 1.0, den.z > 0.0 ? v / den.z : 1.0),
+               vec3(1.0));
 }
 
 // T̃_j: lobe j's PCSS visibility at a receiver of that bias, raised by the yarn-level inter-reflection
