@@ -16,8 +16,9 @@ flyaways, environment) and converts everything to the scene:
   scaled by k, linear in k between its samples) at that channel's colour; a pack without the curves (schema < 2.6)
   gives the white yarn's times the colour, a first-order approximation (cotton1 in the examples' red: T_Y 0.41 /
   0.11 / 0.08 against the curve's 0.37 / 0.21 / 0.20), and ``hull_from`` says which. ``hull_albedo`` (RGB) is the
-  ρ_Y of the directional lights' yarn-level bounce (``yarn_bounce``), its luminance (``yarn_albedo``) the ρ of the
-  environment's inter-reflection (``knitrun.render.interreflection``); None (neither term) for a pack baked before
+  ρ_Y of the directional lights' yarn-level bounce (``yarn_bounce``) and, per channel, of the environment's
+  inter-reflection, whose shadow pass takes its luminance (``yarn_albedo``; ``knitrun.render.interreflection``);
+  None (neither term) for a pack baked before
   schema 2.1, which ``RenderResult.facts["interreflection"]`` then reports.
 * Fiber counts for the dual-scattering estimate at run time: ``dual_scattering.fiber_counts`` (n_cross, n_occluded)
   from the yarn spec stored in the pack's provenance. With ``transmission`` and a pack that has the yarn's
