@@ -1008,8 +1008,12 @@ def test_flyaway_points_that_share_the_regular_points_shadow_lookups_move_the_im
                                                                                             monkeypatch):
     """Two crossing yarns under the sky (soft shadows of every lobe): the image with each flyaway point's own shadow
     lookups and with those shared from the regular point at the same sample (``same_surface``) differ by less than
-    0.2 % of the peak anywhere and 0.1 % in mean (measured: not at all); pairing each with the first regular point
-    of its pixel, whatever its curve and position, moves a pixel by 0.53 % of the peak. Both on the strip plane
+    0.3 % of the peak anywhere and 0.1 % in mean (measured: 0.25 % in blue, 0.12 % in green, 0.08 % in red, the mean
+    0.005 %; the regular point's lookup keeps its own strip's margin, the hair's does not). The bound was 0.2 % until
+    stop 61, when each channel took its own inter-reflected sky visibility: blue's ρ_Y (0.641 against the luminance's
+    0.743) lifts the lobes' visibility least, so the same difference of lookups shows most there (0.16 % in blue with
+    the luminance on every channel). Pairing each with the first regular point of its pixel, whatever its curve and
+    position, moved a pixel by 0.53 % of the peak (stop 36). Both on the strip plane
     (``axis_shadows``): the default looks a regular point up on its tube's surface, and a hair over its yarn's body
     then takes that lookup, nearer to where the hair lies than its own strip plane (2.7 % of the peak at one pixel
     here, measured)."""
@@ -1026,7 +1030,7 @@ def test_flyaway_points_that_share_the_regular_points_shadow_lookups_move_the_im
     monkeypatch.setattr(pipeline, "same_surface", own)
     alone = _render(path, pack, features=axis).image
     worst = np.abs(shared.image - alone).max() / alone.max()
-    assert worst < 2e-3 and abs(shared.image.mean() / alone.mean() - 1.0) < 1e-3
+    assert worst < 3e-3 and abs(shared.image.mean() / alone.mean() - 1.0) < 1e-3
 
 
 def test_a_yarn_without_flyaways_renders_without_a_flyaway_layer(tmp_path):
