@@ -108,19 +108,19 @@ while Ψ^Fiber_G of the body's front is nearly 0. Both backends; the ablation ``
 over the body to lie in front of it, as until stop 56 (measured in BENCHMARKS.md, "Issue 13: hairs seen through the
 body").
 
-The hair canopy (since stop 60, the default on both backends since stop 61) dims each directional light by the hair layers of the other yarns
-between a point and the light (``knitrun.render.hair_canopy``: shells of hair density from the pack's flyaway
-coverage, other yarns' layers crossed by the beam, evaluated at the polyline points' tube surface toward the light and
-interpolated along the curves). The shadow maps draw the yarns' bodies alone; traced on the reference's fibers the
-other yarns' flyaways keep 8.5 % of the light off the lit regular fibers of the grazing patch's interior and 2.9 %
-of the directional patch's (``benchmarks/probe_hair_canopy.py``), and the reference's regular fibers seen between the
-hairs are that much darker than the strips' (``benchmarks/probe_first_surface.py``). With it the grazing patch's
-brightness goes from 1.060 to 1.006 of the reference's and its yarn-scale error from 1.38 to 1.30× the instance
-floor, the directional patch's from 0.997 to 0.980 and 1.38 to 1.37×, the simulated patch's from 0.957 to 0.944
-(out of [0.95, 1.05]) at 1.74×; the lone yarns and the sky (no directional light) do not change; it costs no
+The hair canopy (since stop 60; the default on both backends since stop 61) dims each directional light by the hair
+layers of the other yarns between a point and the light (``knitrun.render.hair_canopy``: shells of hair density from
+the pack's flyaway coverage, other yarns' layers crossed by the beam, evaluated at the polyline points' tube surface
+toward the light and interpolated along the curves). The shadow maps draw the yarns' bodies alone; traced on the
+reference's fibers the other yarns' flyaways keep 8.5 % of the light off the lit regular fibers of the grazing patch's
+interior and 2.9 % of the directional patch's (``benchmarks/probe_hair_canopy.py``), and the reference's regular
+fibers seen between the hairs are that much darker than the strips' (``benchmarks/probe_first_surface.py``). With it
+the grazing patch's brightness goes from 1.060 to 1.006 of the reference's and its yarn-scale error from 1.38 to 1.30×
+the instance floor, the directional patch's from 0.997 to 0.980 and 1.38 to 1.37×, the simulated patch's from 0.957 to
+0.944 (out of [0.95, 1.05]) at 1.74×; the lone yarns and the sky (no directional light) do not change; it costs no
 measurable time (BENCHMARKS.md, stop 60). It became the default with the GL backend drawing it (the canopy at the
-polyline points in a texture, as the bounce) and ``render.hair_layers`` 3 (stop 61): the ablation
-``no_hair_canopy`` leaves it out.
+polyline points in a texture, as the bounce) and ``render.hair_layers`` 3 (stop 61): the ablation ``no_hair_canopy``
+leaves it out.
 
 ``hair_light`` False draws the flyaway layer's hairs opaque and black: the image holds the light of the regular
 fibers seen between the hairs. It is no rung of the ladder but a split, as ``multiple_scattering``: the reference

@@ -602,7 +602,7 @@ class Renderer:
         points' hair coverage α composited as the resolve composites them, every hair opaque (the share of the pixel
         where a camera ray's first surface is a hair); zeros without flyaways. A diagnostic, not part of a frame:
         its counterpart on the reference is the share of camera rays whose first hit is a loop or hair fiber
-        (``benchmarks/probe_hair_coverage.py``, which sets ``render.hair_layers`` by it)."""
+        (``benchmarks/probe_hair_coverage.py``, by which stop 61 chose ``render.hair_layers``)."""
         lines = _polylines(self.scene, self.curves, self.frame_index(frame), self.samples_per_segment)
         camera = scene_camera(self.scene)
         out = np.zeros((camera.height * camera.width, 3))

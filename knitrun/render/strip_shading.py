@@ -50,9 +50,10 @@ between a visible fiber and the light). This is the bin average of what the bake
 the hits of a (v, θ_d, φ) bin, each hit lit directly iff no fiber lies toward the light), with Ψ^Yarn_G = V from the
 yarn-level shadow map in place of the other yarns' fibers: Huang et al. 2025 eq. 11. Per SRBF lobe j (centre ω_j,
 sharpness λ_j, weight W_j, visibility T̃_j from the lobe's shadow map, raised by the yarn-level inter-reflection of
-``knitrun.render.interreflection`` when the pack has a hull albedo), eq. 17:
+``knitrun.render.interreflection`` when the pack has a hull albedo, per channel: T̃_j,c from the ρ_Y of channel c,
+``channel_visibility``), eq. 17:
 
-    L_o += W_j · T̃_j · ξ_s(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
+    L_o += W_j · T̃_j,c · ξ_s(ω_i = ω_j) · Ψ_{G,M} Ψ_{G,N}(ω_i = ω_j) · I_M(θ_o^f, θ_j^f, φ_j^f − φ_o^f, λ_j)
 
 (I_M = the pack's I_M^{TT,D} table + the R lobe integrated per lookup, ``im_lookup.im_kernel``; the kernels read
 the table as ``im_lookup.IMSlices``, interpolated at each lobe's λ once, ``im_slice_kernel``)
@@ -65,7 +66,10 @@ weights), and each cell c acts as a distant light for the smooth DS terms, with 
 n = n_occluded + (1 − T̃_c) n_cross, the count that passes all of T_Y (T̃ takes no τ_Y: the hull albedo ρ_Y of its
 inter-reflection already holds what a blocker lets through, T_Y ≤ ρ_Y, so none of it is split out as direct):
 
-    L_o += E_c · ξ · (D d_b f_back^direct + F_scatter) cos θ_c^f        (``ds_kernel`` terms; f itself is in I_M)
+    L_o += E_c · ξ · (D d_b f_back^direct + F_scatter) cos θ_c^f · T̃_c,c / T̃_c        (``ds_kernel`` terms; f
+                                                                                  itself is in I_M)
+
+(T̃_c,c / T̃_c: channel c's share of the light past the neighbours, ``channel_visibility`` of the mixed T̃_c.)
 
 Flyaways (``shade_flyaway``): the variant of period ⌊s/period⌋ of curve c is ``variant_of(c, period)`` (a fixed
 integer hash, stable over frames); alpha = the variant's coverage A(u, v) on the wider flyaway strip; the hair

@@ -196,8 +196,8 @@ void main() {
         float mu_r = lobe_centre_at(wide.alpha_r, sigma_r, theta_o_f);
         vec3 i_m = im_kernel(wide, mu_r, sigma_r, cos2_normaliser(mu_r, sigma_r), theta_o_f, clamped_asin(dot(tf, w)),
                              -phi_f, lobe_lambda[j]);
-        rgb += lobe_weight[j] * channel_visibility(vis) * hair_light(on_body, behind, reach, v_strip, sp.t, sp.n, sp.b, w)
-             * i_m;
+        rgb += lobe_weight[j] * channel_visibility(vis)
+             * hair_light(on_body, behind, reach, v_strip, sp.t, sp.n, sp.b, w) * i_m;
     }
     out_radiance = vec4(alpha * rgb, 1.0);
 }
