@@ -84,18 +84,24 @@ def first_hits(scene_curves, segment_fiber, origins, directions, passes):
     return t_total, fiber
 
 
-def probe(name, pack_path):
-    scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
+def reference_fibers(scene):
+    """(fibers, their ``CurveScene``) of the reference's draw of ``scene`` (its fiber seed and frame; one yarn entry,
+    as the example scenes have)."""
     if len(scene.yarns) != 1:
-        raise SystemExit(f"{name}: one yarn entry expected")
+        raise SystemExit(f"{scene.name}: one yarn entry expected")
     entry = scene.yarns[0]
-    radius = entry.radius
     curves = read_curves(entry.curves, scene.units)
     drawn = _only_curves(curves, np.isin(curves.yarn_type, entry.yarn_type_indices))
     fibers = _concat([sweep_fibers(drawn, scene.render.frame, {i: entry.spec for i in entry.yarn_type_indices},
-                                   {i: radius for i in entry.yarn_type_indices}, seed=scene.render.seed)])
+                                   {i: entry.radius for i in entry.yarn_type_indices}, seed=scene.render.seed)])
+    return fibers, CurveScene(fibers)
+
+
+def probe(name, pack_path):
+    scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
+    radius = scene.yarns[0].radius
+    fibers, scene_curves = reference_fibers(scene)
     kind = fibers.kind.copy()
-    scene_curves = CurveScene(fibers)
     segment_fiber = scene_curves.segment_fiber
     points, curve, arc, offsets = dense_polylines(scene, radius)
     tree = cKDTree(points)

@@ -24,16 +24,15 @@ from pathlib import Path
 
 import numpy as np
 
-from data_formats.scene import load_scene, read_curves
+from data_formats.scene import load_scene
 from knitbake.fibers.fiber_set import KIND_REGULAR
-from knitbake.fibers.fiber_sweep import sweep_fibers
-from knitbake.trace.embree_curves import CurveScene, closest_hits
+from knitbake.trace.embree_curves import closest_hits
 from knitbake.trace.path_tracer import camera_rays
-from knitbake.trace.reference import _concat, _only_curves
 from knitrun.render.camera import scene_camera, tan_half_fov
 from knitrun.render.pipeline import Renderer
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from probe_hair_canopy import reference_fibers  # noqa: E402
 from probe_regions import PATCH_BOXES, boxes_and_all, parse_box  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -44,14 +43,7 @@ SCENES = ("straight_yarn_directional", "knit_patch_directional", "knit_patch_gra
 def reference_hair_cover(scene, rays: int) -> np.ndarray:
     """(H, W) the share of each pixel's ``rays`` jittered camera rays whose first hit is a loop or hair fiber of the
     scene's reference draw (its fiber seed; one yarn entry)."""
-    if len(scene.yarns) != 1:
-        raise SystemExit(f"{scene.name}: one yarn entry expected")
-    entry = scene.yarns[0]
-    curves = read_curves(entry.curves, scene.units)
-    drawn = _only_curves(curves, np.isin(curves.yarn_type, entry.yarn_type_indices))
-    fibers = _concat([sweep_fibers(drawn, scene.render.frame, {i: entry.spec for i in entry.yarn_type_indices},
-                                   {i: entry.radius for i in entry.yarn_type_indices}, seed=scene.render.seed)])
-    curve_scene = CurveScene(fibers)
+    fibers, curve_scene = reference_fibers(scene)
     camera = scene_camera(scene)
     fwd, right, up = camera.basis()
     n_pix = camera.width * camera.height
