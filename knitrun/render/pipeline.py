@@ -33,7 +33,8 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
    angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by 1.5 yarn
    radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job),
-   a regular point's beyond its own yarn's strip toward each light (``Receivers``, ``receiver_bias``).
+   every point's beyond its own yarn's strip toward each light (``Receivers``, ``receiver_bias``): a flyaway point's
+   too, since the kernels cross its own yarn's tube toward the light themselves (``strip_shading._hair_light``).
    A flyaway point with a regular point of its curve in its pixel within ``SHARE_REACH`` = 0.1 pixel (``strip_shading.
    same_surface``: the same MSAA sample of the same strip plane) takes that point's visibilities instead of its own
    lookups (``facts["flyaway_points_shared"]``): 47 % of the covered flyaway points of ``bench_render``'s patch. The
@@ -118,6 +119,7 @@ from knitrun.sim.simulate import RADIUS_TOLERANCE
 SHADOW_BIAS_RADII = 1.5
 LOBE_SHADOW_DIVISOR = 4
 SHARE_REACH = 0.1  # pixels: a flyaway point this close to a regular point of its curve shares its shadow lookups
+RECEIVER_KEYS = ("position", "view_dir", "tangent", "v", "yarn")  # what ``strip_receivers`` reads of a point
 BOUNCE_SPACING_RADII = 1.5  # yarn radii between the polyline points the yarn-level bounce is computed at
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
 
@@ -375,19 +377,28 @@ class Receivers(NamedTuple):
     tangent: np.ndarray | None = None
 
 
-def strip_receivers(points, looks, surface: bool) -> Receivers:
+def strip_receivers(points, looks, surface: bool, flyaway: bool = False) -> Receivers:
     """The receivers of regular ``points``, biased by ``SHADOW_BIAS_RADII`` yarn radii: on the tube surface the camera
     sees there (the strip point moved toward the camera along its view ray by r √(1 − v²), where a tube of radius r
     about the strip's axis meets the ray; the strip point itself at the edges v = ±1) or, ``surface`` False, the strip
     points themselves. Both lie off the yarn's axis: a
     strip point v r along the strip's half-width direction b = normalize(ω_o × t) (``strip_raster``; taken here at
-    the point's own ω_o and t), the surface r √(1 − v²) further toward the camera."""
+    the point's own ω_o and t), the surface r √(1 − v²) further toward the camera.
+
+    ``flyaway``: ``points`` are the flyaway layer's, on strips of the entry's ``flyaway_half_width`` h: the strip
+    points themselves (``surface`` is ignored), v h off the axis, with the same bias and so the same margin from their
+    own yarn's strip as a regular point. Their own yarn's shadow on them is the kernels' (``strip_shading._hair_light``
+    crosses the tube toward the light), not the map's: without the margin a hair behind its yarn from the light took
+    that shadow twice."""
     radius = np.array([look.radius for look in looks], np.float64)[points["yarn"]]
+    width = radius if not flyaway else np.array([look.flyaway_half_width for look in looks],
+                                                np.float64)[points["yarn"]]
     position = np.ascontiguousarray(points["position"], np.float64)
     tangent = np.ascontiguousarray(points["tangent"], np.float64)
     out_position, offset = np.empty_like(position), np.empty_like(position)
     _strip_receivers(position, np.ascontiguousarray(points["view_dir"], np.float64), tangent,
-                     np.ascontiguousarray(points["v"], np.float64), radius, surface, out_position, offset)
+                     np.ascontiguousarray(points["v"], np.float64), width, surface and not flyaway, out_position,
+                     offset)
     return Receivers(out_position, SHADOW_BIAS_RADII * radius, offset, tangent)
 
 
@@ -664,9 +675,8 @@ class Renderer:
             shared = np.flatnonzero(covered & (partner >= 0))
             where.append(np.flatnonzero(covered & (partner < 0)))
             facts["flyaway_points_shared"] = int(len(shared))
-        bias_radius = np.array([look.radius for look in looks]) * SHADOW_BIAS_RADII
         receivers = [strip_receivers(s, looks, features.surface_shadows) for s in layers] + \
-            [Receivers(s["position"][at], bias_radius[s["yarn"][at]] if len(s["yarn"]) else np.zeros(0))
+            [strip_receivers({key: s[key][at] for key in RECEIVER_KEYS}, looks, False, flyaway=True)
              for s, at in zip(sets[len(layers):], where[len(layers):])]
         directional = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         light_dir = np.array([light.unit_direction for light in directional], np.float64).reshape(-1, 3)

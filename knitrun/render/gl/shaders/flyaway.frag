@@ -172,6 +172,10 @@ void main() {
         float body_level = mip_level(sp.footprint, period / float(body0.x), 2.0 * radius / float(body0.y));
         behind = behind_share(sample_mip(coverage_tex, texture_levels, body_level, sp.u, v_strip).r);
     }
+    // the lights are looked up at the strip point, biased per light by how far it lies behind its own yarn's strip
+    // (pipeline.strip_receivers with flyaway): its own yarn's shadow is hair_light's, not the map's
+    vec3 half_width = cross(sp.wo, sp.t);
+    vec3 offset = length(half_width) > 0.0 ? flyaway_half_width * sp.v * normalize(half_width) : vec3(0.0);
     Params p = yarn_params();
     vec3 rgb = vec3(0.0);
     for (int l = 0; l < n_lights; ++l) {
@@ -179,7 +183,8 @@ void main() {
         float phi_f = azimuth_difference(tf, sp.wo, w);
         float theta_i_f = clamped_asin(dot(tf, w));
         vec3 f = bcsdf_single(spread_params(p, spread2, phi_f), theta_i_f, theta_o_f, phi_f);
-        float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position, shadow_bias, PCF_RADIUS)
+        float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position,
+                                       shadow_bias + own_strip_depth(offset, sp.t, w), PCF_RADIUS)
                                   * canopy_at(l, fin.segment, sp.s));
         rgb += light_irradiance[l] * lit * hair_light(on_body, behind, reach, v_strip, sp.t, sp.n, sp.b, w) * f
              * cos(theta_i_f);
@@ -187,7 +192,7 @@ void main() {
             rgb += light_irradiance[l] * lit * body_glow(reach, v_strip, behind, sp.n, sp.b, w, p.a_r + p.a_tt + p.a_d);
     }
     for (int j = 0; j < n_lobes; ++j) {
-        float vis = lobe_visibility(j, sp.position, shadow_bias);
+        float vis = lobe_visibility(j, sp.position, shadow_bias + own_strip_depth(offset, sp.t, lobe_dir[j]));
         if (vis <= 0.0) continue;
         vec3 w = lobe_dir[j];
         float phi_f = azimuth_difference(tf, sp.wo, w);
