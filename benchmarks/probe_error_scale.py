@@ -24,6 +24,12 @@ of the regular strips, ``strip_raster.rasterize_visibility``):
   repeats (light placed or shaded wrongly in the stitch), which a model can fix. Its control is the same oracle built
   for the other fiber instance (how far such a gain goes on an image that has no systematic error). This oracle and
   the next are measured on the interior's bounding box, against that crop's own instance floor.
+* ``loop phase`` (the same scenes): one factor per place along the loop, over the pixels the front regular strips
+  cover: per bin of the front strip's rest arc length along its course, modulo one stitch (``LOOP_BINS`` per
+  stitch, 15° of Crane's t each, from the middle of a leg), the interior courses apart from the first and last. It
+  pools a part of the yarn's path (a leg, the bend into a head, a sinker) wherever the camera sees it, whatever lies
+  around it; printed with the model over the reference per bin over the interior courses (and the instance over the
+  reference, how far one draw moves a bin): which part of the loop is lit wrongly.
 * ``average stitch`` (the same scenes and bins): the image with each interior pixel replaced by its bin's mean (the
   stitch that the image shows on average), for the model, the reference and the instance: if the model's average
   stitch scores as the model does, its stitch-to-stitch variation costs nothing and the error is in the average
@@ -31,7 +37,8 @@ of the regular strips, ``strip_raster.rasterize_visibility``):
 
 With ``--out``, the stitch-phase scenes also get ``<scene>_average_stitch.png``: the reference's average stitch, the
 model's, and the log ratio of their luminance at half the yarn scale (red: the model too bright, blue: too dark,
-green: within ±19 %), over a window of 2 × 2 stitches, enlarged 3×.
+green: within ±19 %), over a window of 2 × 2 stitches, enlarged 3×; and ``<scene>_loop_phase.png``: the reference,
+the model, and the model's front strips painted by their loop-phase bin's ratio in the same colours, same window.
 
 Printed per scene: the instance floor, the model's error, and each oracle's error (and ratio to the floor). Needs
 the references of ``bench_floors.py`` (``<scene>.exr`` and ``<scene>_instance.exr``). About 5 s per scene on 2 cores.
@@ -64,12 +71,15 @@ V_BINS = 16
 ANGLE_BINS = 18  # 10° each over [0°, 180°): a line on screen has no sign
 GAIN_SCALES = (2, 4, 8)
 CRANE_CURVES = "knit_patch_6x6.h5"  # the example scenes' Crane patch: every stitch the same (stitch-phase oracle)
+CRANE_COLS = 6  # its stitches per course
+LOOP_BINS = 24  # loop-phase bins per stitch (15° of Crane's t each)
 
 
 def front_strips(scene, renderer):
     """Pixel rows, columns, v and the tangent's angle in the x–y plane (degrees in [0, 180); the screen's for the
     example scenes' cameras, which look along −z) of the samples the front regular strips of ``renderer``
-    (a ``pipeline.Renderer`` of ``scene``) cover, at one sample per pixel."""
+    (a ``pipeline.Renderer`` of ``scene``) cover, at one sample per pixel; and each sample's curve and the fraction
+    of its curve's rest length at it."""
     lines = pipeline._polylines(scene, renderer.curves, renderer.frame_index(None), renderer.samples_per_segment)
     radius = np.array([renderer.looks[k].radius for k in lines.entry])
     vis = rasterize_visibility(lines.points, lines.offsets, False, lines.rest, radius, lines.entry,
@@ -77,7 +87,21 @@ def front_strips(scene, renderer):
     rows, cols, sample = np.nonzero(vis.coverage)
     attributes = sample_attributes(vis, rows, cols, sample)
     t = np.asarray(attributes["tangent"], np.float64)
-    return rows, cols, np.asarray(attributes["v"]), np.degrees(np.arctan2(t[:, 1], t[:, 0])) % 180.0
+    curve = vis.curve[rows, cols, sample].astype(np.int64)
+    length = lines.rest[lines.offsets[1:] - 1] - lines.rest[lines.offsets[:-1]]
+    along = (np.asarray(attributes["arclength"], np.float64) - lines.rest[lines.offsets[:-1]][curve]) / length[curve]
+    return (rows, cols, np.asarray(attributes["v"]), np.degrees(np.arctan2(t[:, 1], t[:, 0])) % 180.0, curve,
+            along)
+
+
+def loop_phase(curve, along, curves, cols=CRANE_COLS):
+    """The loop phase bin (``LOOP_BINS`` per stitch) of front-strip samples of the Crane patch (its rows run
+    ``cols`` whole stitches, t ∈ [−π/2, 2π·cols − π/2], every stitch the same length: the phase is the fraction
+    ``along`` the curve times ``cols``, mod 1; phase 0 is the middle of a leg, t = −π/2) and whether the sample's
+    course is an interior one (neither the first nor the last curve)."""
+    phase = (along * cols) % 1.0
+    n_curves = sum(len(c.offsets) - 1 for c in curves)
+    return np.minimum((phase * LOOP_BINS).astype(np.int64), LOOP_BINS - 1), (curve > 0) & (curve < n_curves - 1)
 
 
 def stitch_phase_bins(scene, curves, shape):
@@ -151,6 +175,26 @@ def average_stitch_png(path, reference, model, bins, d):
     write_png(path, np.repeat(np.repeat(picture, 3, axis=0), 3, axis=1))  # 3× nearest: a stitch ~200 px wide
 
 
+def loop_phase_png(path, reference, model, rows, cols, phase, interior, ratio, origin, d):
+    """``--out``'s loop-phase picture: the reference, the model, and the model's front-strip pixels of the interior
+    courses painted by their bin's model / reference (``ratio`` per loop-phase bin; red: the model too bright, blue:
+    too dark, green: within ±19 %, as the average stitch's), over a window of about 2 × 2 stitches from ``origin``
+    (row, column), enlarged 3×."""
+    window = (slice(origin[0], origin[0] + int(round(5.6 * d))), slice(origin[1], origin[1] + int(round(7.9 * d))))
+    log_ratio = np.zeros(model.shape[:2])
+    painted = np.zeros(model.shape[:2], bool)
+    log_ratio[rows[interior], cols[interior]] = np.log2(np.maximum(ratio[phase[interior]], 1e-9))
+    painted[rows[interior], cols[interior]] = True
+    scale = 1.0 / max(float(np.percentile(reference[window], 99.5)), 1e-12)
+    tone = [np.clip(a[window] * scale, 0.0, 1.0) ** (1 / 2.2) for a in (reference, model)]
+    r = log_ratio[window]
+    signed = np.stack([np.clip(r, 0, 1.5) / 1.5, 0.6 * np.clip(1 - np.abs(r) / 0.25, 0, 1),
+                       np.clip(-r, 0, 1.5) / 1.5], axis=-1) * painted[window][..., None]
+    gap = np.ones((tone[0].shape[0], 3, 3))
+    picture = np.concatenate([tone[0], gap, tone[1], gap, signed], axis=1) ** 2.2
+    write_png(path, np.repeat(np.repeat(picture, 3, axis=0), 3, axis=1))
+
+
 def binned_gain(model, reference, rows, cols, bins):
     """(H, W) gains: per bin, the reference's luminance over the model's, summed over the bin's pixels; 1 elsewhere."""
     gain = np.ones(model.shape)
@@ -184,7 +228,7 @@ def probe(name, pack, reference_dir, ablation, out=None):
     def error(img, gain):
         return yarn_scale_metrics(img * gain[..., None], reference, d)["rel_l1"]
 
-    rows, cols, v, angle = front_strips(scene, renderer)
+    rows, cols, v, angle, curve, along = front_strips(scene, renderer)
     v_bin = np.clip(((v + 1.0) * 0.5 * V_BINS).astype(np.int64), 0, V_BINS - 1)
     angle_bin = np.clip((angle / 180.0 * ANGLE_BINS).astype(np.int64), 0, ANGLE_BINS - 1)
     plain = error(model, np.ones(lm.shape))
@@ -217,6 +261,22 @@ def probe(name, pack, reference_dir, ablation, out=None):
                      f"under the same oracle {inner(crop[2], stitch_gain(li_in, lr_in, bins)):.2f}×")
         lines.append("  average stitch: the model's {:.2f}× floor, the reference's {:.2f}×, the instance's {:.2f}×"
                      .format(*(inner(average_stitch(img, bins)) for img in crop)))
+        phase, interior = loop_phase(curve, along, renderer.curves)
+        e = error(model, binned_gain(lm, lr, rows, cols, phase + LOOP_BINS * interior))
+        lines.append(f"  oracle loop phase ({LOOP_BINS} bins, interior and outer courses apart) {e:.4f} "
+                     f"({e / floor:.2f}× floor); model / reference per bin over the interior courses' front-strip "
+                     f"pixels (instance / reference), from a leg's middle (t = −90°) in steps of 15° of t:")
+        profile, ratio = [], np.ones(LOOP_BINS)
+        for b in range(LOOP_BINS):
+            at = interior & (phase == b)
+            r, c = rows[at], cols[at]
+            ratio[b] = lm[r, c].sum() / max(lr[r, c].sum(), 1e-30)
+            profile.append(f"{-90 + 15 * b:+4d}°: {ratio[b]:.2f} ({li[r, c].sum() / max(lr[r, c].sum(), 1e-30):.2f}) "
+                           f"n={at.sum()}")
+        lines.extend("    " + "; ".join(profile[k:k + 4]) for k in range(0, LOOP_BINS, 4))
+        if out is not None:
+            loop_phase_png(Path(out) / f"{name}_loop_phase.png", reference, model, rows, cols, phase, interior,
+                           ratio, (box[0].start, box[1].start), d)
         if out is not None:
             average_stitch_png(Path(out) / f"{name}_average_stitch.png", crop[1], crop[0], bins, d)
     return "\n".join(lines)
