@@ -6,7 +6,8 @@ per cent (the back-lit straight yarn: 5.4 % over eight draws, its flyaways), as 
 ``--count`` further draws per scene, fiber seed and sampling seed S + 2 … S + 1 + count (S the scene's seed; S and S + 1
 are the reference and its instance floor, ``knitbake.compare.report.FLOORS``), at the reference's spp (its JSON summary
 in DIR; else the scene's; or ``--spp``), into ``DIR/<scene>_fiber<seed>.exr`` with their JSON summaries, and prints each
-draw's mean radiance over the reference's and the spread of the means.
+draw's mean radiance over the reference's and the spread of the means. A draw already in DIR is kept when its summary
+says the same spp (or has none), and traced again (with a line saying so) when it says another.
 
     .venv/bin/python benchmarks/bench_instances.py --out out/bench/refs2 [--count 6] [--scenes a,b] [--spp N]
 """
@@ -58,14 +59,19 @@ def main():
         means = []
         for k in range(seed + 2, seed + 2 + args.count):
             path = instance_path(out, name, k)
+            kept = (read_summary(path) or {}).get("spp", spp) if path.is_file() else spp
+            if kept != spp:  # a draw of another spp is not this ruler's
+                print(f"{path}: traced at {kept} spp, not {spp}: traced again", flush=True)
+                path.unlink()
             if not path.is_file():
                 image, facts = trace_reference(scene, spp, k, scene.render.max_depth, fiber_seed=k)
                 write_reference(path, image, {"scene": name, **facts})
             means.append(float(read_exr(path).mean()))
         base = float(read_exr(ref).mean()) if ref.is_file() else float(np.mean(means))
         ratios = np.array(means) / base
-        print(f"| {name} | {spp} | {args.count} | {', '.join(f'{r:.3f}' for r in ratios)} | "
-              f"{ratios.std(ddof=1):.3f} | {time.perf_counter() - t0:.0f} |", flush=True)
+        spread = f"{ratios.std(ddof=1):.3f}" if len(ratios) > 1 else "—"  # one draw has no spread
+        print(f"| {name} | {spp} | {args.count} | {', '.join(f'{r:.3f}' for r in ratios)} | {spread} | "
+              f"{time.perf_counter() - t0:.0f} |", flush=True)
 
 
 if __name__ == "__main__":
