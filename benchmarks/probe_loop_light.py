@@ -10,15 +10,18 @@ loop_phase``'s bins), and from it (moved 2e-4 along the radial direction from th
 directional light is traced over the reference's fibers twice:
 
 * **lit past every regular fiber** (the receiver's own fiber and every flyaway passed through): what reaches it;
-* **lit past its own yarn** (only the regular fibers of the receiver's own course block): what its own yarn's
-  fibers let through, the self-shadowing the strips take from Ψ^Fiber, baked on a straight yarn.
+* **lit past its own cross-section** (only the regular fibers of the receiver's own course within ``OWN_ARC_RADII``
+  radii of rest arc length block): what its own yarn there lets through, the self-shadowing the strips take from
+  Ψ^Fiber, baked on a straight yarn (the rest of its course shadows it at yarn level, as another yarn would).
 
-For the strips, over the pixels their front regular strips of that bin cover (the interior courses): the full image
-over the same image with every yarn-level lookup lit (``pipeline._visibility`` returning 1: what the shadow maps
-take off, with the light passed through blockers, the bounce and the canopy as they follow from it), the full image
-over the one without fiber-level shadowing (``Features(fiber_shadowing=False)``: what Ψ^Fiber takes off), and the
-full image over the reference. Each is a ratio of summed luminance, so a term that also moves the multiple
-scattering moves its ratio too; the reference's columns are shares of receivers, not of light.
+For the strips, over their front regular points and the pixels their front regular strips of that bin cover (the
+interior courses): the mean yarn-level visibility V of the first directional light at the points (the shadow map's,
+``pipeline._visibility``, before the light passed through blockers), the full image over the same image with every
+yarn-level lookup lit (what the shadow maps take off, with the light passed through blockers, the bounce and the
+canopy as they follow from it), the full image over the one without fiber-level shadowing
+(``Features(fiber_shadowing=False)``: what Ψ^Fiber takes off), and the full image over the reference. The image
+columns are ratios of summed luminance, so a term that also moves the multiple scattering moves its ratio too; the
+reference's columns are shares of receivers, not of light.
 
     .venv/bin/python benchmarks/probe_loop_light.py --pack out/bench/cotton1_standard_56.h5 \\
         --reference-dir out/bench/refs2 [--scenes knit_patch_grazing,knit_patch_directional]
@@ -48,11 +51,12 @@ from probe_hair_canopy import dense_polylines, first_hits, reference_fibers  # n
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = "knit_patch_grazing,knit_patch_directional"
+OWN_ARC_RADII = 4.0  # the receiver's own cross-section: its course's fibers within this rest arc length (radii)
 
 
 def reference_receivers(scene):
     """The reference's receivers (module docstring): (loop-phase bin, interior course, lit past every regular fiber,
-    lit past its own yarn) per pixel whose camera ray meets a regular fiber."""
+    lit past its own cross-section) per pixel whose camera ray meets a regular fiber."""
     radius = scene.yarns[0].radius
     fibers, curves = reference_fibers(scene)
     kind = fibers.kind
@@ -77,16 +81,51 @@ def reference_receivers(scene):
         raise SystemExit(f"{scene.name}: no directional light")
     start = hit + radial * 2e-4
     toward = np.broadcast_to(np.asarray(light[0].unit_direction, np.float64), start.shape).copy()
-    own_fiber, own_curve = fiber[seen], curve[near]
+    own_fiber, own_curve, own_arc = fiber[seen], curve[near], arc[near]
     lit = first_hits(curves, curves.segment_fiber, start, toward,
                      lambda f, i, p: (kind[f] != KIND_REGULAR) | (f == own_fiber[i]))[1] < 0
-    lit_own = first_hits(curves, curves.segment_fiber, start, toward,
-                         lambda f, i, p: (kind[f] != KIND_REGULAR) | (f == own_fiber[i])
-                         | (curve[tree.query(p)[1]] != own_curve[i]))[1] < 0
+
+    def elsewhere(f, i, p):  # not the receiver's own cross-section: passed through
+        _, at = tree.query(p)
+        return (kind[f] != KIND_REGULAR) | (f == own_fiber[i]) | (curve[at] != own_curve[i]) | \
+            (np.abs(arc[at] - own_arc[i]) > OWN_ARC_RADII * radius)
+
+    lit_own = first_hits(curves, curves.segment_fiber, start, toward, elsewhere)[1] < 0
     phase = ((arc[near] - arc[offsets[own_curve]]) / length[own_curve] * CRANE_COLS) % 1.0
     bins = np.minimum((phase * LOOP_BINS).astype(np.int64), LOOP_BINS - 1)
     interior = (own_curve > 0) & (own_curve < len(length) - 1)
     return bins, interior, lit, lit_own
+
+
+def point_visibility(scene, packs):
+    """(the first directional light's yarn-level visibility V, loop-phase bin, interior course, weight) of the front
+    regular shading points of the strips, caught as the renderer looks them up (its first map of the scene's
+    ``shadow_map_size``: the directional lights' come before the lobes')."""
+    caught = {}
+    receivers_of, shadows = pipeline.strip_receivers, pipeline._visibility
+
+    def catch_points(points, looks, surface, flyaway=False):
+        caught.setdefault("points", points)  # the front layer's are the first
+        return receivers_of(points, looks, surface, flyaway)
+
+    def catch_visibility(lines, radius, direction, size, *rest):
+        found = shadows(lines, radius, direction, size, *rest)
+        if size == scene.render.shadow_map_size and "V" not in caught:
+            caught.update(V=found[0], lines=lines)
+        return found
+
+    try:
+        pipeline.strip_receivers, pipeline._visibility = catch_points, catch_visibility
+        renderer = pipeline.Renderer(scene, packs)
+        renderer.render()
+    finally:
+        pipeline.strip_receivers, pipeline._visibility = receivers_of, shadows
+    points, lines = caught["points"], caught["lines"]
+    curve = np.asarray(points["curve"], np.int64)
+    start, end = lines.rest[lines.offsets[:-1]], lines.rest[lines.offsets[1:] - 1]
+    along = (np.asarray(points["arclength"], np.float64) - start[curve]) / (end - start)[curve]
+    phase, interior = loop_phase(curve, along, renderer.curves)
+    return caught["V"], phase, interior, np.asarray(points["weight"], np.float64)
 
 
 def strip_images(scene, pack):
@@ -114,20 +153,23 @@ def probe(name, pack, reference_dir) -> str:
     scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
     bins, inner, lit, lit_own = reference_receivers(scene)
     full, unshadowed, no_psi, (rows, cols, phase, interior) = strip_images(scene, pack)
+    vis, vis_phase, vis_interior, weight = point_visibility(scene, {"cotton1": str(pack)})
     reference = read_exr(Path(reference_dir) / f"{name}.exr").astype(np.float64)[..., :3] @ np.asarray(LUMINANCE)
 
     def ratio(a, b, r, c):
         return a[r, c].sum() / max(b[r, c].sum(), 1e-30)
 
     lines = [f"\n{name} (interior courses):\n",
-             "| loop phase (Crane's t) | reference: lit past every regular fiber | lit past its own yarn | strips: "
-             "what the shadow maps leave | what Ψ^Fiber leaves | strips / reference |",
-             "|---|---|---|---|---|---|"]
+             "| loop phase (Crane's t) | reference: lit past every regular fiber | lit past its own cross-section | "
+             "strips: V | what the shadow maps leave | what Ψ^Fiber leaves | strips / reference |",
+             "|---|---|---|---|---|---|---|"]
     for b in range(LOOP_BINS):
         m = inner & (bins == b)
         at = interior & (phase == b)
         r, c = rows[at], cols[at]
+        v = vis_interior & (vis_phase == b)
         lines.append(f"| {-90 + 15 * b:+d}° | {lit[m].mean():.2f} | {lit_own[m].mean():.2f} | "
+                     f"{np.average(vis[v], weights=weight[v]) if weight[v].sum() > 0 else np.nan:.2f} | "
                      f"{ratio(full, unshadowed, r, c):.2f} | {ratio(full, no_psi, r, c):.2f} | "
                      f"{ratio(full, reference, r, c):.2f} |")
     return "\n".join(lines)
