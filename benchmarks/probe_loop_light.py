@@ -98,9 +98,10 @@ def reference_receivers(scene):
 
 
 def point_visibility(scene, packs):
-    """(the first directional light's yarn-level visibility V, loop-phase bin, interior course, weight) of the front
-    regular shading points of the strips, caught as the renderer looks them up (its first map of the scene's
-    ``shadow_map_size``: the directional lights' come before the lobes')."""
+    """The strips' full render, caught as the renderer looks its lights up: (its renderer, its luminance image, and
+    per front regular shading point the first directional light's yarn-level visibility V (its first map of the
+    scene's ``shadow_map_size``: the directional lights' come before the lobes'), loop-phase bin, interior course and
+    weight)."""
     caught = {}
     receivers_of, shadows = pipeline.strip_receivers, pipeline._visibility
 
@@ -117,7 +118,7 @@ def point_visibility(scene, packs):
     try:
         pipeline.strip_receivers, pipeline._visibility = catch_points, catch_visibility
         renderer = pipeline.Renderer(scene, packs)
-        renderer.render()
+        full = np.asarray(renderer.render().image, np.float64)[..., :3] @ np.asarray(LUMINANCE, np.float64)
     finally:
         pipeline.strip_receivers, pipeline._visibility = receivers_of, shadows
     points, lines = caught["points"], caught["lines"]
@@ -125,16 +126,13 @@ def point_visibility(scene, packs):
     start, end = lines.rest[lines.offsets[:-1]], lines.rest[lines.offsets[1:] - 1]
     along = (np.asarray(points["arclength"], np.float64) - start[curve]) / (end - start)[curve]
     phase, interior = loop_phase(curve, along, renderer.curves)
-    return caught["V"], phase, interior, np.asarray(points["weight"], np.float64)
+    return renderer, full, (caught["V"], phase, interior, np.asarray(points["weight"], np.float64))
 
 
-def strip_images(scene, pack):
-    """(full, yarn-level lookups all lit, without Ψ^Fiber) luminance images of the strips, and the front strips'
-    (rows, cols, loop-phase bin, interior course)."""
-    packs = {"cotton1": str(pack)}
+def strip_images(scene, packs, renderer):
+    """(yarn-level lookups all lit, without Ψ^Fiber) luminance images of the strips, and the front strips' (rows, cols,
+    loop-phase bin, interior course) of ``renderer``'s frame."""
     lum = np.asarray(LUMINANCE, np.float64)
-    renderer = pipeline.Renderer(scene, packs)
-    full = np.asarray(renderer.render().image, np.float64)[..., :3] @ lum
     rows, cols, _, _, curve, along = front_strips(scene, renderer)
     phase, interior = loop_phase(curve, along, renderer.curves)
     shadows = pipeline._visibility
@@ -146,14 +144,15 @@ def strip_images(scene, pack):
         pipeline._visibility = shadows
     no_psi = np.asarray(pipeline.Renderer(scene, packs, features=Features(fiber_shadowing=False)).render().image,
                         np.float64)[..., :3] @ lum
-    return full, unshadowed, no_psi, (rows, cols, phase, interior)
+    return unshadowed, no_psi, (rows, cols, phase, interior)
 
 
 def probe(name, pack, reference_dir) -> str:
     scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
     bins, inner, lit, lit_own = reference_receivers(scene)
-    full, unshadowed, no_psi, (rows, cols, phase, interior) = strip_images(scene, pack)
-    vis, vis_phase, vis_interior, weight = point_visibility(scene, {"cotton1": str(pack)})
+    packs = {"cotton1": str(pack)}  # the example scenes draw cotton1, as bench_compare.py
+    renderer, full, (vis, vis_phase, vis_interior, weight) = point_visibility(scene, packs)
+    unshadowed, no_psi, (rows, cols, phase, interior) = strip_images(scene, packs, renderer)
     reference = read_exr(Path(reference_dir) / f"{name}.exr").astype(np.float64)[..., :3] @ np.asarray(LUMINANCE)
 
     def ratio(a, b, r, c):
