@@ -88,10 +88,15 @@ def front_strips(scene, renderer):
     attributes = sample_attributes(vis, rows, cols, sample)
     t = np.asarray(attributes["tangent"], np.float64)
     curve = vis.curve[rows, cols, sample].astype(np.int64)
-    length = lines.rest[lines.offsets[1:] - 1] - lines.rest[lines.offsets[:-1]]
-    along = (np.asarray(attributes["arclength"], np.float64) - lines.rest[lines.offsets[:-1]][curve]) / length[curve]
     return (rows, cols, np.asarray(attributes["v"]), np.degrees(np.arctan2(t[:, 1], t[:, 0])) % 180.0, curve,
-            along)
+            fraction_along(lines, curve, attributes["arclength"]))
+
+
+def fraction_along(lines, curve, arclength):
+    """The fraction (N,) of its curve's rest length at points of ``curve`` (N,) and rest ``arclength`` (N,) on
+    ``lines`` (the renderer's polylines)."""
+    start, end = lines.rest[lines.offsets[:-1]], lines.rest[lines.offsets[1:] - 1]
+    return (np.asarray(arclength, np.float64) - start[curve]) / (end - start)[curve]
 
 
 def loop_phase(curve, along, curves, cols=CRANE_COLS):
@@ -277,7 +282,6 @@ def probe(name, pack, reference_dir, ablation, out=None):
         if out is not None:
             loop_phase_png(Path(out) / f"{name}_loop_phase.png", reference, model, rows, cols, phase, interior,
                            ratio, (box[0].start, box[1].start), d)
-        if out is not None:
             average_stitch_png(Path(out) / f"{name}_average_stitch.png", crop[1], crop[0], bins, d)
     return "\n".join(lines)
 

@@ -46,7 +46,7 @@ from knitrun.render.ablations import Features
 from knitrun.render.camera import scene_camera, tan_half_fov
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from probe_error_scale import CRANE_COLS, LOOP_BINS, front_strips, loop_phase  # noqa: E402
+from probe_error_scale import CRANE_COLS, LOOP_BINS, fraction_along, front_strips, loop_phase  # noqa: E402
 from probe_hair_canopy import dense_polylines, first_hits, reference_fibers  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -123,9 +123,7 @@ def point_visibility(scene, packs):
         pipeline.strip_receivers, pipeline._visibility = receivers_of, shadows
     points, lines = caught["points"], caught["lines"]
     curve = np.asarray(points["curve"], np.int64)
-    start, end = lines.rest[lines.offsets[:-1]], lines.rest[lines.offsets[1:] - 1]
-    along = (np.asarray(points["arclength"], np.float64) - start[curve]) / (end - start)[curve]
-    phase, interior = loop_phase(curve, along, renderer.curves)
+    phase, interior = loop_phase(curve, fraction_along(lines, curve, points["arclength"]), renderer.curves)
     return renderer, full, (caught["V"], phase, interior, np.asarray(points["weight"], np.float64))
 
 
