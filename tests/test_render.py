@@ -302,6 +302,32 @@ def test_the_single_scattering_split_is_darker_and_blind_to_what_crosses_yarns(t
     assert np.abs(c - d).max() > 1e-4
 
 
+def test_the_single_scattering_split_leaves_out_light_another_fiber_scattered_first(tmp_path, pack):
+    """The yarn-level terms whose light a body's fibers or another yarn scattered before the fiber seen are multiple
+    scattering, so ``Features(multiple_scattering=False)`` draws none of them: under the sun the body's glow on its
+    hairs (the split's image is the same with ``hair_glow`` off, which the full image is not), and under the sky the
+    lobes' inter-reflection between two yarns (the same with ρ_Y taken out of the lobes, which the full image is
+    not). Until stop 63 both counted as single scattering."""
+    pair = [straight(), straight(z=0.1) + [0, 0.05, 0]]
+    single = dict(multiple_scattering=False)
+    sun = write_scene(tmp_path, pair, camera=FRONT, lights=SUN, name="sun")
+    assert np.array_equal(_render(sun, pack, features=Features(**single)).image,
+                          _render(sun, pack, features=Features(hair_glow=False, **single)).image)
+    glow = _render(sun, pack).image - _render(sun, pack, features=Features(hair_glow=False)).image
+    assert glow.max() > 1e-4
+    sky = write_scene(tmp_path, pair, camera=FRONT, lights=SKY, name="sky")
+    renderer = Renderer(load_scene(sky), {"cotton1": str(pack)}, Features(flyaways=False, **single))
+    a = renderer.render().image
+    for look in renderer.looks:  # no hull albedo: nothing to inter-reflect the lobes with
+        look.yarn_albedo = None
+    assert np.array_equal(a, renderer.render().image)
+    full = Renderer(load_scene(sky), {"cotton1": str(pack)}, Features(flyaways=False))
+    b = full.render().image
+    for look in full.looks:
+        look.yarn_albedo = None
+    assert np.abs(b - full.render().image).max() > 1e-4
+
+
 def _parallax_points(xyz, rest, segment, arclength, v, tangent, view, radius=0.03):
     """``parallax_shift`` of points on one polyline (vertices ``xyz``, rest arc length ``rest``)."""
     lines = SimpleNamespace(points=np.asarray(xyz, float), rest=np.asarray(rest, float),

@@ -726,8 +726,9 @@ class Renderer:
         if fly_points is not None:
             for vis in (light_vis, light_beyond, lobe_vis) if features.two_blockers else (light_vis, lobe_vis):
                 vis[-1][:, shared] = vis[0][:, partner[shared]]
-        albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) if features.interreflection else \
-            np.zeros(len(looks))
+        # the lobes' inter-reflection is light another yarn scattered first: multiple scattering
+        albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) \
+            if features.interreflection and features.multiple_scattering else np.zeros(len(looks))
         if len(lobe_dir) and albedo.any():
             lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :]) for v, s in zip(lobe_vis, sets)]
         # per yarn, the ρ the lobes were inter-reflected with and ρ_Y per channel, which the kernels take each
@@ -737,6 +738,7 @@ class Renderer:
         if self.environment:
             facts["interreflection"] = {
                 look.name: "off (Features.interreflection)" if not features.interreflection else
+                "off (Features.multiple_scattering: single scattering alone)" if not features.multiple_scattering else
                 round(float(a), 4) if look.yarn_albedo is not None else "absent from the pack (schema < 2.1)"
                 for look, a in zip(looks, albedo)}
         ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
@@ -780,7 +782,7 @@ class Renderer:
                 shade_flyaway(idx, hairs, *self.kernel_looks[k],
                               looks[k].coverage if features.hairs_behind else None,
                               Lights(light_dir, light_e, light_vis[-1], light_beyond[-1]) if len(light_dir) else None,
-                              hair_glow(looks[k]) if features.hair_glow and len(light_dir) else None,
+                              hair_glow(looks[k]) if glow_on(features) and len(light_dir) else None,
                               *environment,
                               fly_rgb, fly_alpha, fly_transmit)
             if not features.hair_light:  # the split of ``Features.hair_light``: opaque black hairs
@@ -863,6 +865,12 @@ def _yarn_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, verte
                          np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, values)
         out.append(values)
     return out
+
+
+def glow_on(features: Features) -> bool:
+    """Whether the hairs take their body's glow (``Features.hair_glow``): light the body's fibers scattered first, so
+    multiple scattering, which ``Features.multiple_scattering`` False leaves out."""
+    return features.hair_glow and features.multiple_scattering
 
 
 def hair_glow(look) -> np.ndarray | None:

@@ -367,7 +367,7 @@ class GLRenderer:
         }
         if flyaway is not None:  # the three variants
             uniforms.update(flyaway_half_width=float(kernel_look.flyaway_half_width), fly_levels=flyaway[0][1])
-            glow = pipeline.hair_glow(look) if self.features.hair_glow else None
+            glow = pipeline.hair_glow(look) if pipeline.glow_on(self.features) else None
             uniforms.update(use_glow=int(glow is not None), glow_back=np.zeros(3) if glow is None else glow[0],
                             glow_forward=np.zeros(3) if glow is None else glow[1])
             uniforms.update(hairs_behind=int(self.features.hairs_behind))
