@@ -17,13 +17,23 @@ light from (θ_i, −φ)): off the diagonal, where the closure stage closes ξ a
 between its bin centres, where the renderer interpolates it (BENCHMARKS.md, "Issue 13: where in a knit's shape the
 error starts").
 
+``--split`` compares single and multiple scattering apart instead, as the closure closes them (``correction/xi_view_ss``,
+``_ms``): per view, the reference traced with ``--seeds`` fiber instances at full depth and with one scattering event
+(``trace_reference(..., max_depth=1)``: single scattering SS, the rest MS), the model with
+``Features.multiple_scattering`` off for its SS, and the model's SS without ξ (``xi`` off: what ξ_ss starts from).
+Printed per view: the reference's SS and MS (mean of RGB) and, per model, its SS, MS and whole over the reference's.
+At a bin centre ξ_ss is what the closure made it; between centres it is interpolated, so there the renderer's
+single scattering is right only as far as its response without ξ changes as the reference's does (BENCHMARKS.md,
+"Issue 13: single scattering between the closure's cells").
+
     .venv/bin/python benchmarks/probe_closure.py --pack out/bench/cotton1_standard.h5 [--ablations full,factored] \
-        [--views 0:56.25:22.5,11.25:56.25:22.5]
+        [--views 0:56.25:22.5,11.25:56.25:22.5] [--split [--seeds 4]]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import tempfile
@@ -39,6 +49,7 @@ from data_formats.scene import load_scene  # noqa: E402
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves  # noqa: E402
 from data_formats.yarn_spec import load_preset  # noqa: E402
 from knitbake.stages.correction import yarn_direction  # noqa: E402
+from knitbake.trace.reference import trace_reference  # noqa: E402
 from knitrun.render.ablations import regular_fibers  # noqa: E402
 from knitrun.render.pipeline import render  # noqa: E402
 
@@ -80,7 +91,11 @@ def main():
     parser.add_argument("--spp", type=int, default=32)
     parser.add_argument("--views", default=None, help="θ_i:θ_o:φ in degrees, comma-separated (default: the diagonal "
                         "bin centres θ_i = −θ_o = −θ_d)")
+    parser.add_argument("--split", action="store_true", help="single and multiple scattering apart (module docstring)")
+    parser.add_argument("--seeds", type=int, default=4, help="with --split: fiber instances the reference averages")
     args = parser.parse_args()
+    if args.seeds < 1:
+        parser.error(f"--seeds {args.seeds}: at least 1")
     if args.views:
         try:
             views = [tuple(math.radians(float(x)) for x in view.split(":")) for view in args.views.split(",")]
@@ -92,8 +107,13 @@ def main():
         views = [(-theta_d, theta_d, phi) for theta_d in THETA_D for phi in PHI]
     period = load_preset("cotton1").geometry.ply_pitch
     ablations = args.ablations.split(",")
-    print("| θ_i | θ_o | φ | " + " | ".join(ablations) + " |")
-    print("|---|---|---|" + "---|" * len(ablations))
+    if args.split:
+        print("| θ_i | θ_o | φ | reference SS, MS | " + " | ".join(f"{a}: SS, MS, whole" for a in ablations)
+              + " | SS without ξ |")
+        print("|---|---|---|---|" + "---|" * (len(ablations) + 1))
+    else:
+        print("| θ_i | θ_o | φ | " + " | ".join(ablations) + " |")
+        print("|---|---|---|" + "---|" * len(ablations))
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         points = np.stack([np.zeros(31), np.zeros(31), np.linspace(-1.5 * period, 2.5 * period, 31)], axis=1)
@@ -101,11 +121,35 @@ def main():
                                                                 yarn_types=["cotton1"], units="cm"))
         for theta_i, theta_o, phi in views:
             scene = _scene(folder, period, theta_i, theta_o, phi, args.spp)
+            angles = f"| {math.degrees(theta_i):+.2f}° | {math.degrees(theta_o):+.2f}° | {math.degrees(phi):+.1f}° | "
+            if args.split:
+                print(angles + _split_row(scene, args.pack, ablations, args.spp, args.seeds), flush=True)
+                continue
             reference = (_trace_without_flyaways(scene, args.spp) @ LUMINANCE).sum()
             ratios = [(render(scene, {"cotton1": args.pack}, regular_fibers(a)).image @ LUMINANCE).sum() / reference
                       for a in ablations]
-            print(f"| {math.degrees(theta_i):+.2f}° | {math.degrees(theta_o):+.2f}° | {math.degrees(phi):+.1f}° | "
-                  + " | ".join(f"{r:.3f}" for r in ratios) + " |", flush=True)
+            print(angles + " | ".join(f"{r:.3f}" for r in ratios) + " |", flush=True)
+
+
+def _split_row(scene, pack, ablations, spp, seeds) -> str:
+    """The cells of one view of ``--split`` after its angles: the reference's SS and MS over ``seeds`` fiber
+    instances (regular fibers), then each model's SS, MS and whole over them, then the first model's SS without ξ."""
+    def traced(depth):
+        return np.mean([trace_reference(scene, spp, seed=scene.render.seed + 2 * s + (depth == 1), max_depth=depth,
+                                        fiber_seed=s, flyaways=False)[0][..., :3].mean() for s in range(seeds)])
+
+    def drawn(features):
+        return float(np.asarray(render(scene, {"cotton1": pack}, features).image, np.float64)[..., :3].mean())
+
+    whole, single = traced(scene.render.max_depth), traced(1)
+    cells = [f"{single * 1e3:.2f}, {(whole - single) * 1e3:.2f} (×10⁻³)"]
+    for name in ablations:
+        features = regular_fibers(name)
+        all_, ss = drawn(features), drawn(dataclasses.replace(features, multiple_scattering=False))
+        cells.append(f"{ss / single:.3f}, {(all_ - ss) / (whole - single):.3f}, {all_ / whole:.3f}")
+    raw = regular_fibers(ablations[0])
+    cells.append(f"{drawn(dataclasses.replace(raw, multiple_scattering=False, xi=False)) / single:.3f}")
+    return " | ".join(cells) + " |"
 
 
 if __name__ == "__main__":
