@@ -24,7 +24,7 @@ error starts").
 Printed per view: the reference's SS and MS (mean of RGB) and, per model, its SS, MS and whole over the reference's.
 At a bin centre ξ_ss is what the closure made it; between centres it is interpolated, so there the renderer's
 single scattering is right only as far as its response without ξ changes as the reference's does (BENCHMARKS.md,
-"Issue 13: single scattering between the closure's cells").
+"Issue 13: single scattering, counted apart and between the closure's cells").
 
     .venv/bin/python benchmarks/probe_closure.py --pack out/bench/cotton1_standard.h5 [--ablations full,factored] \
         [--views 0:56.25:22.5,11.25:56.25:22.5] [--split [--seeds 4]]

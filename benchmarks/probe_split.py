@@ -5,7 +5,9 @@ The path tracer counts scattering events (``trace_reference(..., max_depth=1)`` 
 camera ray, hit, next-event estimate of the lights there), so its image splits into single scattering SS (one
 event) and multiple scattering MS = full − SS. The strip renderer's counterpart is ``Features(multiple_scattering=
 False)``: Zinke's density factors d_f = d_b = 0, which leaves the fiber BCSDF f of each directional light and the
-environment's I_M and drops every DS term of multiple scattering (``knitrun.render.ablations``). Per scene this
+environment's I_M and drops every DS term of multiple scattering, and the yarn-level terms of light another fiber
+scattered first (the bounce, the hairs' glow from their body, the sky's lobes inter-reflected between the yarns; until
+stop 63 the last two counted as single scattering) (``knitrun.render.ablations``). Per scene this
 traces the reference (seed and fiber seed of the scene) and a second fiber instance (seed + 1, fiber seed + 1),
 each at the full depth and at one event, over a black background (so that SS and MS carry no background and the
 means are the yarns' alone), and renders each model of ``--models`` both ways. Reported per model, all at the yarn

@@ -46,8 +46,9 @@ back-scattering, forward-scattered light through other fibers, and the environme
 vanish, and without the yarn-level terms whose light another fiber scattered first: the bounce (``yarn_bounce``), the
 body's glow on its hairs (``hair_glow``) and the sky's lobes inter-reflected between the yarns (``interreflection``'s
 ρ_Y; its gap transmittance τ_Y, light that crossed a blocker unscattered, stays). Until stop 63 the glow and the
-lobes' inter-reflection were counted as single scattering, which put 9–12 % of the lone and the patches' single
-scattering there (BENCHMARKS.md, "Issue 13: single scattering between the closure's cells"). It is no rung of the ladder but a split: the reference traced with one scattering event
+lobes' inter-reflection were counted as single scattering: 3–9 % of the example scenes' single scattering under a
+directional light, 16 % of the patch's under the sky (BENCHMARKS.md, "Issue 13: single scattering, counted apart and
+between the closure's cells"). It is no rung of the ladder but a split: the reference traced with one scattering event
 (``trace_reference(..., max_depth=1)``) is its counterpart, and ``benchmarks/probe_split.py`` compares the two
 halves of the light, single and multiple, scene by scene.
 
