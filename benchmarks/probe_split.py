@@ -21,11 +21,15 @@ scale d (``knitbake.compare.image_metrics``):
 
 ``--tilt-bins`` adds, for scenes drawn from yarn-curve files whose curves turn (a straight yarn sits in one bin), the
 mean of the yarn-scale SS and MS at the curves' control points binned by |ω_o · t| (as ``probe_tilt.py
---bins-from``): how each half changes as the yarn turns toward the camera. ``--out DIR`` keeps the images
+--bins-from``): how each half changes as the yarn turns toward the camera. ``--loop-bins`` adds, on the Crane patch scenes (every stitch alike: ``probe_error_scale.loop_phase``), per
+loop-phase bin of the interior courses (15° of Crane's t; the heads at 0°, the sinkers at 180°), over the pixels the
+first model's front regular strips cover: the references' share of single scattering, the model's SS, MS and whole
+over theirs (luminance; the reference and the second instance averaged), and the bin's share of their light: which
+part of the loop has which half wrong. ``--out DIR`` keeps the images
 (``<scene>/{reference,instance}_{full,single}.exr``, ``strip_<model>_{full,single}.exr``).
 
     .venv/bin/python benchmarks/probe_split.py --pack out/bench/cotton1_standard.h5 [--scenes a,b] \\
-        [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--out DIR]
+        [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--loop-bins] [--out DIR]
 
 The spp per scene is the one the ruler picked (the Monte Carlo floor at most half the instance floor at d:
 BENCHMARKS.md, "The ruler"), unless ``--spp`` is given.
@@ -41,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from data_formats.conventions import LUMINANCE
 from data_formats.images import write_exr
 from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
@@ -50,6 +55,7 @@ from knitrun.render import pipeline
 from knitrun.render.ablations import combined
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from probe_error_scale import CRANE_CURVES, LOOP_BINS, front_strips, loop_phase  # noqa: E402
 from probe_tilt import TILT_BINS, curve_tilts  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -116,6 +122,31 @@ def tilt_rows(name, d, at, ref, strips):
     return out
 
 
+def loop_rows(name, scene, pack, model, ref, inst, strip):
+    """Markdown rows of ``--loop-bins`` for the Crane patch ``scene``: per loop-phase bin of the interior courses,
+    the references' (``ref``, ``inst``: (full, single), averaged) SS share, ``strip``'s (full, single) SS, MS and
+    whole over theirs, and the bin's share of their light, over the pixels ``model``'s front regular strips cover."""
+    lum = np.asarray(LUMINANCE, np.float64)
+    full, single = (0.5 * (a + b) @ lum for a, b in zip(ref, inst))
+    model_full, model_single = (a @ lum for a in strip)
+    renderer = pipeline.Renderer(scene, {"cotton1": pack}, combined(model))
+    rows, cols, _, _, curve, along = front_strips(scene, renderer)
+    phase, interior = loop_phase(curve, along, renderer.curves)
+    _, first = np.unique(rows * scene.camera.width + cols, return_index=True)  # one sample per pixel
+    rows, cols, phase, interior = rows[first], cols[first], phase[first], interior[first]
+    total = full[rows[interior], cols[interior]].sum()
+    out = []
+    for b in range(LOOP_BINS):
+        at = interior & (phase == b)
+        r, c = rows[at], cols[at]
+        ss, ms = single[r, c].sum(), (full - single)[r, c].sum()
+        cells = [f"{-90 + 15 * b:+d}°", f"{ss / (ss + ms):.2f}", f"{model_single[r, c].sum() / ss:.2f}",
+                 f"{(model_full - model_single)[r, c].sum() / ms:.2f}",
+                 f"{model_full[r, c].sum() / (ss + ms):.2f}", f"{(ss + ms) / total:.3f}"]
+        out.append(f"| {name} | " + " | ".join(cells) + " |")
+    return out
+
+
 def checked_models_and_scenes(parser, args):
     """(models, scene names) of ``--models`` and ``--scenes``, each checked, and ``--pack`` a file; a one-line
     ``parser.error`` for the first that is not."""
@@ -142,6 +173,7 @@ def main():
                         help="names of knitrun.render.ablations, or combinations a+b")
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     parser.add_argument("--tilt-bins", action="store_true", help="bin SS and MS along the curves by |ω_o · t|")
+    parser.add_argument("--loop-bins", action="store_true", help="on the Crane patches, SS and MS per loop-phase bin")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)
@@ -150,7 +182,7 @@ def main():
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
           "| with the instance's SS |")
     print("|---|---|---|---|---|---|---|---|")
-    tilt_tables = []
+    tilt_tables, loop_tables = [], []
     for name in names:
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
         scene = dataclasses.replace(scene, background=(0.0, 0.0, 0.0))
@@ -175,12 +207,20 @@ def main():
             populated = 0 if at is None else len(np.unique(np.digitize(at[2], TILT_BINS[1:-1])))
             if populated > 1:  # a straight yarn sits in one bin
                 tilt_tables += tilt_rows(name, d, at, ref, strips)
+        if args.loop_bins and all(y.curves is not None and Path(y.curves).name == CRANE_CURVES for y in scene.yarns):
+            loop_tables += loop_rows(name, scene, args.pack, models[0], ref, inst, strips[models[0]])
     if tilt_tables:
         print("\nYarn-scale SS / MS at the control points, by |ω_o · t|:\n")
         print("| scene | image | " + " | ".join(f"{lo:.1f}–{hi:.1f}" for lo, hi in zip(TILT_BINS[:-1], TILT_BINS[1:]))
               + " |")
         print("|---" * 7 + "|")
         print("\n".join(tilt_tables))
+    if loop_tables:
+        print(f"\nPer loop-phase bin of the interior courses ({models[0]} over the mean of the reference and the "
+              "instance, luminance):\n")
+        print("| scene | loop phase | reference SS share | SS | MS | whole | share of the light |")
+        print("|---" * 7 + "|")
+        print("\n".join(loop_tables))
 
 
 if __name__ == "__main__":
