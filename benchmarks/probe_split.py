@@ -21,11 +21,15 @@ scale d (``knitbake.compare.image_metrics``):
 
 ``--tilt-bins`` adds, for scenes drawn from yarn-curve files whose curves turn (a straight yarn sits in one bin), the
 mean of the yarn-scale SS and MS at the curves' control points binned by |ω_o · t| (as ``probe_tilt.py
---bins-from``): how each half changes as the yarn turns toward the camera. ``--loop-bins`` adds, on the Crane patch scenes (every stitch alike: ``probe_error_scale.loop_phase``), per
-loop-phase bin of the interior courses (15° of Crane's t; the heads at 0°, the sinkers at 180°), over the pixels the
-first model's front regular strips cover: the references' share of single scattering, the model's SS, MS and whole
-over theirs (luminance; the reference and the second instance averaged), and the bin's share of their light: which
-part of the loop has which half wrong. ``--out DIR`` keeps the images
+--bins-from``): how each half changes as the yarn turns toward the camera.
+
+``--loop-bins`` adds, on the Crane patch scenes (every stitch alike: ``probe_error_scale.loop_phase``), per loop-phase
+bin of the interior courses (15° of Crane's t; the heads at 0°, the sinkers at 180°), over the pixels the first
+model's front regular strips cover: the references' share of single scattering, the model's SS, MS and whole over
+theirs (luminance; the reference and the second instance averaged), and the bin's share of their light: which part
+of the loop has which half wrong.
+
+``--out DIR`` keeps the images
 (``<scene>/{reference,instance}_{full,single}.exr``, ``strip_<model>_{full,single}.exr``).
 
     .venv/bin/python benchmarks/probe_split.py --pack out/bench/cotton1_standard.h5 [--scenes a,b] \\
