@@ -29,11 +29,19 @@ model's front regular strips cover: the references' share of single scattering, 
 theirs (luminance; the reference and the second instance averaged), and the bin's share of their light: which part
 of the loop has which half wrong.
 
+``--layers`` adds, per scene and model, each half split again by the layer the camera ray meets first: the regular
+fibers and the flyaways. The reference's regular part is traced with ``seen="regular"`` (the light of the paths whose
+first hit is a regular fiber; the flyaways still block and scatter), at full depth and at one event, for the reference
+and the second instance; the strips' with ``Features(hair_light=False)`` (the hairs opaque and black, the regular
+strips' light between them). The flyaways' part is the whole less the regular part. Reported: each part's share of
+the reference's light and the model's (and the instance's) part over the reference's: which layer holds which half's
+error.
+
 ``--out DIR`` keeps the images
 (``<scene>/{reference,instance}_{full,single}.exr``, ``strip_<model>_{full,single}.exr``).
 
     .venv/bin/python benchmarks/probe_split.py --pack out/bench/cotton1_standard.h5 [--scenes a,b] \\
-        [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--loop-bins] [--out DIR]
+        [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--loop-bins] [--layers] [--out DIR]
 
 The spp per scene is the one the ruler picked (the Monte Carlo floor at most half the instance floor at d:
 BENCHMARKS.md, "The ruler"), unless ``--spp`` is given.
@@ -68,17 +76,21 @@ SCENES = {"straight_yarn_directional": 16, "straight_yarn_sky": 16, "straight_ya
           "simulated_patch_directional": 32}  # name → the ruler's spp
 
 
-def traced(scene, spp, seed, fiber_seed):
-    """(full, single) reference images of ``scene`` (RGB float64) and the seconds both took."""
+def traced(scene, spp, seed, fiber_seed, seen="all"):
+    """(full, single) reference images of ``scene`` (RGB float64) and the seconds both took; ``seen`` as
+    ``trace_reference``'s."""
     t0 = time.perf_counter()
-    full, _ = trace_reference(scene, spp, seed, scene.render.max_depth, fiber_seed=fiber_seed)
-    single, _ = trace_reference(scene, spp, seed, 1, fiber_seed=fiber_seed)
+    full, _ = trace_reference(scene, spp, seed, scene.render.max_depth, fiber_seed=fiber_seed, seen=seen)
+    single, _ = trace_reference(scene, spp, seed, 1, fiber_seed=fiber_seed, seen=seen)
     return full.astype(np.float64), single.astype(np.float64), time.perf_counter() - t0
 
 
-def rendered(scene, pack, model):
-    """(full, single) strip images of ``scene`` for ablation ``model``."""
+def rendered(scene, pack, model, hair_light=True):
+    """(full, single) strip images of ``scene`` for ablation ``model``; ``hair_light`` False: the hairs black (the
+    regular strips' light alone, ``Features.hair_light``)."""
     features = combined(model)
+    if not hair_light:
+        features = dataclasses.replace(features, hair_light=False)
     full = pipeline.Renderer(scene, {"cotton1": pack}, features).render().image
     single = pipeline.Renderer(scene, {"cotton1": pack},
                                dataclasses.replace(features, multiple_scattering=False)).render().image
@@ -151,6 +163,28 @@ def loop_rows(name, scene, pack, model, ref, inst, strip):
     return out
 
 
+LAYER_PARTS = ("regular SS", "regular MS", "flyaways' SS", "flyaways' MS")
+
+
+def layer_parts(whole, regular):
+    """The four parts of ``LAYER_PARTS`` (RGB means) from the (full, single) images of the whole light and of the
+    light whose camera ray first meets a regular fiber."""
+    (full, single), (reg_full, reg_single) = ((np.mean(a) for a in pair) for pair in (whole, regular))
+    return (reg_single, reg_full - reg_single, single - reg_single, (full - single) - (reg_full - reg_single))
+
+
+def layer_rows(name, ref, inst, strips):
+    """Markdown rows of ``--layers``: ``ref``, ``inst`` and each entry of ``strips`` (label → (whole, regular), each
+    a (full, single) pair) as their parts' ratios to the reference's, after a row of the reference's shares."""
+    parts = layer_parts(*ref)
+    total = float(np.mean(ref[0][0]))
+    rows = [f"| {name} | *reference: share of its light* | " + " | ".join(f"{p / total:.3f}" for p in parts) + " |"]
+    for label, (whole, regular) in [("*other fiber instance*", inst), *strips.items()]:
+        rows.append(f"| {name} | {label} | " + " | ".join(
+            f"{q / p:.2f}×" if p > 0 else "—" for q, p in zip(layer_parts(whole, regular), parts)) + " |")
+    return rows
+
+
 def checked_models_and_scenes(parser, args):
     """(models, scene names) of ``--models`` and ``--scenes``, each checked, and ``--pack`` a file; a one-line
     ``parser.error`` for the first that is not."""
@@ -178,6 +212,8 @@ def main():
     parser.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the ruler's per scene)")
     parser.add_argument("--tilt-bins", action="store_true", help="bin SS and MS along the curves by |ω_o · t|")
     parser.add_argument("--loop-bins", action="store_true", help="on the Crane patches, SS and MS per loop-phase bin")
+    parser.add_argument("--layers", action="store_true",
+                        help="each half split again by the layer seen first: regular fibers, flyaways")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)
@@ -186,7 +222,7 @@ def main():
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
           "| with the instance's SS |")
     print("|---|---|---|---|---|---|---|---|")
-    tilt_tables, loop_tables = [], []
+    tilt_tables, loop_tables, layer_tables = [], [], []
     for name in names:
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
         scene = dataclasses.replace(scene, background=(0.0, 0.0, 0.0))
@@ -206,6 +242,12 @@ def main():
                                           *((f"strip_{m}", s) for m, s in strips.items())]:
                 write_exr(folder / f"{label}_full.exr", full.astype(np.float32))
                 write_exr(folder / f"{label}_single.exr", single.astype(np.float32))
+        if args.layers:
+            *ref_regular, _ = traced(scene, spp, seed, seed, seen="regular")
+            *inst_regular, _ = traced(scene, spp, seed + 1, seed + 1, seen="regular")
+            layer_tables += layer_rows(name, (ref, ref_regular), (inst, inst_regular),
+                                       {m: (strips[m], rendered(scene, args.pack, m, hair_light=False))
+                                        for m in models})
         if args.tilt_bins:
             at = curve_tilts(scene)
             populated = 0 if at is None else len(np.unique(np.digitize(at[2], TILT_BINS[1:-1])))
@@ -219,6 +261,12 @@ def main():
               + " |")
         print("|---" * 7 + "|")
         print("\n".join(tilt_tables))
+    if layer_tables:
+        print("\nEach half by the layer the camera ray meets first (RGB means; the model's and the instance's part "
+              "over the reference's):\n")
+        print("| scene | image | " + " | ".join(LAYER_PARTS) + " |")
+        print("|---" * 6 + "|")
+        print("\n".join(layer_tables))
     if loop_tables:
         print(f"\nPer loop-phase bin of the interior courses ({models[0]} over the mean of the reference and the "
               "instance, luminance):\n")
