@@ -169,7 +169,8 @@ LAYER_PARTS = ("regular SS", "regular MS", "flyaways' SS", "flyaways' MS")
 def layer_parts(whole, regular):
     """The four parts of ``LAYER_PARTS`` (RGB means) from the (full, single) images of the whole light and of the
     light whose camera ray first meets a regular fiber."""
-    (full, single), (reg_full, reg_single) = ((np.mean(a) for a in pair) for pair in (whole, regular))
+    full, single = (float(np.mean(a)) for a in whole)
+    reg_full, reg_single = (float(np.mean(a)) for a in regular)
     return (reg_single, reg_full - reg_single, single - reg_single, (full - single) - (reg_full - reg_single))
 
 
