@@ -37,11 +37,20 @@ strips' light between them). The flyaways' part is the whole less the regular pa
 the reference's light and the model's (and the instance's) part over the reference's: which layer holds which half's
 error.
 
+``--curves K,L`` keeps only those curves of each scene's yarn-curve files (e.g. one course of a patch: a yarn in its
+knitted shape with no neighbour to shade it or send it light), ``--scale S`` scales what is kept by S about the
+camera's look-at point, the camera S times as far (an orthographic one S times as tall) with S times the pixels per
+side, so that the picture is the same, the yarn as many pixels wide, with every bend S times gentler against the
+yarn's radius, and ``--no-flyaways`` draws the regular fibers alone in both (the bake's yarn; the reference without
+its flyaways, the strips without the flyaway layer): which part of a scene's error a lone yarn in the scene's shape
+already has, and whether it follows the bends (BENCHMARKS.md, "Issue 13: one course alone", stop 65).
+
 ``--out DIR`` keeps the images
 (``<scene>/{reference,instance}_{full,single}.exr``, ``strip_<model>_{full,single}.exr``).
 
     .venv/bin/python benchmarks/probe_split.py --pack out/bench/cotton1_standard.h5 [--scenes a,b] \\
-        [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--loop-bins] [--layers] [--out DIR]
+        [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--loop-bins] [--layers] \\
+        [--curves K,L] [--scale S] [--no-flyaways] [--out DIR]
 
 The spp per scene is the one the ruler picked (the Monte Carlo floor at most half the instance floor at d:
 BENCHMARKS.md, "The ruler"), unless ``--spp`` is given.
@@ -51,7 +60,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -60,6 +71,7 @@ import numpy as np
 from data_formats.conventions import LUMINANCE
 from data_formats.images import write_exr
 from data_formats.scene import load_scene
+from data_formats.yarn_curves import make_yarn_curves, read_yarn_curves, write_yarn_curves
 from knitbake.compare.image_metrics import yarn_filter, yarn_scale_metrics
 from knitbake.compare.report import yarn_diameter_px
 from knitbake.trace.reference import trace_reference
@@ -76,21 +88,24 @@ SCENES = {"straight_yarn_directional": 16, "straight_yarn_sky": 16, "straight_ya
           "simulated_patch_directional": 32}  # name → the ruler's spp
 
 
-def traced(scene, spp, seed, fiber_seed, seen="all"):
-    """(full, single) reference images of ``scene`` (RGB float64) and the seconds both took; ``seen`` as
-    ``trace_reference``'s."""
+def traced(scene, spp, seed, fiber_seed, seen="all", flyaways=True):
+    """(full, single) reference images of ``scene`` (RGB float64) and the seconds both took; ``seen`` and
+    ``flyaways`` as ``trace_reference``'s."""
     t0 = time.perf_counter()
-    full, _ = trace_reference(scene, spp, seed, scene.render.max_depth, fiber_seed=fiber_seed, seen=seen)
-    single, _ = trace_reference(scene, spp, seed, 1, fiber_seed=fiber_seed, seen=seen)
+    full, _ = trace_reference(scene, spp, seed, scene.render.max_depth, fiber_seed=fiber_seed, seen=seen,
+                              flyaways=flyaways)
+    single, _ = trace_reference(scene, spp, seed, 1, fiber_seed=fiber_seed, seen=seen, flyaways=flyaways)
     return full.astype(np.float64), single.astype(np.float64), time.perf_counter() - t0
 
 
-def rendered(scene, pack, model, hair_light=True):
+def rendered(scene, pack, model, hair_light=True, flyaways=True):
     """(full, single) strip images of ``scene`` for ablation ``model``; ``hair_light`` False: the hairs black (the
-    regular strips' light alone, ``Features.hair_light``)."""
+    regular strips' light alone, ``Features.hair_light``); ``flyaways`` False: no flyaway layer."""
     features = combined(model)
     if not hair_light:
         features = dataclasses.replace(features, hair_light=False)
+    if not flyaways:
+        features = dataclasses.replace(features, flyaways=False)
     full = pipeline.Renderer(scene, {"cotton1": pack}, features).render().image
     single = pipeline.Renderer(scene, {"cotton1": pack},
                                dataclasses.replace(features, multiple_scattering=False)).render().image
@@ -186,6 +201,40 @@ def layer_rows(name, ref, inst, strips):
     return rows
 
 
+def kept_curves(scene, keep, scale, folder):
+    """``scene`` with only the curves ``keep`` (indices, or None: all) of each yarn entry's curve file, scaled by
+    ``scale`` about the camera's look-at point with the camera ``scale`` times as far and ``scale`` times the pixels
+    per side (module docstring, ``--curves``, ``--scale``); the new curve files are written under ``folder``.
+    ValueError (one line) for an entry without a curve file or an index it lacks."""
+    centre = np.asarray(scene.camera.look_at, np.float64)
+    yarns = []
+    for k, entry in enumerate(scene.yarns):
+        if entry.curves is None:
+            raise ValueError(f"yarns[{k}] draws a stitch mesh, not a curve file: --curves and --scale need curves")
+        curves = read_yarn_curves(entry.curves)
+        chosen = range(len(curves.offsets) - 1) if keep is None else keep
+        bad = [c for c in chosen if not 0 <= c < len(curves.offsets) - 1]
+        if bad:
+            raise ValueError(f"yarns[{k}]: {entry.curves} has {len(curves.offsets) - 1} curves, no curve {bad[0]}")
+        spans = [slice(curves.offsets[c], curves.offsets[c + 1]) for c in chosen]
+        points = centre + (np.concatenate([curves.points[:, s] for s in spans], axis=1) - centre) * scale
+        kept = make_yarn_curves(points, np.concatenate([[0], np.cumsum([s.stop - s.start for s in spans])]),
+                                closed=curves.closed[list(chosen)], yarn_type=curves.yarn_type[list(chosen)],
+                                yarn_types=curves.yarn_types,
+                                rest_arclength=np.concatenate([curves.rest_arclength[s] for s in spans]) * scale,
+                                curve_type=curves.curve_type, units=curves.units, frame_time=curves.frame_time,
+                                radius=curves.radius)
+        path = Path(folder) / f"yarn{k}_curves.h5"
+        write_yarn_curves(path, kept)
+        yarns.append(dataclasses.replace(entry, curves=path))
+    camera = scene.camera
+    position = centre + (np.asarray(camera.position, np.float64) - centre) * scale
+    camera = dataclasses.replace(camera, position=tuple(position.tolist()),
+                                 ortho_height=None if camera.ortho_height is None else camera.ortho_height * scale,
+                                 width=max(1, round(camera.width * scale)), height=max(1, round(camera.height * scale)))
+    return dataclasses.replace(scene, yarns=tuple(yarns), camera=camera)
+
+
 def checked_models_and_scenes(parser, args):
     """(models, scene names) of ``--models`` and ``--scenes``, each checked, and ``--pack`` a file; a one-line
     ``parser.error`` for the first that is not."""
@@ -215,9 +264,24 @@ def main():
     parser.add_argument("--loop-bins", action="store_true", help="on the Crane patches, SS and MS per loop-phase bin")
     parser.add_argument("--layers", action="store_true",
                         help="each half split again by the layer seen first: regular fibers, flyaways")
+    parser.add_argument("--curves", default=None,
+                        help="comma-separated curve indices: keep only those of each scene's curve files")
+    parser.add_argument("--scale", type=float, default=1.0,
+                        help="scale the curves about the look-at point, the camera as far again (bends gentler)")
+    parser.add_argument("--no-flyaways", action="store_true", help="the regular fibers alone, in both")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)
+    if not (math.isfinite(args.scale) and args.scale > 0.0):
+        parser.error(f"--scale: {args.scale} is not a positive number")
+    if args.layers and args.no_flyaways:
+        parser.error("--layers splits the light by the flyaways: not with --no-flyaways")
+    try:
+        keep = None if args.curves is None else [int(c) for c in args.curves.split(",")]
+    except ValueError:
+        parser.error(f"--curves: {args.curves!r} is not a comma-separated list of curve indices")
+    flyaways = not args.no_flyaways
+    scratch = tempfile.TemporaryDirectory(prefix="probe_split_")
     print("Over a black background; ratios of RGB means to the reference's (the compare weighs luminance); rel L1 at "
           "the yarn scale over the instance floor.\n")
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
@@ -227,11 +291,18 @@ def main():
     for name in names:
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
         scene = dataclasses.replace(scene, background=(0.0, 0.0, 0.0))
+        if keep is not None or args.scale != 1.0:
+            folder = Path(scratch.name) / name
+            folder.mkdir()
+            try:
+                scene = kept_curves(scene, keep, args.scale, folder)
+            except ValueError as error:
+                parser.error(f"--curves/--scale on {name}: {error}")
         spp = args.spp or SCENES.get(name, 16)
         seed, d = scene.render.seed, yarn_diameter_px(scene)
-        *ref, ref_s = traced(scene, spp, seed, seed)
-        *inst, inst_s = traced(scene, spp, seed + 1, seed + 1)
-        strips = {m: rendered(scene, args.pack, m) for m in models}
+        *ref, ref_s = traced(scene, spp, seed, seed, flyaways=flyaways)
+        *inst, inst_s = traced(scene, spp, seed + 1, seed + 1, flyaways=flyaways)
+        strips = {m: rendered(scene, args.pack, m, flyaways=flyaways) for m in models}
         rows, floor = split_rows(name, d, ref, inst, strips)
         print("\n".join(rows), flush=True)
         print(f"<!-- {name}: {spp} spp, d = {d:.1f} px, instance floor {floor:.3f}; traced {ref_s:.0f} + "
@@ -256,6 +327,7 @@ def main():
                 tilt_tables += tilt_rows(name, d, at, ref, strips)
         if args.loop_bins and all(y.curves is not None and Path(y.curves).name == CRANE_CURVES for y in scene.yarns):
             loop_tables += loop_rows(name, scene, args.pack, models[0], ref, inst, strips[models[0]])
+    scratch.cleanup()
     if tilt_tables:
         print("\nYarn-scale SS / MS at the control points, by |ω_o · t|:\n")
         print("| scene | image | " + " | ".join(f"{lo:.1f}–{hi:.1f}" for lo, hi in zip(TILT_BINS[:-1], TILT_BINS[1:]))
