@@ -17,7 +17,9 @@ scale d (``knitbake.compare.image_metrics``):
   and of MS;
 * the yarn-scale rel L1 as a ratio to the instance floor (the second instance's rel L1), for the model and for two
   oracles: the model's SS with the instance's MS (what a perfect multiple-scattering term would leave), and the
-  instance's SS with the model's MS (what a perfect single-scattering term would leave).
+  instance's SS with the model's MS (what a perfect single-scattering term would leave);
+* each half alone: the model's SS against the reference's SS at the yarn scale, over the instance's SS against it
+  (that half's own floor), and the same for MS: how far each half is placed from where the fibers put it.
 
 ``--tilt-bins`` adds, for scenes drawn from yarn-curve files whose curves turn (a straight yarn sits in one bin), the
 mean of the yarn-scale SS and MS at the curves' control points binned by |ω_o · t| (as ``probe_tilt.py
@@ -129,8 +131,11 @@ def split_rows(name, d, ref, inst, strips):
             perfect_ms = yarn_scale_metrics(single + (inst[0] - inst[1]), ref[0], d)["rel_l1"]
             perfect_ss = yarn_scale_metrics(inst[1] + ms, ref[0], d)["rel_l1"]
             cells += [f"{perfect_ms / floor:.2f}×", f"{perfect_ss / floor:.2f}×"]
+            for own, other, mine in ((single, inst[1], ref[1]), (ms, inst[0] - inst[1], ref_ms)):
+                half_floor = yarn_scale_metrics(other, mine, d)["rel_l1"]
+                cells.append(f"{yarn_scale_metrics(own, mine, d)['rel_l1'] / half_floor:.2f}×")
         else:
-            cells += ["—", "—"]
+            cells += ["—"] * 4
         rows.append("| " + " | ".join(cells) + " |")
     return rows, floor
 
@@ -267,7 +272,8 @@ def main():
     parser.add_argument("--curves", default=None,
                         help="comma-separated curve indices: keep only those of each scene's curve files")
     parser.add_argument("--scale", type=float, default=1.0,
-                        help="scale the curves about the look-at point, the camera as far again (bends gentler)")
+                        help="scale the curves about the look-at point, the camera S times as far and S times the "
+                             "pixels per side (the same picture, every bend gentler)")
     parser.add_argument("--no-flyaways", action="store_true", help="the regular fibers alone, in both")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")
     args = parser.parse_args()
@@ -276,6 +282,8 @@ def main():
         parser.error(f"--scale: {args.scale} is not a positive number")
     if args.layers and args.no_flyaways:
         parser.error("--layers splits the light by the flyaways: not with --no-flyaways")
+    if args.loop_bins and (args.curves is not None or args.scale != 1.0):
+        parser.error("--loop-bins reads the whole Crane patch: not with --curves or --scale")
     try:
         keep = None if args.curves is None else [int(c) for c in args.curves.split(",")]
     except ValueError:
@@ -285,8 +293,8 @@ def main():
     print("Over a black background; ratios of RGB means to the reference's (the compare weighs luminance); rel L1 at "
           "the yarn scale over the instance floor.\n")
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
-          "| with the instance's SS |")
-    print("|---|---|---|---|---|---|---|---|")
+          "| with the instance's SS | SS / its floor | MS / its floor |")
+    print("|---" * 10 + "|")
     tilt_tables, loop_tables, layer_tables = [], [], []
     for name in names:
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
