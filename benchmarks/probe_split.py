@@ -133,7 +133,8 @@ def split_rows(name, d, ref, inst, strips):
             cells += [f"{perfect_ms / floor:.2f}×", f"{perfect_ss / floor:.2f}×"]
             for own, other, mine in ((single, inst[1], ref[1]), (ms, inst[0] - inst[1], ref_ms)):
                 half_floor = yarn_scale_metrics(other, mine, d)["rel_l1"]
-                cells.append(f"{yarn_scale_metrics(own, mine, d)['rel_l1'] / half_floor:.2f}×")
+                cells.append(f"{yarn_scale_metrics(own, mine, d)['rel_l1'] / half_floor:.2f}×" if half_floor > 0
+                             else "—")
         else:
             cells += ["—"] * 4
         rows.append("| " + " | ".join(cells) + " |")
