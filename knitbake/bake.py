@@ -115,8 +115,10 @@ QUALITY = {
 # closure 2: ξ closed at every view (θ_i, θ_o), correction/xi_view; 3: and apart on single and multiple scattering;
 # interreflection 5: ρ_Y and T_Y against the colour (interreflection/*_by_colour); closure 4: the renderer it closes
 # on no longer shadows the lone yarn by its own strip (shadow_map.own_strip_depth), the ξ stored is the one drawn last,
-# CLAMP 4 → 8; flyaway 3: the draw of flyaways nearest the yarn's coverage profile (textures.nearest_flyaway_draw)
-STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 7, "shadowing": 3, "environment": 3,
+# CLAMP 4 → 8; flyaway 3: the draw of flyaways nearest the yarn's coverage profile (textures.nearest_flyaway_draw);
+# correction 8, closure 5: paths as long as the references' (path_tracer.MAX_DEPTH, 32 events, not 16); closure 5
+# also: a part's bin that fails the per-row test takes its angle bin's v-summed ratio where that sum is measured
+STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 8, "shadowing": 3, "environment": 3,
                  "interreflection": 5, "textures": 2, "flyaway": 3, "closure": CLOSURE_STAGE_VERSION}
 
 

@@ -39,6 +39,7 @@ import os
 from data_formats.yarn_spec import YarnSpec
 from knitbake.bake import bake_plan, run_stage, write_baked_pack
 from knitbake.stages.closure import CLOSURE_INPUTS
+from knitbake.trace.path_tracer import MAX_DEPTH
 from knitbake.trace.reference import reference_batch, sample_batches
 
 SCHEDULER_ENV = "KNIT_DASK_SCHEDULER"
@@ -110,7 +111,7 @@ def bake_library(client, jobs: list[tuple[YarnSpec, str]], quality: str = "draft
     return out
 
 
-def submit_reference(client, scene, spp: int, seed: int = 0, fiber_seed: int | None = None, max_depth: int = 16,
+def submit_reference(client, scene, spp: int, seed: int = 0, fiber_seed: int | None = None, max_depth: int = MAX_DEPTH,
                      batch_spp: int | None = None, geometry: str = "curves", use_cache: bool = True):
     """Submit the reference of ``scene`` (at its ``render.frame``): one task per sample batch (each builds the
     fibers where it runs and renders its samples, ``reference_batch``, whose sums are cached so that a rerun of an

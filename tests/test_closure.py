@@ -275,6 +275,28 @@ def _miss_parts(pack, split, folder):
     return out
 
 
+def test_a_part_whose_rows_fail_takes_its_angle_bins_ratio_summed_over_v():
+    """``closure.part_ratio``: a measured row moves by its own ratio; a row too noisy alone moves by its angle bin's
+    Σ_v want / Σ_v drawn where that sum is measured (every channel, standard errors in quadrature ≤ 25 %); an angle
+    bin whose sum is noisy or undrawn leaves its failing rows at 1."""
+    want = np.full((4, 1, 1, 3, 3), 0.2)
+    err = np.full_like(want, 0.02)
+    err[2:, :, :, 1] = 0.2  # angle bin 1: rows 2, 3 fail alone; summed: 0.8 ± 0.28 (35 %) → not pooled either
+    err[2:, :, :, 2] = 0.09  # angle bin 2: rows 2, 3 fail alone (45 %); summed: 0.8 ± 0.13 (16 %) → pooled
+    drawn = np.full_like(want, 0.1)
+    drawn[3, :, :, 2] = 0.3
+    rows_ok = np.all(err <= closure.MAX_RELATIVE_ERROR * want, axis=-1, keepdims=True)
+    ratio, pooled = closure.part_ratio(want, err, drawn, rows_ok, 1e-3, 1e-3)
+    assert ratio.shape == want.shape and pooled.shape == rows_ok.shape
+    assert np.allclose(ratio[:, 0, 0, 0], 2.0) and not pooled[:, 0, 0, 0].any()  # every row measured
+    assert np.allclose(ratio[:2, 0, 0, 1], 2.0) and np.allclose(ratio[2:, 0, 0, 1], 1.0)
+    assert not pooled[:, 0, 0, 1].any()
+    assert np.allclose(ratio[:2, 0, 0, 2], 2.0) and np.allclose(ratio[2:, 0, 0, 2], 0.8 / 0.6)
+    assert pooled[2:, 0, 0, 2].all() and not pooled[:2, 0, 0, 2].any()
+    undrawn = closure.part_ratio(want, err, np.zeros_like(drawn), np.zeros_like(rows_ok), 1e-3, 1e-3)
+    assert np.allclose(undrawn[0], 1.0) and not undrawn[1].any()
+
+
 def test_the_split_xi_reproduces_single_and_multiple_scattering_apart(closed_pack, tmp_path):
     """ξ closed apart (``correction/xi_view_ss``, ``_ms``): the renderer's single scattering and its multiple
     scattering each come closer to the path tracer's, per bin, than with the one closed ξ on both; the split tables are

@@ -17,8 +17,9 @@ SCHEMA_VERSION = "2.6"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 # the closure stage version whose closed ξ (correction/xi_view, xi_closed) closes on knit's current renderer; each
 # closed table carries the version that baked it (attribute closure_version, ASSET_PACK.md §6) and knit's renderer
-# warns about an older one (a pack closed before version 4 has none)
-CLOSURE_STAGE_VERSION = 4
+# warns about an older one (a pack closed before version 4 has none). 5: paths of MAX_DEPTH (32) events, as the
+# references', not 16; a part's bin that fails the per-row test takes its angle bin's v-summed ratio (ASSET_PACK.md §6)
+CLOSURE_STAGE_VERSION = 5
 TABLE_DTYPE = np.dtype("<f4")
 MAX_MIP_LEVELS = 16
 COMPRESS_BYTES = 1 << 16  # datasets at least this large are stored gzip(4)+shuffle

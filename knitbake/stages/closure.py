@@ -54,12 +54,19 @@ each part from the closed ξ: the renderer draws every bin with ξ_ss on single 
     ξ_ss ← ξ_ss · Ψ_SS / S_SS,        ξ_ms ← ξ_ms · Ψ_MS / (S − S_SS)
 
 in the bins where that part is measured (``SIGNAL``, ``MAX_RELATIVE_ERROR``), within ``CLAMP`` of the paper's ξ;
-elsewhere the closed ξ. Stored: ``correction/xi_view_ss``, ``_ms`` and their diagonals ``xi_closed_ss``, ``_ms``.
+a bin whose row fails that test but whose angle bin (θ_i, θ_o, φ) passes it summed over v moves by the ratio of the
+sums, Σ_v Ψ_SS / Σ_v S_SS (likewise for multiple scattering; ``part_ratio``, since closure version 5: one event's
+glints are too sparse for most rows alone, and those bins fell back to the closed ξ, 1.8× theirs); the rest keep the
+closed ξ. Stored: ``correction/xi_view_ss``, ``_ms`` and their diagonals ``xi_closed_ss``, ``_ms``.
+
+Paths. Every trace here and in the correction stage follows paths of up to ``path_tracer.MAX_DEPTH`` scattering
+events (Russian roulette past the third), the scene format's default depth, which the references use (16 until
+closure version 5, correction version 8: 5 % of a knitted course's multiple scattering lay beyond it).
 
 Errors. The closed ξ is Ψ_* over the renderer's estimate per unit ξ, so its relative standard error is Ψ_*'s (over
 the batches); where a bin kept the starting ξ, the paper's error interpolated at its θ_d. It does not include the
 closure residual, which is reported beside it. The split ξ's relative error is its part's (Ψ_MS's: Ψ_*'s and
-Ψ_SS's in quadrature).
+Ψ_SS's in quadrature); in a bin moved by its angle bin's sums, the sums' relative error.
 """
 
 from __future__ import annotations
@@ -78,7 +85,7 @@ from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.stages.correction import row_v, strip_camera, v_bin_sums, yarn_direction, yarn_tracer
 from knitbake.stages.stage_result import StageResult
-from knitbake.trace.path_tracer import render
+from knitbake.trace.path_tracer import MAX_DEPTH, render
 from knitrun.shading.table_lookup import axis_cell
 
 CLOSURE_INPUTS = ("dual_scattering", "correction", "shadowing", "textures")
@@ -127,7 +134,7 @@ def _views(n_theta: int, n_phi: int):
 
 
 def trace_view_radiance(spec: YarnSpec, diagonal: tuple, rows: int, spp: int, batches: int, seed: int,
-                        max_depth: int = 16, progress=None, shape=None):
+                        max_depth: int = MAX_DEPTH, progress=None, shape=None):
     """Ψ_* (N_v, N_θ, N_θ, N_φ, 3) on axes (v, θ_i, θ_o, φ) and its standard error over ``batches``: the path-traced
     mean radiance per v bin of the correction stage's yarn, camera and light (module docstring), paths of at most
     ``max_depth`` scattering events (1: single scattering). ``diagonal``: the correction stage's
@@ -273,6 +280,7 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
         parts = {"ss": (single, single_err), "ms": (target - single, np.hypot(target_err, single_err))}
         apart = {name: closed.copy() for name in parts}
         moved_parts = {name: np.zeros(closed.shape, bool) for name in parts}
+        pooled_parts = {name: np.zeros(closed.shape, bool) for name in parts}
         measured_parts = {name: measured(*value) for name, value in parts.items()}
         step = passes(split_from + batches)
         for it in range(iterations + 1):
@@ -283,16 +291,21 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
             used_parts = {name: measured_parts[name] & (drawn_parts[name] > SIGNAL * drawn.max()) for name in parts}
             if it == iterations:
                 break
-            for name, (want, _) in parts.items():
-                ok = used_parts[name]
-                ratio = np.where(ok, want / np.where(ok, drawn_parts[name], 1.0), 1.0)
+            for name, (want, want_err) in parts.items():
+                ratio, pooled = part_ratio(want, want_err, drawn_parts[name], used_parts[name],
+                                           SIGNAL * target.sum(axis=0).max(), SIGNAL * drawn.sum(axis=0).max())
                 apart[name] = np.clip(apart[name] * ratio, paper / CLAMP, paper * CLAMP)
-                moved_parts[name] |= ok
+                moved_parts[name] |= used_parts[name]
+                pooled_parts[name] |= pooled & ~moved_parts[name]
     for name, (want, want_err) in parts.items():
-        ok, moved = used_parts[name], moved_parts[name]
+        ok, moved, pooled = used_parts[name], moved_parts[name], pooled_parts[name] & ~moved_parts[name]
         counts[f"bins_closed_{name}"] = int(moved.all(axis=-1).sum())
+        counts[f"bins_pooled_{name}"] = int(pooled.all(axis=-1).sum())
         value = apart[name]  # the tables the last render drew, as for the totals
-        error = value * np.where(moved, want_err / np.where(moved, np.abs(want), 1.0), relative)
+        pooled_relative = (np.sqrt((want_err ** 2).sum(axis=0, keepdims=True))
+                           / np.maximum(np.abs(want.sum(axis=0, keepdims=True)), 1e-300))
+        error = value * np.where(moved, want_err / np.where(moved, np.abs(want), 1.0),
+                                 np.where(pooled, pooled_relative, relative))
         tables[f"correction/xi_view_{name}"], errors[f"correction/xi_view_{name}"] = value, error
         tables[f"correction/xi_closed_{name}"] = diagonal_of(value)
         errors[f"correction/xi_closed_{name}"] = diagonal_of(error)
@@ -300,6 +313,25 @@ def close_correction(spec: YarnSpec, inputs: dict, write_pack_to, rows: int, ite
         left[f"correction/xi_closed_{name}"] = _residual(diagonal_of(drawn_parts[name]), diagonal_of(want),
                                                          diagonal_of(ok))
     return tables, errors, counts, left
+
+
+def part_ratio(want, want_err, drawn, rows_ok, want_floor, drawn_floor):
+    """(ratio, pooled) of one iteration of the split closure for one part (module docstring), arrays (N_v, N_θ, N_θ,
+    N_φ, 3) but ``rows_ok`` and ``pooled`` (…, 1): a bin whose row is measured (``rows_ok``) moves by want/drawn; one
+    whose row is not but whose angle bin (θ_i, θ_o, φ) is, summed over v, moves by Σ_v want / Σ_v drawn (``pooled``
+    True); the rest by 1. An angle bin is measured summed over v when, in every channel, Σ_v want exceeds
+    ``want_floor``, its standard error (the rows' in quadrature) is at most ``MAX_RELATIVE_ERROR`` of it, and Σ_v
+    drawn exceeds ``drawn_floor``. Without the pooled sums most of the single scattering's bins failed the per-row
+    test and fell back to the whole ξ, 1.8× theirs (closure stage version 4: 23.5 % of cotton1's bins closed;
+    BENCHMARKS.md, "Issue 13: one course alone", item 6)."""
+    total, total_drawn = want.sum(axis=0, keepdims=True), drawn.sum(axis=0, keepdims=True)
+    total_err = np.sqrt((want_err ** 2).sum(axis=0, keepdims=True))
+    pooled = np.all((total > want_floor) & (total_err <= MAX_RELATIVE_ERROR * total) & (total_drawn > drawn_floor),
+                    axis=-1, keepdims=True)
+    pooled = np.broadcast_to(pooled, rows_ok.shape) & ~rows_ok
+    row_ratio = want / np.where(rows_ok, drawn, 1.0)
+    pooled_ratio = total / np.where(total_drawn > 0.0, total_drawn, 1.0)
+    return np.where(rows_ok, row_ratio, np.where(pooled, pooled_ratio, 1.0)), pooled
 
 
 def _residual(rendered, target, used) -> dict:

@@ -41,7 +41,7 @@ from data_formats.yarn_spec import YarnSpec, dumps_spec
 from knitbake.fibers.fiber_set import KIND_REGULAR
 from knitbake.fibers.procedural_yarn import generate_fibers
 from knitbake.stages.stage_result import StageResult
-from knitbake.trace.path_tracer import TracerScene, camera_rays, render
+from knitbake.trace.path_tracer import MAX_DEPTH, TracerScene, camera_rays, render
 from knitrun.render.camera import Camera, tan_half_fov
 from knitrun.shading.dual_scattering import evaluate_ds, fiber_counts
 from knitrun.shading.fiber_bcsdf import params_from_optics
@@ -267,7 +267,7 @@ def _ds_image(tracer, cam, light, spp, seed, ds_tables, params, n_occluded=None)
 
 
 def bake_correction(spec: YarnSpec, ds_tables: dict, n_v=8, n_theta=4, n_phi=4, rows=32, spp=8, batches=4,
-                    max_depth=16, seed=0, progress=None):
+                    max_depth=MAX_DEPTH, seed=0, progress=None):
     """ξ_M, ξ_N and residuals (see module docstring); ``ds_tables``: the baked ``dual_scattering/*`` arrays.
     Returns (tables, errors)."""
     thetas = cell_centres(*THETA_RANGE, n_theta)

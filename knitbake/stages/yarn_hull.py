@@ -52,7 +52,7 @@ from data_formats.yarn_spec import YarnSpec
 from knitbake.stages.correction import strip_camera, yarn_direction, yarn_tracer
 from knitbake.stages.stage_result import StageResult
 from knitbake.trace.env_light import env_from_image, uniform_env
-from knitbake.trace.path_tracer import render
+from knitbake.trace.path_tracer import MAX_DEPTH, render
 from knitrun.shading.equirect import texel_directions
 from knitrun.shading.fiber_bcsdf import tinted
 
@@ -75,7 +75,7 @@ def colour_scales(n_colours: int) -> np.ndarray:
     return cell_centres(*AXES["colour_scale"].range, n_colours)
 
 
-def hull_radiance(spec: YarnSpec, environment, n_views=6, rows=16, spp=4, batches=3, max_depth=32, seed=0,
+def hull_radiance(spec: YarnSpec, environment, n_views=6, rows=16, spp=4, batches=3, max_depth=MAX_DEPTH, seed=0,
                   colour_scale=1.0, progress=None, progress_offset=0, progress_total=None):
     """(batches, 3): per batch, the view-weighted mean radiance of the strip images (module docstring) with the
     environment ``environment(ω_o)`` of each view (ω_o toward the camera), the fibers' lobe albedos scaled by
@@ -100,7 +100,7 @@ def hull_radiance(spec: YarnSpec, environment, n_views=6, rows=16, spp=4, batche
     return samples
 
 
-def bake_yarn_hull(spec: YarnSpec, n_views=6, rows=16, spp=4, batches=3, max_depth=32, seed=0, n_colours=17,
+def bake_yarn_hull(spec: YarnSpec, n_views=6, rows=16, spp=4, batches=3, max_depth=MAX_DEPTH, seed=0, n_colours=17,
                    progress=None):
     """ρ_Y and T_Y (RGB) of ``spec`` (module docstring); returns (tables, errors) with ``TABLE`` and
     ``TRANSMITTANCE_TABLE``, their curves against the colour (``BY_COLOUR``, ``n_colours`` samples of k, 16 m + 1 so

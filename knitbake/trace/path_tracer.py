@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit, prange
 
+from data_formats.scene import RENDER_FIELDS
 from knitbake.fibers.fiber_set import FiberSet
 from knitbake.fibers.tessellate import TubeMesh
 from knitbake.trace.embree_curves import TFAR, CurveScene, any_hits, closest_hits, intersect, occluded, ray_buffer
@@ -67,6 +68,11 @@ from knitrun.render.camera import Camera, tan_half_fov
 from knitrun.shading.fiber_bcsdf import N_CONTEXT, N_PARAMS, context_into, evaluate, pdf, sample
 
 _MASK = np.uint64(0xFFFFFFFFFFFFFFFF)
+# Scattering events per path where a caller does not say: the scene format's default ``render.max_depth``, which the
+# references use, so that the bake's traces (correction, closure, yarn hull) hold the orders of scattering the
+# references hold. At 16 (the bake's until stop 66) a knitted course of cotton1 kept 5 % less multiple scattering
+# than at 32 and 64 (BENCHMARKS.md, "Issue 13: the bake's paths as long as the reference's").
+MAX_DEPTH = RENDER_FIELDS["max_depth"][0]
 
 
 @dataclass
@@ -505,7 +511,7 @@ def _trace_curves(scene, segment_start, segment_fiber, vertices, fiber_type, par
             rays[n] = traced
 
 
-def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_depth: int = 16, rr_depth: int = 3,
+def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_depth: int = MAX_DEPTH, rr_depth: int = 3,
            yarn_only_radius: float = 0.0, samples_per_pass: int | None = None, progress=None):
     """Render ``spp`` samples per pixel; returns (image (H, W, 3), RenderStats). ``progress(done, total)`` is
     called after every pass of ``samples_per_pass`` samples per pixel."""
@@ -515,7 +521,7 @@ def render(scene: TracerScene, camera: Camera, spp: int, seed: int = 0, max_dept
 
 
 def render_samples(scene: TracerScene, camera: Camera, first_sample: int, spp: int, seed: int = 0,
-                   max_depth: int = 16, rr_depth: int = 3, yarn_only_radius: float = 0.0,
+                   max_depth: int = MAX_DEPTH, rr_depth: int = 3, yarn_only_radius: float = 0.0,
                    samples_per_pass: int | None = None, progress=None, own_yarn=None, first_seen=None):
     """The sum (H, W, 3) float64 of samples ``first_sample`` … ``first_sample + spp − 1`` of every pixel, added in
     sample order, and RenderStats: ``render`` is this over samples 0 … spp − 1, divided by spp. A sample's random

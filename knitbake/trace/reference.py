@@ -35,7 +35,7 @@ from knitbake.fibers.fiber_sweep import sweep_fibers
 from knitbake.fibers.tessellate import tessellate_fibers
 from knitbake.trace.embree_curves import CurveScene
 from knitbake.trace.env_light import env_from_image
-from knitbake.trace.path_tracer import TracerScene, render_samples
+from knitbake.trace.path_tracer import MAX_DEPTH, TracerScene, render_samples
 from knitrun.render.camera import Camera, scene_camera
 from knitrun.render.yarn_bounce import REACH_RADII
 from knitrun.shading.builtin_sky import environment_image
@@ -155,7 +155,7 @@ def sample_batches(spp: int, batch_spp: int | None) -> list[tuple[int, int]]:
     return [(first, min(step, spp - first)) for first in range(0, spp, step)]
 
 
-def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = 16, progress=None, on_built=None,
+def trace_reference(scene: Scene, spp: int, seed: int = 0, max_depth: int = MAX_DEPTH, progress=None, on_built=None,
                     fiber_seed: int | None = None, geometry: str = "curves", batch_spp: int | None = None,
                     inter_yarn: bool = True, flyaways: bool = True, seen: str = "all"):
     """Build ``scene``'s fibers and path-trace them: (image (H, W, 3) float32 linear RGB, facts). ``seed`` drives the

@@ -220,9 +220,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     closed_by = (list(split.values()) or [VIEW_XI if view_xi else CLOSED_XI]) if view_xi or closed_xi else []
     version = min((int(stored[n].attrs.get("closure_version", 0)) for n in closed_by), default=CLOSURE_STAGE_VERSION)
     if version < CLOSURE_STAGE_VERSION:
-        warnings.append(f"{pack_path}: its ξ was closed by closure stage version {version or '< 4'}, on an older "
-                        f"renderer than this one (version {CLOSURE_STAGE_VERSION}, ASSET_PACK.md §6): re-bake the "
-                        f"pack (knitbake bake reuses its other stages)")
+        warnings.append(f"{pack_path}: its ξ was closed by closure stage version {version or '< 4'}, older than "
+                        f"this knit's (version {CLOSURE_STAGE_VERSION}; ASSET_PACK.md §6 says what each changed): "
+                        f"re-bake the pack (knitbake bake reuses the stages that did not change)")
     if split:
         names += list(split.values())
     elif view_xi:
