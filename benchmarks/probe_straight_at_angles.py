@@ -10,8 +10,11 @@ direction in the normal plane, b = n × t, φ = −atan2(ω_i·b, ω_i·n)), loo
 repeated, the others clamped, as the renderer reads ξ), times E, and sums them into pixels with the points' MSAA
 weights: the image the straight yarn predicts. Beside it, the scene's reference and a second fiber instance (traced
 whole and with one event, as ``probe_split.py``) and the strips of the full model: totals (luminance) of the whole,
-SS and MS = whole − SS over the reference's, then per bin of the front point's v and |θ_o| (each pixel takes the
-angles of its heaviest point).
+SS and MS = whole − SS over the reference's; each image's yarn-scale rel L1 against the reference (luminance, filtered
+to the projected yarn diameter) over the second instance's, whole, SS and MS, as drawn and with its total scaled to
+the reference's (where the light lies, apart from how much there is: a table indexed by (v, θ_i, θ_o, φ) alone places
+nothing along the yarn's ply pattern); then per bin of the front point's v and |θ_o| (each pixel takes the angles of
+its heaviest point).
 
 The yarns are drawn white (``color`` 1: the tables are the uncoloured yarn's) and without flyaways (the bake's
 regular fibers alone). ``--curves``, ``--scale`` as ``probe_split.py``'s (one course of a patch, its bends S times
@@ -38,6 +41,8 @@ from probe_split import ROOT, kept_curves, rendered, traced  # noqa: E402
 
 from data_formats.conventions import LUMINANCE, PHI_RANGE, THETA_RANGE  # noqa: E402
 from data_formats.scene import EnvironmentLight, load_scene  # noqa: E402
+from knitbake.compare.image_metrics import yarn_filter  # noqa: E402
+from knitbake.compare.report import yarn_diameter_px  # noqa: E402
 from knitrun.render import pipeline  # noqa: E402
 from knitrun.render.ablations import combined  # noqa: E402
 from knitrun.render.camera import scene_camera  # noqa: E402
@@ -97,6 +102,32 @@ def straight_prediction(scene, pack):
     return images, heaviest, angles
 
 
+def placement_rows(rows, d, camera_shape):
+    """Print each image's yarn-scale rel L1 against the reference (luminance, filtered to the yarn's projected
+    diameter ``d`` px), whole, SS and MS, over the other fiber instance's (the floor), as it is and with its total
+    scaled to the reference's: the second says whether the light is placed where the fibers put it."""
+    ref = rows["reference"]
+    inst = rows["other fiber instance"]
+
+    def error(test, part, matched):
+        a, r = test[part].reshape(camera_shape), ref[part].reshape(camera_shape)
+        if matched:
+            a = a * (r.sum() / a.sum())
+        fa, fr = yarn_filter(a[..., None], d), yarn_filter(r[..., None], d)
+        return float(np.abs(fa - fr).sum() / np.abs(fr).sum())
+
+    floors = [error(inst, q, False) for q in range(3)]
+    floors_m = [error(inst, q, True) for q in range(3)]
+    print(f"\nyarn-scale rel L1 (d = {d:.1f} px) over the other instance's (whole, SS, MS); the floors "
+          + ", ".join(f"{f:.3f}" for f in floors) + " (means matched: " + ", ".join(f"{f:.3f}" for f in floors_m)
+          + ")\n\n| image | as drawn | means matched |\n|---|---|---|")
+    for name, value in rows.items():
+        if name in ("reference", "other fiber instance"):
+            continue
+        print(f"| {name} | " + ", ".join(f"{error(value, q, False) / floors[q]:.2f}×" for q in range(3)) + " | "
+              + ", ".join(f"{error(value, q, True) / floors_m[q]:.2f}×" for q in range(3)) + " |")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pack", type=Path, required=True, help="a pack with the closure's split tables")
@@ -150,6 +181,7 @@ def main():
     print("| image | whole / reference | SS / reference | MS / reference |\n|---|---|---|---|")
     for name, value in rows.items():
         print(f"| {name} | " + " | ".join(f"{a.sum() / b.sum():.3f}" for a, b in zip(value, ref)) + " |")
+    placement_rows(rows, yarn_diameter_px(scene), camera_shape=np.shape(reference[0])[:2])
     covered = heaviest >= 0
     for label, key, edges in (("v", v, [-0.5, 0.0, 0.5]), ("|θ_o| (deg)", np.degrees(np.abs(theta_o)), [10, 25, 40])):
         which = np.full(len(heaviest), -1)
