@@ -111,10 +111,14 @@ def placement_rows(rows, d, camera_shape):
 
     def error(test, part, matched):
         a, r = test[part].reshape(camera_shape), ref[part].reshape(camera_shape)
-        if matched:
+        if matched and a.sum() > 0:
             a = a * (r.sum() / a.sum())
         fa, fr = yarn_filter(a[..., None], d), yarn_filter(r[..., None], d)
-        return float(np.abs(fa - fr).sum() / np.abs(fr).sum())
+        den = np.abs(fr).sum()
+        return float(np.abs(fa - fr).sum() / den) if den > 0 else float("nan")
+
+    def over(err, floor):  # a dash where there is no floor (identical instances, or no light in that half)
+        return f"{err / floor:.2f}×" if floor > 0 and np.isfinite(err) else "—"
 
     floors = [error(inst, q, False) for q in range(3)]
     floors_m = [error(inst, q, True) for q in range(3)]
@@ -124,8 +128,8 @@ def placement_rows(rows, d, camera_shape):
     for name, value in rows.items():
         if name in ("reference", "other fiber instance"):
             continue
-        print(f"| {name} | " + ", ".join(f"{error(value, q, False) / floors[q]:.2f}×" for q in range(3)) + " | "
-              + ", ".join(f"{error(value, q, True) / floors_m[q]:.2f}×" for q in range(3)) + " |")
+        print(f"| {name} | " + ", ".join(over(error(value, q, False), floors[q]) for q in range(3)) + " | "
+              + ", ".join(over(error(value, q, True), floors_m[q]) for q in range(3)) + " |")
 
 
 def main():
