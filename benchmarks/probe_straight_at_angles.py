@@ -41,7 +41,7 @@ from probe_split import ROOT, kept_curves, rendered, traced  # noqa: E402
 
 from data_formats.conventions import LUMINANCE, PHI_RANGE, THETA_RANGE  # noqa: E402
 from data_formats.scene import EnvironmentLight, load_scene  # noqa: E402
-from knitbake.compare.image_metrics import yarn_filter  # noqa: E402
+from knitbake.compare.image_metrics import yarn_scale_metrics  # noqa: E402
 from knitbake.compare.report import yarn_diameter_px  # noqa: E402
 from knitrun.render import pipeline  # noqa: E402
 from knitrun.render.ablations import combined  # noqa: E402
@@ -113,9 +113,9 @@ def placement_rows(rows, d, camera_shape):
         a, r = test[part].reshape(camera_shape), ref[part].reshape(camera_shape)
         if matched and a.sum() > 0:
             a = a * (r.sum() / a.sum())
-        fa, fr = yarn_filter(a[..., None], d), yarn_filter(r[..., None], d)
-        den = np.abs(fr).sum()
-        return float(np.abs(fa - fr).sum() / den) if den > 0 else float("nan")
+        if not r.sum() > 0:
+            return float("nan")
+        return yarn_scale_metrics(np.repeat(a[..., None], 3, -1), np.repeat(r[..., None], 3, -1), d)["rel_l1"]
 
     def over(err, floor):  # a dash where there is no floor (identical instances, or no light in that half)
         return f"{err / floor:.2f}×" if floor > 0 and np.isfinite(err) else "—"
