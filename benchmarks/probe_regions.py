@@ -14,9 +14,17 @@ regular-only reference over the full one, the strips without their flyaway layer
 reference, and the light the hairs add (over the full reference's light in the box) in the reference and in the
 strips (``full`` less ``closed``).
 
+With ``--worst F`` a third table asks where each image's error lies rather than its light: both images filtered to
+the scene's projected yarn diameter d (``knitbake.compare.report.yarn_diameter_px`` of the example scene of that
+name), over the reference's lit pixels (above ``LIT`` of its largest), the fraction F of them where the image's
+error is largest: their share of its summed error, its light over the reference's there and how many of them it
+draws darker, and its share of error in the second instance's worst F (the instance's places). An image whose worst
+pixels hold no more of its error than the instance's do, at the instance's ratio, has its error spread like a fiber
+draw's; a model that is darker in most of them misses something the fibers put there.
+
     .venv/bin/python benchmarks/probe_regions.py --compare-dir out/compare57all \\
         --scenes knit_patch_grazing,knit_patch_directional [--box top=60:130:30:480 ...] \\
-        [--regular-dir out/bench/regular_refs]
+        [--regular-dir out/bench/regular_refs] [--worst 0.05]
 """
 
 from __future__ import annotations
@@ -28,6 +36,12 @@ from pathlib import Path
 import numpy as np
 
 from data_formats.images import read_exr
+from data_formats.scene import load_scene
+from knitbake.compare.image_metrics import yarn_filter
+from knitbake.compare.report import yarn_diameter_px
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
+LIT = 0.02  # --worst: a pixel is lit where the filtered reference is above this fraction of its largest
 
 PATCH_BOXES = ("top=60:130:30:480", "interior=130:380:30:440", "bottom=380:460:30:480")
 
@@ -85,6 +99,33 @@ def hair_split_table(reference, regular, closed, full, boxes) -> list[str]:
     return lines
 
 
+def worst_table(reference, light: dict, d: float, fraction: float) -> list[str]:
+    """Lines of one scene's ``--worst`` table (module docstring): ``reference`` and ``light`` (name → image) per
+    pixel, filtered here to ``d`` px; the instance is ``light["floor_instance"]`` where present."""
+    ref = yarn_filter(reference[..., None], d)[..., 0]
+    lit = ref > LIT * ref.max()
+    if not lit.any():
+        return ["(no lit pixel: the reference is black)"]
+    ref = ref[lit]
+    drawn = {name: yarn_filter(img[..., None], d)[..., 0][lit] for name, img in light.items()}
+    n = max(1, int(round(fraction * ref.size)))
+    worst = {name: np.argsort(np.abs(img - ref), kind="stable")[::-1][:n] for name, img in drawn.items()}
+    lines = [f"| image (d = {d:.1f} px, worst {n} of {ref.size} lit pixels) | share of its error in its worst | "
+             "its light / the reference's there | of them darker | share of its error in the instance's worst |",
+             "|---|---|---|---|---|"]
+    for name, img in drawn.items():
+        error, at = np.abs(img - ref), worst[name]
+        total = error.sum()
+        if not total > 0:
+            lines.append(f"| {name} | no error | | | |")
+            continue
+        there = worst.get("floor_instance")
+        in_instance = f"{error[there].sum() / total:.2f}" if there is not None else "—"
+        lines.append(f"| {name} | {error[at].sum() / total:.2f} | {img[at].sum() / ref[at].sum():.2f} | "
+                     f"{np.mean(img[at] < ref[at]):.2f} | {in_instance} |")
+    return lines
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--compare-dir", type=Path, required=True, help="a bench_compare.py --out folder")
@@ -94,7 +135,11 @@ def main(argv=None) -> int:
                         help="name=y0:y1:x0:x1, repeatable (default: the knit patches' top, interior, bottom)")
     parser.add_argument("--regular-dir", type=Path, default=None,
                         help="regular-only references (<scene>_regular.exr): split each box between fibers and hairs")
+    parser.add_argument("--worst", type=float, default=None,
+                        help="fraction F in (0, 1): where each image's yarn-scale error lies (module docstring)")
     args = parser.parse_args(argv)
+    if args.worst is not None and not 0.0 < args.worst < 1.0:
+        parser.error(f"--worst must lie in (0, 1), not {args.worst}")
     boxes = [parse_box(b) for b in (args.box or PATCH_BOXES)]
     for scene in args.scenes.split(","):
         folder = args.compare_dir / scene
@@ -117,6 +162,12 @@ def main(argv=None) -> int:
             else:
                 split = hair_split_table(reference, _light(regular), light["closed"], light["full"], boxes)
                 print("\n" + "\n".join(split))
+        if args.worst is not None:
+            toml = EXAMPLES / f"{scene}.toml"
+            if not toml.is_file():
+                print(f"\n(no --worst table: no example scene {toml.name} to size the yarn from)")
+            else:
+                print("\n" + "\n".join(worst_table(reference, light, yarn_diameter_px(load_scene(toml)), args.worst)))
     return 0
 
 
