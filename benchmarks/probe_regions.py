@@ -108,18 +108,19 @@ def worst_table(reference, light: dict, d: float, fraction: float) -> list[str]:
         return ["(no lit pixel: the reference is black)"]
     ref = ref[lit]
     drawn = {name: yarn_filter(img[..., None], d)[..., 0][lit] for name, img in light.items()}
+    errors = {name: np.abs(img - ref) for name, img in drawn.items()}
     n = max(1, int(round(fraction * ref.size)))
-    worst = {name: np.argsort(np.abs(img - ref), kind="stable")[::-1][:n] for name, img in drawn.items()}
+    worst = {name: np.argsort(error, kind="stable")[::-1][:n] for name, error in errors.items()}
+    there = worst.get("floor_instance")
     lines = [f"| image (d = {d:.1f} px, worst {n} of {ref.size} lit pixels) | share of its error in its worst | "
              "its light / the reference's there | of them darker | share of its error in the instance's worst |",
              "|---|---|---|---|---|"]
     for name, img in drawn.items():
-        error, at = np.abs(img - ref), worst[name]
+        error, at = errors[name], worst[name]
         total = error.sum()
         if not total > 0:
             lines.append(f"| {name} | no error | | | |")
             continue
-        there = worst.get("floor_instance")
         in_instance = f"{error[there].sum() / total:.2f}" if there is not None else "—"
         lines.append(f"| {name} | {error[at].sum() / total:.2f} | {img[at].sum() / ref[at].sum():.2f} | "
                      f"{np.mean(img[at] < ref[at]):.2f} | {in_instance} |")
