@@ -3,8 +3,8 @@
 1. The `shade_regular` calls of the bench_render frame (1280×960, 60,540 control points, MSAA 4; the front layer
    and, at ``--layers 2``, the default, the layer behind it) are captured from the pipeline and timed alone (best
    of 3 after a warm-up), with all lights, with none (frames and texture lookups), and with one kind of light at a
-   time (directional; SRBF lobes' I_M terms; multiple-scattering clusters). A kind of light the scene lacks is
-   None, as the pipeline passes it.
+   time (directional; SRBF lobes' I_M terms; multiple-scattering clusters). A kind of light the scene lacks is a
+   tuple of no rows, as the pipeline passes it (``shading_inputs.no_lights``, ``no_lobes``).
 2. Per-call costs on 1M random inputs, 2 threads: one DS evaluation (``dual_scattering._ds_batch``, D inside
    (0, 1), D = 0, D = 1) and one I_M evaluation (view context + table + R rule, ``im_lookup._im_batch``) at the
    sky's sun-sized λ and at wide ones.
@@ -28,7 +28,7 @@ from data_formats.asset_pack import read_pack  # noqa: E402
 from data_formats.scene import load_scene  # noqa: E402
 from data_formats.yarn_curves import write_yarn_curves  # noqa: E402
 from knitrun.render import pipeline  # noqa: E402
-from knitrun.render.shading_inputs import Lobes, no_lights  # noqa: E402
+from knitrun.render.shading_inputs import no_lights, no_lobes, no_rows  # noqa: E402
 from knitrun.render.strip_shading import shade_regular  # noqa: E402
 from knitrun.shading.dual_scattering import D_B, D_F, _ds_batch  # noqa: E402
 from knitrun.shading.im_lookup import _im_batch, im_table_from, no_im_table  # noqa: E402
@@ -70,11 +70,6 @@ def best_ms(args, repeats=3):
     return 1e3 * min(times)
 
 
-def _count(lights):
-    """Lights (or lobes) in a kernel argument that may be None."""
-    return 0 if lights is None else len(lights.direction)
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pack", required=True)
@@ -87,18 +82,17 @@ def main():
     for light, layer, call in cases:
         idx, points, look, corrections, tangent, coverage, detail, lights, lobes, ms, im, bounce, rgb, alpha = call
         n = len(points.view_dir)
-        off = no_lights(n)
-        no_lobes = Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n)), np.zeros(4))
-        print(f"## {light}, {layer} layer: shade_regular on {len(idx)} shading points ({_count(lights)} directional, "
-              f"{_count(lobes)} SRBF lobes, {_count(ms)} multiple-scattering clusters)")
+        off, dark = no_lights(n), no_lobes(n)
+        print(f"## {light}, {layer} layer: shade_regular on {len(idx)} shading points ({len(lights.direction)} "
+              f"directional, {len(lobes.direction)} SRBF lobes, {len(ms.direction)} multiple-scattering clusters)")
         base = call[:7]
-        rest = [None] + call[12:]  # no yarn-level bounce but in "all lights"
-        rows = [("all lights", call), ("no light (frames, textures)", base + [None, None, None, None] + rest)]
-        if lights is not None and lobes is not None:
-            rows.append(("directional only", base + [lights, None, None, None] + rest))
-        if lobes is not None:
-            rows.append(("SRBF lobes only (I_M)", base + [None, lobes, off, im] + rest))
-            rows.append(("multiple-scattering clusters only", base + [None, no_lobes, ms, im] + rest))
+        rest = [no_rows()] + call[12:]  # no yarn-level bounce but in "all lights"
+        rows = [("all lights", call), ("no light (frames, textures)", base + [off, dark, off, im] + rest)]
+        if len(lights.direction) and len(lobes.direction):
+            rows.append(("directional only", base + [lights, dark, off, im] + rest))
+        if len(lobes.direction):
+            rows.append(("SRBF lobes only (I_M)", base + [off, lobes, off, im] + rest))
+            rows.append(("multiple-scattering clusters only", base + [off, dark, ms, im] + rest))
         for label, variant in rows:
             print(f"  {label}: {best_ms(variant):.0f} ms", flush=True)
     rng = np.random.default_rng(0)

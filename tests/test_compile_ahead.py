@@ -25,8 +25,8 @@ KERNELS = (shade_regular, shade_flyaway, _resolve, resolve_behind, flyaway_cover
 
 def _scene(folder, lights, layers=2):
     """Two yarns, one in front of the other, so both layers and the flyaway layer have points. (Cases: a directional
-    light with both layers and the flyaway layer; the sky with one layer and no flyaways: each kind of light, layer
-    count and flyaway switch changes the kernels' argument types.)"""
+    light with both layers and the flyaway layer; the sky with one layer and no flyaways: the layer count and the
+    flyaway switch decide which kernels a frame calls.)"""
     return load_scene(write_scene(folder, [straight(), straight(z=-0.05)[:, [1, 0, 2]]], camera=FRONT, lights=lights,
                                   render=f"layers = {layers}"))
 
@@ -40,6 +40,22 @@ def test_compile_shading_compiles_every_signature_the_frame_calls(tmp_path, pack
     result = pipeline.Renderer(scene, packs, ABLATIONS[ablation]).render()
     assert {k.__name__: set(k.signatures) for k in KERNELS} == before
     assert result.facts["shading_points"] > 0 and result.image.std() > 0  # the frame did call them
+
+
+def test_every_scene_and_ablation_shades_with_one_signature_of_each_kernel(tmp_path, pack):
+    """The shading kernels take a kind of light the scene lacks, and an ablation's off switch, as inputs of no rows,
+    not None (``strip_shading``, "One signature"): after a frame under the sun and the sky with every feature, frames
+    under the sun alone, under the sky alone and with the ablations that drop the bounce, the hairs' glow, the hairs
+    behind the body or the tables compile no new signature of ``shade_regular`` or ``shade_flyaway``."""
+    packs, both = {"cotton1": str(pack)}, SUN + "\n" + SKY
+    pipeline.Renderer(_scene(tmp_path, both), packs).render()
+    shading = (shade_regular, shade_flyaway)
+    before = {k.__name__: set(k.signatures) for k in shading}
+    for lights, ablation in ((SUN, "full"), (SKY, "full"), (both, "no_bounce"), (both, "no_hair_glow"),
+                             (SUN, "no_hairs_behind"), (both, "plain_ds"), (SUN, "factored")):
+        result = pipeline.Renderer(_scene(tmp_path, lights), packs, ABLATIONS[ablation]).render()
+        assert result.image.std() > 0
+        assert {k.__name__: set(k.signatures) for k in shading} == before, (lights, ablation)
 
 
 def test_the_kernel_cache_index_is_where_kernels_cached_looks(tmp_path, pack):

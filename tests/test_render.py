@@ -25,14 +25,14 @@ from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift,
                                      strip_receivers)
 from knitrun.render.strip_shading import (HAIR_DEPTHS, _corrections, _hair_light, behind_share, body_glow,
                                           cylinder_solid_angle, resolve, resolve_behind, shade_regular, variant_of)
-from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights
+from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights, no_lobes, no_rows
 from knitrun.render.texture_sampling import mip_stack, sample_mip
 from knitrun.render.yarn_look import no_detail, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading import fiber_bcsdf as fb
 from knitrun.shading.builtin_sky import sky_image
 from knitrun.shading.dual_scattering import D_B, D_F
 from knitrun.shading.equirect import texel_directions
-from knitrun.shading.im_lookup import im_slices, im_table_from
+from knitrun.shading.im_lookup import im_slices, im_table_from, no_im_table
 from knitrun.shading.srbf_fit import fit_srbf
 from tests.helpers import BACKLIT, FRONT, ROUGH, SKY, SUN, TEST_SHAPE, TINY, straight, write_scene
 
@@ -135,6 +135,12 @@ def _kernel_frames(n, seed):
     return (tangent, view, mip_stack([[np.tile([1.0, 0.0, 0.0], (2, 4, 1))]]), mip_stack([[np.ones((2, 4))]]), off)
 
 
+def _no_environment(n):
+    """``shade_regular``'s environment arguments (lobes, multiple-scattering cells, I_M slices) for a scene without
+    one, at n points."""
+    return no_lobes(n), no_lights(n), im_slices(no_im_table(), np.zeros(0))
+
+
 def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
     """A directional light's direct fraction at yarn level is V + (1 − V) τ_Y (``past_blockers``): with no fiber
     counted toward the light (n_occluded = n_cross = 0, so only the direct fraction differs), a point fully in
@@ -154,8 +160,8 @@ def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
         lights = Lights(sun, np.full((1, 3), 2.0), np.full((1, n), visibility),
                         np.zeros((1, 0)) if beyond is None else np.full((1, n), beyond))  # (1, 0): not counted
-        shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), lights, None, None, None, None, rgb,
-                      alpha)
+        shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), lights, *_no_environment(n), no_rows(),
+                      rgb, alpha)
         return rgb
 
     assert np.any(shaded(0.25, 0.0) > 0.0)
@@ -190,7 +196,7 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
         look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, D_F, D_B)
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
                       Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n)), np.zeros(4)), no_lights(n),
-                      im_slices(i_m, fit.sharpness), None, rgb, alpha)
+                      im_slices(i_m, fit.sharpness), no_rows(), rgb, alpha)
         theta_o = np.arcsin(np.sum(view * tangent, axis=1))
         direct = np.zeros((n, 3))
         for wj, lam, w in zip(fit.directions, fit.sharpness, fit.weights):
@@ -1007,9 +1013,9 @@ def test_the_hair_cover_is_the_share_of_each_pixel_the_hairs_take(tmp_path, pack
     assert not np.any(at(2, Features(flyaways=False)).hair_cover())
 
 
-def test_a_hair_takes_each_kind_of_light_whether_or_not_the_other_kind_is_compiled(tmp_path, pack, monkeypatch):
-    """``shade_flyaway`` with the directional lights alone (no lobes: that branch not compiled) plus the lobes alone
-    (no directional lights) is the hair radiance of both together; alpha and transmittance do not depend on the
+def test_a_hair_takes_each_kind_of_light_alone_as_beside_the_other(tmp_path, pack, monkeypatch):
+    """``shade_flyaway`` with the directional lights alone (lobes of no rows) plus the lobes alone (directional lights
+    of no rows, and so no glow) is the hair radiance of both together; alpha and transmittance do not depend on the
     lights."""
     from knitrun.render import pipeline
 
@@ -1020,7 +1026,8 @@ def test_a_hair_takes_each_kind_of_light_whether_or_not_the_other_kind_is_compil
         shade_kernel(idx, points, look, corrections, flyaway, coverage, lights, glow, lobes, im, rgb, alpha, transmit)
         n = len(rgb)
         parts = []
-        for kinds in ((lights, glow, None, None), (None, None, lobes, im)):
+        n_points = len(points.v)
+        for kinds in ((lights, glow, no_lobes(n_points), im), (no_lights(n_points), no_rows(), lobes, im)):
             out = (np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)))
             shade_kernel(idx, points, look, corrections, flyaway, coverage, *kinds, *out)
             parts.append(out)
@@ -1228,10 +1235,10 @@ def test_the_directional_lights_take_the_first_detail_and_the_environment_the_se
 
     def shaded(detail, directional, environment):
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
-        lobes = Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((4, n)), np.zeros(4)) if environment else None
-        shade_regular(np.arange(n), points, look, off, flat, full, detail, sun if directional else None, lobes,
-                      cells if environment else None, im_slices(i_m, fit.sharpness) if environment else None, None,
-                      rgb, alpha)
+        sky = (Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((4, n)), np.zeros(4)), cells,
+               im_slices(i_m, fit.sharpness)) if environment else _no_environment(n)
+        shade_regular(np.arange(n), points, look, off, flat, full, detail, sun if directional else no_lights(n), *sky,
+                      no_rows(), rgb, alpha)
         return rgb
 
     def constant(a, b):

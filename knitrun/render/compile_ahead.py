@@ -3,8 +3,8 @@ the rasterizer's.
 
 On an empty kernel cache the strip renderer's first frame spends nearly all its time compiling Numba kernels, on one
 core, one kernel after another (``benchmarks/profile_compile.py``: 37 s for the example patch, ~15 s of it the
-``raster`` pass's kernels and ~14 s the ``shade`` pass's). The kernels' argument types depend on the scene (its
-lights, layers, flyaways and the renderer's ``Features``), not on the frame, so a second process can compile the
+``raster`` pass's kernels and ~14 s the ``shade`` pass's). Which kernels a frame calls, and their argument types,
+depend on the scene (its layers and flyaways), not on the frame, so a second process can compile the
 ``shade`` and ``resolve`` kernels, the flyaway coverage and ``same_surface`` (``pipeline.Renderer.compile_shading``:
 the passes run on a frame with no shading point) into the shared on-disk cache while this one loads the packs, fits
 the environment and rasterizes. Numba looks in its cache before it compiles, so when this process reaches those
@@ -31,8 +31,8 @@ from pathlib import Path
 
 
 def kernels_cached() -> bool:
-    """Whether the on-disk kernel cache has an entry for ``strip_shading.shade_regular`` (any signature): then the
-    scene's kernels are most likely there already. Reads Numba's cache index path, a private attribute: a Numba
+    """Whether the on-disk kernel cache has an entry for ``strip_shading.shade_regular`` (it has one signature for
+    every scene, ``strip_shading``, "One signature"): then the scene's kernels are most likely there already. Reads Numba's cache index path, a private attribute: a Numba
     that moved it reads as cached (no helper), the safe side."""
     from knitrun.render.strip_shading import shade_regular
 

@@ -103,12 +103,13 @@ from knitrun.render.compile_ahead import start_compile_ahead
 from knitrun.render.hair_canopy import canopy_grid, canopy_transmittance
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.ms_lights import ms_lights
-from knitrun.render.shading_inputs import Lights, Lobes, Points
+from knitrun.render.shading_inputs import Lights, Lobes, Points, no_rows
 from knitrun.render.shadow_map import behind_map, build_shadow_map, own_strip_depth, shadow_visibility
 from knitrun.render.strip_raster import (rasterize_before, rasterize_behind, rasterize_visibility, vertex_tangent,
                                          vertex_tangents)
 from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
                                           same_surface, shade_flyaway, shade_regular, shading_points)
+from knitrun.render.texture_sampling import no_texture
 from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, tube_optics, vertex_bounce
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
@@ -743,7 +744,7 @@ class Renderer:
                 for look, a in zip(looks, albedo)}
         ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
         facts["ms_lights"] = int(len(ms_dir))
-        bounce = [None] * len(layers)
+        bounce = [no_rows()] * len(layers)
         if bounce_on:
             bounce = _yarn_bounce(lines, looks, camera, light_dir, light_e, at_bounce, vertex_vis, vertex_beyond,
                                   layers, facts)
@@ -763,12 +764,10 @@ class Renderer:
             for k, look in enumerate(looks):
                 idx = np.flatnonzero(layer["yarn"] == k)
                 kernel_look, corrections, _ = self.kernel_looks[k]
-                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m], lobe_albedo[k]),
-                               Lights(ms_dir, ms_e, ms_vis[m], np.zeros((len(ms_dir), 0))),
-                               self.im_slices[k]) if len(lobe_dir) else (None, None, None)
                 shade_regular(idx, regular, kernel_look, corrections, look.tangent, look.coverage, look.detail,
-                              Lights(light_dir, light_e, light_vis[m], light_beyond[m]) if len(light_dir) else None,
-                              *environment,
+                              Lights(light_dir, light_e, light_vis[m], light_beyond[m]),
+                              Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[m], lobe_albedo[k]),
+                              Lights(ms_dir, ms_e, ms_vis[m], np.zeros((len(ms_dir), 0))), self.im_slices[k],
                               bounce[m], rgb, alpha)
             shaded.append((rgb, alpha))
         if fly_points is not None:
@@ -776,14 +775,12 @@ class Renderer:
             fly_rgb, fly_alpha, fly_transmit = np.zeros((n_fly, 3)), np.zeros(n_fly), np.zeros((n_fly, 3))
             for k in drawn_fly:
                 idx = np.flatnonzero((fly_points["yarn"] == k) & covered)
-                environment = (Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1], lobe_albedo[k]), self.im_slices[k]) \
-                    if len(lobe_dir) \
-                    else (None, None)  # a kind of light the scene lacks is not compiled (``shade_flyaway``)
+                glow = hair_glow(looks[k]) if glow_on(features) else None
                 shade_flyaway(idx, hairs, *self.kernel_looks[k],
-                              looks[k].coverage if features.hairs_behind else None,
-                              Lights(light_dir, light_e, light_vis[-1], light_beyond[-1]) if len(light_dir) else None,
-                              hair_glow(looks[k]) if glow_on(features) and len(light_dir) else None,
-                              *environment,
+                              looks[k].coverage if features.hairs_behind else no_texture(1),
+                              Lights(light_dir, light_e, light_vis[-1], light_beyond[-1]),
+                              no_rows() if glow is None else glow,
+                              Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1], lobe_albedo[k]), self.im_slices[k],
                               fly_rgb, fly_alpha, fly_transmit)
             if not features.hair_light:  # the split of ``Features.hair_light``: opaque black hairs
                 fly_rgb[:] = 0.0
@@ -807,8 +804,8 @@ class Renderer:
 
     def compile_shading(self):
         """Compile the kernels of the ``shade`` and ``resolve`` passes, the flyaway coverage and the shadow pass's
-        ``same_surface`` for this scene (its lights, layers, flyaways and features decide their argument types, its
-        size does not) by running them on a frame with no shading point: what ``compile_ahead``'s helper does while
+        ``same_surface`` for this scene (its layers and flyaways decide which kernels a frame calls, its size does
+        not) by running them on a frame with no shading point: what ``compile_ahead``'s helper does while
         the first frame compiles the rasterizer. Draws nothing, costs only the compilation (or the cache's load)."""
         camera = scene_camera(self.scene)
         lines = _no_polylines()

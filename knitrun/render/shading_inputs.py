@@ -2,7 +2,10 @@
 named tuples of arrays, one per kind of input, instead of dozens of positional arrays. Numba passes a named tuple to a
 kernel whole and types it by its fields, so each field keeps one dtype and number of dimensions. The tuples are flat
 (no tuple inside a tuple): Numba's ``prange`` lowering splits argument tuples into their fields and cannot rebuild
-a nested one, so a yarn's textures travel as ``MipStack`` arguments of their own.
+a nested one, so a yarn's textures travel as ``MipStack`` arguments of their own. An input a scene lacks is a
+structure of no rows (``no_lights``, ``no_lobes``, ``no_rows``, ``texture_sampling.no_texture``), never None: Numba
+types None apart and would compile a kernel once per combination of absent inputs (``strip_shading``, "One
+signature").
 
 =================  =======================================================================================
 structure          fields (units: scene lengths, radians, linear RGB; N = shading points)
@@ -93,3 +96,14 @@ class Lobes(NamedTuple):
 def no_lights(n_points: int) -> Lights:
     """No distant light (an environment-only scene, or no multiple-scattering cluster)."""
     return Lights(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, n_points)), np.zeros((0, 0)))
+
+
+def no_lobes(n_points: int) -> Lobes:
+    """No SRBF lobe (a scene without an environment)."""
+    return Lobes(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, n_points)), np.zeros(4))
+
+
+def no_rows() -> np.ndarray:
+    """(0, 3) float64: an optional per-point or per-channel input that is absent (the yarn-level bounce of
+    ``shade_regular``, the body's glow of ``shade_flyaway``)."""
+    return np.zeros((0, 3))

@@ -115,6 +115,16 @@ The shading kernels run ``prange`` over blocks of ``POINT_BLOCK`` points, each b
 tangent, a light's direction) instead of taking views: Numba allocates an array per ``np.empty`` and bumps the
 shared array's reference count with an atomic instruction per view, which cost as much as the shading itself
 (BENCHMARKS.md, "An interactive strip renderer on 2 cores"). Outputs are written per point as before.
+
+One signature
+-------------
+Each shading kernel is compiled for one signature whatever the scene and the ``Features``: a kind of light the scene
+lacks is a structure of no rows and an off switch an empty array (``shading_inputs``), so its loop runs zero times.
+Until stop 68 they came as None, which Numba types apart and prunes before it compiles: every combination of absent
+inputs was a signature of its own, compiled anew (on 2 cores ~36 s a signature of either kernel with both kinds of
+light, 9–17 s with the sun alone), so the default test run compiled ``shade_flyaway`` six times and ``shade_regular``
+five (~310 s of it; BENCHMARKS.md, "Issue 13: … the test run (stop 67)" and "(stop 68)"). A scene with one kind of
+light now compiles the other's terms too, once per machine: the kernel cache serves every later scene.
 """
 
 from __future__ import annotations
@@ -128,7 +138,7 @@ from data_formats.conventions import THETA_RANGE
 from knitrun.render.camera import tan_half_fov
 from knitrun.render.interreflection import channel_visibility
 from knitrun.render.strip_raster import sample_attributes
-from knitrun.render.texture_sampling import mip_level, sample_mip
+from knitrun.render.texture_sampling import has_levels, mip_level, sample_mip
 from knitrun.render.yarn_bounce import INV_PI2, lambert_pair
 from knitrun.shading.dual_scattering import (K_F_BACK_DIRECT, K_F_DIRECT, K_F_SCATTER, K_TOTAL, ds_kernel,
                                              ds_scratch, forward_fraction)
@@ -454,11 +464,11 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
     """Shade the points ``idx`` (indices into ``points``) of one yarn; writes rgb[idx], alpha[idx]. ``points``,
     ``look``, ``corrections`` (ξ, Ψ^Fiber), the textures ``tangent``, ``coverage`` and ``detail``, ``lights``
     (directional), ``lobes`` (SRBF), ``ms`` (the environment's multiple-scattering lights, module docstring) and
-    ``im``: the named tuples of ``knitrun.render.shading_inputs``. ``lights`` is None for a scene without
-    directional lights, and ``lobes``, ``ms``, ``im`` are None without an environment: Numba prunes the branch of a
-    None argument before it compiles, so a scene never compiles the terms of a kind of light it lacks (the I_M and
-    multiple-scattering terms are ~40 % of this kernel's compile time). ``bounce`` (N, 3): the yarn-level radiance the
-    neighbouring yarns scatter onto each point (``knitrun.render.yarn_bounce``), or None: none."""
+    ``im``: the named tuples of ``knitrun.render.shading_inputs``. A kind of light the scene lacks comes as a tuple
+    of no rows (``no_lights``, ``no_lobes``: no directional light, no environment), never None: one signature serves
+    every scene and every ``Features``, so the kernel compiles once (module docstring, "One signature"). ``bounce``
+    (N, 3): the yarn-level radiance the neighbouring yarns scatter onto each point (``knitrun.render.yarn_bounce``),
+    or (0, 3) (``shading_inputs.no_rows``): none."""
     params, ds, period = look.params, look.ds, look.period
     n_occluded, n_cross, d_f, d_b = look.n_occluded, look.n_cross, look.d_f, look.d_b
     n_cross_rest, gap = look.n_cross_rest, look.gap
@@ -488,61 +498,59 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
             theta_o_f = longitudinal_angle(tf, wo)
             xi[:] = 1.0
             psi[:] = 1.0
-            if lights is not None:
-                for light in range(lights.direction.shape[0]):
-                    _copy_row(lights.direction, light, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
-                    fiber_lit = _fiber_lit(psi)
-                    vis, beyond = lights.visibility[light, q], _beyond(lights, light, q)
-                    n_front = n_occluded + yarns_crossed(vis, beyond) * n_cross_rest
-                    lit = past_blockers(vis, beyond, gap) * fiber_lit
-                    phi_f = azimuth_difference(tf, wo, w)
-                    spread_params(params, spread2, phi_f, wide)
-                    theta_i_f = longitudinal_angle(tf, w)
-                    ds_kernel(wide, ds, theta_i_f, theta_o_f, phi_f, n_front, d_f, d_b, lit, comp, ds_work)
-                    cos_i = math.cos(theta_i_f)
-                    for ch in range(3):
-                        # D f cos θ_i, single scattering (``dual_scattering``: F_direct = D (f + d_b f_back^direct))
-                        single = (comp[K_F_DIRECT, ch] - lit * d_b * comp[K_F_BACK_DIRECT, ch]) * cos_i
-                        rgb[q, ch] += lights.irradiance[light, ch] * (
-                            xi_s[ch] * single + xi[ch] * (comp[K_TOTAL, ch] - single))
+            for light in range(lights.direction.shape[0]):
+                _copy_row(lights.direction, light, w)
+                _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch)
+                fiber_lit = _fiber_lit(psi)
+                vis, beyond = lights.visibility[light, q], _beyond(lights, light, q)
+                n_front = n_occluded + yarns_crossed(vis, beyond) * n_cross_rest
+                lit = past_blockers(vis, beyond, gap) * fiber_lit
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                theta_i_f = longitudinal_angle(tf, w)
+                ds_kernel(wide, ds, theta_i_f, theta_o_f, phi_f, n_front, d_f, d_b, lit, comp, ds_work)
+                cos_i = math.cos(theta_i_f)
+                for ch in range(3):
+                    # D f cos θ_i, single scattering (``dual_scattering``: F_direct = D (f + d_b f_back^direct))
+                    single = (comp[K_F_DIRECT, ch] - lit * d_b * comp[K_F_BACK_DIRECT, ch]) * cos_i
+                    rgb[q, ch] += lights.irradiance[light, ch] * (
+                        xi_s[ch] * single + xi[ch] * (comp[K_TOTAL, ch] - single))
             ambient[0], ambient[1], ambient[2] = rgb[q, 0], rgb[q, 1], rgb[q, 2]  # the environment's terms: below
-            if lobes is not None:
-                for j in range(lobes.direction.shape[0]):
-                    vis = lobes.visibility[j, q]
-                    if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
-                        continue
-                    _copy_row(lobes.direction, j, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, multiple=False)
-                    theta_j_f = longitudinal_angle(tf, w)
-                    phi_f = azimuth_difference(tf, wo, w)
-                    spread_params(params, spread2, phi_f, wide)
-                    # the R lobe of the fiber-frame view, for I_M's R rule
-                    r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
-                    im_slice_kernel(im, j, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
-                    for ch in range(3):  # single scattering, each channel's inter-reflected visibility
-                        vis_ch = channel_visibility(vis, lobes.albedo[0], lobes.albedo[1 + ch])
-                        rgb[q, ch] += lobes.weight[j, ch] * vis_ch * xi_s[ch] * psi[ch] * i_m[ch]
-                for c in range(ms.direction.shape[0]):  # multiple scattering: cells of the sky as distant lights
-                    _copy_row(ms.direction, c, w)
-                    _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, single=False)
-                    vis = ms.visibility[c, q]
-                    lit = vis * _fiber_lit(psi)
-                    theta_c_f = longitudinal_angle(tf, w)
-                    phi_f = azimuth_difference(tf, wo, w)
-                    spread_params(params, spread2, phi_f, wide)
-                    ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, d_f, d_b, lit,
-                              comp, ds_work, False)  # f itself is in the lobes' I_M
-                    cos_c = math.cos(theta_c_f)
-                    for ch in range(3):
-                        multiple = (lit * d_b * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
-                        # the channel's share of the light past the neighbours (``interreflection`` docstring)
-                        tint = channel_visibility(vis, lobes.albedo[0], lobes.albedo[1 + ch]) / vis if vis > 0.0 \
-                            else 1.0
-                        rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple * tint
+            for j in range(lobes.direction.shape[0]):
+                vis = lobes.visibility[j, q]
+                if vis <= 0.0:  # the lobe is blocked here: its term is zero, skip its lookups
+                    continue
+                _copy_row(lobes.direction, j, w)
+                _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, multiple=False)
+                theta_j_f = longitudinal_angle(tf, w)
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                # the R lobe of the fiber-frame view, for I_M's R rule
+                r_lobe_context_into(wide, math.sin(theta_o_f), ctx)
+                im_slice_kernel(im, j, wide, ctx, theta_o_f, theta_j_f, -phi_f, lobes.sharpness[j], i_m)
+                for ch in range(3):  # single scattering, each channel's inter-reflected visibility
+                    vis_ch = channel_visibility(vis, lobes.albedo[0], lobes.albedo[1 + ch])
+                    rgb[q, ch] += lobes.weight[j, ch] * vis_ch * xi_s[ch] * psi[ch] * i_m[ch]
+            for c in range(ms.direction.shape[0]):  # multiple scattering: cells of the sky as distant lights
+                _copy_row(ms.direction, c, w)
+                _corrections(corrections, v, t, n, b, theta_o, w, xi, xi_s, psi, scratch, single=False)
+                vis = ms.visibility[c, q]
+                lit = vis * _fiber_lit(psi)
+                theta_c_f = longitudinal_angle(tf, w)
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                ds_kernel(wide, ds, theta_c_f, theta_o_f, phi_f, n_occluded + (1.0 - vis) * n_cross, d_f, d_b, lit,
+                          comp, ds_work, False)  # f itself is in the lobes' I_M
+                cos_c = math.cos(theta_c_f)
+                for ch in range(3):
+                    multiple = (lit * d_b * comp[K_F_BACK_DIRECT, ch] + comp[K_F_SCATTER, ch]) * cos_c
+                    # the channel's share of the light past the neighbours (``interreflection`` docstring)
+                    tint = channel_visibility(vis, lobes.albedo[0], lobes.albedo[1 + ch]) / vis if vis > 0.0 \
+                        else 1.0
+                    rgb[q, ch] += ms.irradiance[c, ch] * xi[ch] * multiple * tint
             for ch in range(3):
                 ambient[ch] = rgb[q, ch] - ambient[ch]
-            if bounce is not None:  # light the neighbouring yarns scatter onto this one (``yarn_bounce``)
+            if bounce.shape[0] > 0:  # light the neighbouring yarns scatter onto this one (``yarn_bounce``)
                 for ch in range(3):
                     rgb[q, ch] += bounce[q, ch]
             for ch in range(3):
@@ -665,14 +673,14 @@ def _glow_between(tube, albedo, v, wb, wn, cos_l, lo, hi, weight, out):
 def shade_flyaway(idx, points, look, corrections, flyaway, coverage, lights, glow, lobes, im, rgb, alpha, transmit):
     """Shade the flyaway-layer points ``idx`` of one yarn (the named tuples of ``knitrun.render.shading_inputs``;
     ``flyaway``: its three texture variants); writes rgb[idx], alpha[idx] and transmit[idx] (RGB, the hair's
-    forward fraction ā_f(θ_o): what it passes on of the radiance behind it). ``lights`` is None without directional
-    lights, ``lobes`` and ``im`` None without an environment: as in ``shade_regular``, a kind of light a scene lacks
-    is not compiled (the lobes' I_M terms and a second copy of ``_hair_light``: about half this kernel's compile).
-    ``glow`` (2, 3): the body's R_Y and S_Y for its glow on the hairs under the directional lights (``body_glow``),
-    or None: none (``Features.hair_glow`` off, or a pack without ρ_Y and T_Y). ``coverage``: the regular strip's
-    coverage texture (``shade_regular``'s), read at a hair over the body (|v_strip| ≤ 1, at the hair's own u, mip
-    level from the regular texels) for the share of the hairs seen there that lie behind the body (``behind_share``), or
-    None: every hair seen over the body lies in front of it (``Features.hairs_behind`` off)."""
+    forward fraction ā_f(θ_o): what it passes on of the radiance behind it). A kind of light the scene lacks comes as
+    a tuple of no rows, as in ``shade_regular`` (one signature for every scene and ``Features``). ``glow`` (2, 3): the
+    body's R_Y and S_Y for its glow on the hairs under the directional lights (``body_glow``), or (0, 3)
+    (``shading_inputs.no_rows``): none (``Features.hair_glow`` off, or a pack without ρ_Y and T_Y). ``coverage``: the
+    regular strip's coverage texture (``shade_regular``'s), read at a hair over the body (|v_strip| ≤ 1, at the hair's
+    own u, mip level from the regular texels) for the share of the hairs seen there that lie behind the body
+    (``behind_share``), or a stack of no level (``texture_sampling.no_texture``): every hair seen over the body lies
+    in front of it (``Features.hairs_behind`` off)."""
     params, ds, period = look.params, look.ds, look.period
     half_width, radius, n_rest, gap = look.flyaway_half_width, look.radius, look.n_cross_rest, look.gap
     reach = half_width / radius  # the hair layer's half-width in yarn radii
@@ -708,44 +716,42 @@ def shade_flyaway(idx, points, look, corrections, flyaway, coverage, lights, glo
             on_body = abs(v_strip) <= 1.0
             behind = 0.0  # the share of the hairs seen here that lie behind the body (``behind_share``)
             if on_body:
-                if coverage is not None:
+                if has_levels(coverage):
                     level = mip_level(points.footprint[q], period / coverage.cols[0, 0],
                                       2.0 * radius / coverage.rows[0, 0])
                     sample_mip(coverage, 0, level, points.arclength[q] / period, v_strip, cov)
                     behind = behind_share(cov[0])
-            if lights is not None:
-                for light in range(lights.direction.shape[0]):
-                    _copy_row(lights.direction, light, w)
-                    wl[0], wl[1], wl[2] = dot(w, tf), dot(w, ny), -dot(w, b)
-                    spread_params(params, spread2, azimuth_difference(tf, wo, w), wide)
-                    context_into(wide, wo_l, ctx, False)
-                    evaluate(wide, ctx, wl, f)
-                    cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
-                    _hair_light(on_body, behind, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
-                    lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap) * cos_i
+            for light in range(lights.direction.shape[0]):
+                _copy_row(lights.direction, light, w)
+                wl[0], wl[1], wl[2] = dot(w, tf), dot(w, ny), -dot(w, b)
+                spread_params(params, spread2, azimuth_difference(tf, wo, w), wide)
+                context_into(wide, wo_l, ctx, False)
+                evaluate(wide, ctx, wl, f)
+                cos_i = math.sqrt(max(0.0, 1.0 - wl[0] * wl[0]))
+                _hair_light(on_body, behind, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
+                lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap) * cos_i
+                for ch in range(3):
+                    rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
+                if glow.shape[0] > 0:  # the body's glow (``body_glow``), lit as the hair is
                     for ch in range(3):
-                        rgb[q, ch] += lights.irradiance[light, ch] * lit * psi[ch] * f[ch]
-                    if glow is not None:  # the body's glow (``body_glow``), lit as the hair is
-                        for ch in range(3):
-                            hair_albedo[ch] = params[P_A_R + ch] + params[P_A_TT + ch] + params[P_A_D + ch]
-                        body_glow(glow, hair_albedo, reach, v_strip, behind, n, b, w, f)
-                        body_lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap)
-                        for ch in range(3):
-                            rgb[q, ch] += lights.irradiance[light, ch] * body_lit * f[ch]
-            if lobes is not None:
-                for j in range(lobes.direction.shape[0]):
-                    if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
-                        continue
-                    _copy_row(lobes.direction, j, w)
-                    phi_f = azimuth_difference(tf, wo, w)
-                    spread_params(params, spread2, phi_f, wide)
-                    r_lobe_context_into(wide, wo_l[0], ctx)
-                    im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f,
-                                    lobes.sharpness[j], f)
-                    _hair_light(on_body, behind, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
-                    for ch in range(3):  # each channel's inter-reflected visibility (``channel_visibility``)
-                        vis = channel_visibility(lobes.visibility[j, q], lobes.albedo[0], lobes.albedo[1 + ch])
-                        rgb[q, ch] += lobes.weight[j, ch] * vis * psi[ch] * f[ch]
+                        hair_albedo[ch] = params[P_A_R + ch] + params[P_A_TT + ch] + params[P_A_D + ch]
+                    body_glow(glow, hair_albedo, reach, v_strip, behind, n, b, w, f)
+                    body_lit = past_blockers(lights.visibility[light, q], _beyond(lights, light, q), gap)
+                    for ch in range(3):
+                        rgb[q, ch] += lights.irradiance[light, ch] * body_lit * f[ch]
+            for j in range(lobes.direction.shape[0]):
+                if lobes.visibility[j, q] <= 0.0:  # blocked: a zero term
+                    continue
+                _copy_row(lobes.direction, j, w)
+                phi_f = azimuth_difference(tf, wo, w)
+                spread_params(params, spread2, phi_f, wide)
+                r_lobe_context_into(wide, wo_l[0], ctx)
+                im_slice_kernel(im, j, wide, ctx, theta_o_f, longitudinal_angle(tf, w), -phi_f,
+                                lobes.sharpness[j], f)
+                _hair_light(on_body, behind, corrections, ds, n_rest, gap, reach, v_strip, t, n, b, w, psi, scratch)
+                for ch in range(3):  # each channel's inter-reflected visibility (``channel_visibility``)
+                    vis = channel_visibility(lobes.visibility[j, q], lobes.albedo[0], lobes.albedo[1 + ch])
+                    rgb[q, ch] += lobes.weight[j, ch] * vis * psi[ch] * f[ch]
 
 
 @njit(cache=True, inline='always')

@@ -33,6 +33,19 @@ def empty_mip_stack(channels: int, variants: int = 1) -> MipStack:
     return mip_stack([[np.zeros((1, 1, channels))] for _ in range(variants)])
 
 
+def no_texture(channels: int) -> MipStack:
+    """A stack of no level: "no such texture" for a kernel that reads an optional texture only where
+    ``has_levels`` says it has one (the same Numba type as any stack of ``channels``, so no second signature)."""
+    return MipStack(np.zeros((0, channels), np.float32), np.zeros((1, 0), np.int64), np.zeros((1, 0), np.int64),
+                    np.zeros((1, 0), np.int64))
+
+
+@njit(cache=True)
+def has_levels(mip):
+    """Whether ``mip`` holds a texture (``no_texture``'s stack holds none)."""
+    return mip.cols.shape[1] > 0
+
+
 def mip_stack(chains) -> MipStack:
     """A ``MipStack`` from a list of variants, each a list of levels (H, W) or (H, W, C), level 0 first."""
     blocks, offset, rows, cols = [], [], [], []
