@@ -32,8 +32,8 @@ from pathlib import Path
 
 def kernels_cached() -> bool:
     """Whether the on-disk kernel cache has an entry for ``strip_shading.shade_regular`` (it has one signature for
-    every scene, ``strip_shading``, "One signature"): then the scene's kernels are most likely there already. Reads Numba's cache index path, a private attribute: a Numba
-    that moved it reads as cached (no helper), the safe side."""
+    every scene, ``strip_shading``, "One signature"): then the scene's kernels are most likely there already. Reads
+    Numba's cache index path, a private attribute: a Numba that moved it reads as cached (no helper), the safe side."""
     from knitrun.render.strip_shading import shade_regular
 
     try:

@@ -123,8 +123,9 @@ lacks is a structure of no rows and an off switch an empty array (``shading_inpu
 Until stop 68 they came as None, which Numba types apart and prunes before it compiles: every combination of absent
 inputs was a signature of its own, compiled anew (on 2 cores ~36 s a signature of either kernel with both kinds of
 light, 9–17 s with the sun alone), so the default test run compiled ``shade_flyaway`` six times and ``shade_regular``
-five (~310 s of it; BENCHMARKS.md, "Issue 13: … the test run (stop 67)" and "(stop 68)"). A scene with one kind of
-light now compiles the other's terms too, once per machine: the kernel cache serves every later scene.
+five (~310 s of it; BENCHMARKS.md, "Issue 13: … the test run (stop 67)" and "Issue 13: the shading kernels' one
+signature, …(stop 68)"). A scene with one kind of light now compiles the other's terms too, once per machine: the
+kernel cache serves every later scene.
 """
 
 from __future__ import annotations
