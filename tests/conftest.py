@@ -1,12 +1,33 @@
-"""Fixtures shared by the test modules (plain shared data and builders are in ``helpers.py``)."""
+"""Fixtures shared by the test modules (plain shared data and builders are in ``helpers.py``), and how a test
+process shares the cores.
+
+``make test`` runs the tests in two pytest-xdist worker processes (``-n 2 --dist loadfile``: a module's tests stay in
+one worker, so a module's fixtures are built once). Each worker then computes on its share of the cores, Numba's
+kernels and the BLAS under numpy and scipy alike (``pytest_configure``): two workers running two threads each on two
+cores made the relaxation's least-squares solves 4× slower (OpenBLAS threads spinning while the other worker's ran)
+and the whole run only 14 % faster than one process (BENCHMARKS.md, "The default test run on two workers"). A test
+may still ask for more threads (``numba.set_num_threads`` up to ``NUMBA_NUM_THREADS``), as the thread-count
+determinism tests do.
+"""
 
 import dataclasses
+import os
 
+import numba
 import pytest
+from threadpoolctl import threadpool_limits
 
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
 from tests.helpers import TINY
+
+
+def pytest_configure(config):
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if workers > 1:  # an xdist worker: its share of the cores (module docstring)
+        share = max(1, len(os.sched_getaffinity(0)) // workers)
+        numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))
+        threadpool_limits(share)
 
 
 @pytest.fixture(scope="session")
