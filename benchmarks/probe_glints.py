@@ -134,7 +134,8 @@ def main(argv=None) -> int:
     camera = scene_camera(scene)
     lines = pipeline._polylines(scene, renderer.curves, renderer.frame_index(None), renderer.samples_per_segment)
     raster = renderer._raster(lines, camera).points
-    points = pipeline._kernel_points(pipeline.parallax_shift(raster, lines, renderer.looks), lines, renderer.looks)
+    points = pipeline._kernel_points(pipeline.parallax_shift(raster, lines, renderer.looks), lines, renderer.looks,
+                                     renderer.features.fiber_bend)
     h, w = camera.height, camera.width
     pixel = np.repeat(np.arange(h * w), np.diff(raster["start"]))
     heaviest = np.full(h * w, -1)
@@ -179,7 +180,7 @@ def main(argv=None) -> int:
             u, v = points.arclength[q] / kernel_look.period, min(max(points.v[q], -1.0), 1.0)
             sample_mip(look.tangent, 0, level, u, v, tex)
             sample_mip(look.coverage, 0, level, u, v, cov)
-            t_f = tex[0] * t + tex[1] * b + tex[2] * n
+            t_f = tex[0] * points.along[q] * t + tex[1] * b + tex[2] * n
             t_f = t_f / np.linalg.norm(t_f) if np.linalg.norm(t_f) >= 1e-6 else t  # ``_texture_tangent``'s rule
             fiber = fiber if fiber @ t >= 0.0 else -fiber
             rows.append((mismatch(fiber, -ray), mismatch(t, wo), mismatch(t_f, wo),

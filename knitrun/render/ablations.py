@@ -12,12 +12,13 @@ tables.
 
 The full model (the defaults) draws the flyaway layer and shades the regular fibers with ξ closed on this renderer at
 every view, apart on single and multiple scattering, looks the lights up on the tube surface the camera sees, reads the
-textures with the axial parallax and adds the light the neighbouring yarns scatter onto each yarn. The flyaway layer
-lowers the yarn-scale error on every scene once its hairs lie in their own yarn's shadow and the regular fibers are not
-already too bright: with the paper's ξ the lone yarn's regular fibers alone are 15–16 % brighter than the reference
-traced without hairs under the sky and back-lit (BENCHMARKS.md, "Issue 13: hairs in their own yarn's shadow, and the
-closed ξ with flyaways as the default", "Issue 13: ξ closed on the strip renderer"). The last four terms became the
-default together in stop 49 (BENCHMARKS.md, "Issue 13: the default model of stop 49"): against the model without them
+textures with the axial parallax, tilts the fibers by the curve's bend and stretch and adds the light the neighbouring
+yarns scatter onto each yarn. The flyaway layer lowers the yarn-scale error on every scene once its hairs lie in their
+own yarn's shadow and the regular fibers are not already too bright: with the paper's ξ the lone yarn's regular fibers
+alone are 15–16 % brighter than the reference traced without hairs under the sky and back-lit (BENCHMARKS.md, "Issue 13:
+hairs in their own yarn's shadow, and the closed ξ with flyaways as the default", "Issue 13: ξ closed on the strip
+renderer"). The ξ closed at every view, the surface lookups, the parallax and the bounce became the default together in
+stop 49 (BENCHMARKS.md, "Issue 13: the default model of stop 49"): against the model without them
 (``diagonal_xi+no_parallax+no_bounce+axis_shadows``) the yarn-scale error over the instance floor falls on the four
 patches (1.70 / 1.58 / 1.80 / 2.02× → 1.51 / 1.46 / 1.70 / 1.87×: directional, grazing, sky, simulated) and the straight
 yarn under the sky (1.14 → 1.04×), the back-lit and directional straight yarns move by +0.01 and +0.02×, and six of the
@@ -58,6 +59,15 @@ tilted toward the camera is read further along (both backends; the ablation ``no
 own). Alone it lowered the error on three patches of four but darkened the grazing-light patch (BENCHMARKS.md,
 "Issue 13: single and multiple scattering, split"); in the default it darkens the grazing patch's lit legs back
 (without it 1.174 of the reference's brightness, with it 1.041).
+
+``fiber_bend`` tilts the regular fibers as the curve's bend and stretch tilt the reference's swept fibers
+(``pipeline.fiber_bend``: the texture tangent's component along the yarn scaled by λ (1 − κ·o); both backends, the
+ablation ``no_bend`` shades every fiber as on a straight yarn at rest). The default since stop 69: on the four
+patches the yarn-scale error over the instance floor falls 1.35 / 1.29 / 1.39 / 1.72× → 1.22 / 1.22 / 1.34 / 1.59×
+(directional, grazing, sky, simulated; the straight yarns do not move), because the single scattering lies where
+the reference's does (its own error over its floor on the simulated patch 2.03 → 1.83×) and its excess falls
+(1.22 → 1.18× the reference's); the patches' means fall 0.5–2 %, uncovering the multiple scattering they lack
+(BENCHMARKS.md, "Issue 13: the default test run on two workers, fibers tilted by a bend").
 
 ``yarn_bounce`` adds, under directional lights, the light the neighbouring yarns scatter onto a yarn
 (``knitrun.render.yarn_bounce``: from the pack's hull albedo and transmittance, no fitted constant; it needs
@@ -138,9 +148,9 @@ CPU renderer only.
 plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-level inter-reflection and bounce, + ξ
 closed on the renderer (at every view), + flyaways (= the full model, the default); every rung draws the surface
 lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
-detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the yarn-level
-bounce, with the lookups on the axis plane, with one ξ closed on single and multiple scattering together, with two
-blocking yarns counted, without the body's glow on its hairs, with every hair seen over a body taken to lie in
+detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the fiber
+bend, without the yarn-level bounce, with the lookups on the axis plane, with one ξ closed on single and multiple
+scattering together, with two blocking yarns counted, without the body's glow on its hairs, with every hair seen over a body taken to lie in
 front of it and without other yarns' hair layers dimming the directional lights.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
@@ -164,6 +174,7 @@ class Features:
     view_xi: bool = True  # with closed_xi: ξ closed at every view (correction/xi_view) where the pack has it
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
     parallax: bool = True  # the regular points' texture coordinate and tangent where the tube's seen surface lies
+    fiber_bend: bool = True  # the regular fibers tilted by the curve's bend and stretch (pipeline.fiber_bend)
     yarn_bounce: bool = True  # light the neighbouring yarns scatter onto a yarn under directional lights
     split_xi: bool = True  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms) where the pack
     # has it, else the one closed ξ
@@ -189,6 +200,7 @@ ABLATIONS = {
     "papers_xi": Features(closed_xi=False),
     "diagonal_xi": Features(view_xi=False),
     "no_parallax": Features(parallax=False),
+    "no_bend": Features(fiber_bend=False),
     "no_bounce": Features(yarn_bounce=False),
     "axis_shadows": Features(surface_shadows=False),
     "whole_xi": Features(split_xi=False),
@@ -205,6 +217,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "no_detail": "full without the fiber-level detail", "papers_xi": "full with the paper's ξ",
                    "diagonal_xi": "full with ξ closed on the diagonal",
                    "no_parallax": "full without the axial parallax",
+                   "no_bend": "full with every fiber tilted as on a straight yarn at rest",
                    "no_bounce": "full without the yarn-level bounce",
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "whole_xi": "full with one ξ closed on single and multiple scattering together",

@@ -12,7 +12,9 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
 =================  =======================================================================================
 ``Points``         ``view_dir`` (N, 3) unit toward the camera, ``tangent`` (N, 3) unit yarn tangent,
                    ``arclength`` (N,) rest arc length shifted by the view phase, ``v`` (N,) across the strip
-                   in [−1, 1], ``footprint`` (N,) pixel size at the point, ``curve`` (N,) int64 curve index
+                   in [−1, 1], ``footprint`` (N,) pixel size at the point, ``curve`` (N,) int64 curve index,
+                   ``along`` (N,) the scale of the fiber tangent's component along the yarn (the fiber bend,
+                   ``pipeline.fiber_bend``; ones for hairs)
 ``Corrections``    ``xi_full``, ``psi_full`` (N_v, N_θ, N_φ, 3) or (0, 1, 1, 3) for "use the factors";
                    ``xi_m``, ``xi_n``, ``psi_gm``, ``psi_gn`` (N_v, N, 3) factors (ASSET_PACK.md §6–7);
                    ``xi_view`` (N_v, N_θi, N_θo, N_φ, 3), ξ closed at every view, or (0, 1, 1, 1, 3): when it
@@ -50,6 +52,7 @@ class Points(NamedTuple):
     v: np.ndarray
     footprint: np.ndarray
     curve: np.ndarray
+    along: np.ndarray
 
 
 class Corrections(NamedTuple):

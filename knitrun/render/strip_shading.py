@@ -15,7 +15,8 @@ Regular fibers (``shade_regular``), per point, angles by ``ASSET_PACK.md`` §3
 ----------------------------------------------------------------------------
 t the yarn tangent (G-buffer), ω_o toward the camera, n = normalize(ω_o − (ω_o·t)t), b = n × t, u = s/period,
 v ∈ [−1, 1]. Textures (trilinear, mip level from the pixel footprint): coverage c(u, v) is the point's alpha;
-the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where it vanishes). Per directional light
+the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where it vanishes), its component along t
+scaled by the point's fiber bend (``Points.along``, ``pipeline.fiber_bend``). Per directional light
 (toward ω_i, irradiance E, yarn-level visibility V from the shadow map):
 
     yarn angles   θ_i, θ_o against t;  θ_d = (θ_o − θ_i)/2;  φ = φ_o − φ_i = −atan2(ω_i·b, ω_i·n)
@@ -418,10 +419,11 @@ def _fiber_lit(psi):
 
 
 @njit(cache=True)
-def _texture_tangent(tex, t, n, b, tf):
-    """World fiber tangent from a coverage-premultiplied strip-frame vector; t where it vanishes."""
+def _texture_tangent(tex, t, n, b, tf, along):
+    """World fiber tangent from a coverage-premultiplied strip-frame vector, its component along t scaled by
+    ``along`` (the fiber bend, ``pipeline.fiber_bend``; 1 for hairs); t where it vanishes."""
     for k in range(3):
-        tf[k] = tex[0] * t[k] + tex[1] * b[k] + tex[2] * n[k]
+        tf[k] = along * tex[0] * t[k] + tex[1] * b[k] + tex[2] * n[k]
     norm = math.sqrt(dot(tf, tf))
     if norm < 1e-6:
         tf[0], tf[1], tf[2] = t[0], t[1], t[2]
@@ -493,7 +495,7 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
             sample_mip(tangent, 0, level, u, v, tex)
             alpha[q] = min(max(cov[0], 0.0), 1.0)
             sample_mip(detail, 0, level, u, v, fiber_detail)  # the directional lights' and the environment's
-            _texture_tangent(tex, t, n, b, tf)
+            _texture_tangent(tex, t, n, b, tf, points.along[q])
             spread2 = tangent_spread(tex, cov[0])
             theta_o = longitudinal_angle(t, wo)
             theta_o_f = longitudinal_angle(tf, wo)
@@ -590,7 +592,7 @@ def _hair_texel(q, points, period, flyaway, texel_u, texel_v, t, wo, n, b, tf, t
     u, v = points.arclength[q] / period, min(max(points.v[q], -1.0), 1.0)
     sample_mip(flyaway, variant_of(points.curve[q], int(math.floor(u))),
                mip_level(points.footprint[q], texel_u, texel_v), u, v, texel)
-    return _texture_tangent(texel, t, n, b, tf), v
+    return _texture_tangent(texel, t, n, b, tf, 1.0), v
 
 
 @njit(parallel=True, cache=True)

@@ -31,13 +31,14 @@ is shaded twice, each weighted by its own coverage); the shadow maps are rasteri
 of a shadow map is the nearest projected polyline point. ``tests/test_gl_render.py`` holds the two renderers
 together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
 
-Four terms read more than a fragment's own attributes: ``Features.surface_shadows`` looks
+Five terms read more than a fragment's own attributes: ``Features.surface_shadows`` looks
 the lights up on the tube surface seen (the fragment's position moved r √(1 − v²) toward the camera,
 ``pipeline.strip_receivers``); ``Features.parallax`` walks the frame's polylines (a texture of points, rest arc
 lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from the fragment's segment as
 ``pipeline.parallax_shift`` does, first to the segment its sample lies on (a fragment's sample may lie past its own
-segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; and ``Features.yarn_bounce``, the
-light the neighbouring yarns scatter onto each polyline point, is computed on the CPU (``pipeline.frame_bounce``,
+segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; ``Features.fiber_bend`` reads
+the bend and stretch of the segment it ends on from the same texture (``pipeline.fiber_bend``);
+``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is computed on the CPU (``pipeline.frame_bounce``,
 the lights' visibility at the points from the CPU twin's shadow maps: one more map per directional light and
 frame) and uploaded as a texture of the points (``_bounce_texture``), which a fragment interpolates along its
 segment by rest arc length as ``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each
@@ -143,6 +144,7 @@ def gl_constants() -> str:
         f"const float NO_YARN = {NO_YARN!r};",
         f"const float PCF_RADIUS = {PCF_RADIUS!r};",
         f"const float PARALLAX_MAX_SIN = {pipeline.PARALLAX_MAX_SIN!r};",
+        f"const float MIN_ALONG = {pipeline.MIN_ALONG!r};",
         f"const float OWN_STRIP_MAX = {OWN_STRIP_MAX!r};",
         f"const int PARALLAX_STEPS = {PARALLAX_STEPS};",
         f"const int POLYLINE_ROW = {POLYLINE_ROW};",
@@ -207,7 +209,8 @@ def _texture3d(ctx, array):
 
 
 def _polyline_textures(ctx, lines, tangent):
-    """The frame's polylines for the axial parallax (``regular.frag``): (points, curve bounds) textures. Point i at
+    """The frame's polylines for the axial parallax and the fiber bend (``regular.frag``): (points, curve bounds)
+    textures. Point i at
     row i // POLYLINE_ROW, columns 3 (i mod POLYLINE_ROW) + 0, 1, 2: (x, y, z, rest arc length), (vertex tangent,
     0), (the yarn frame's normal N, 0); curve c at (c mod POLYLINE_ROW, c // POLYLINE_ROW): (its first point, its
     last point), exact as float32 below 2²⁴ points."""
@@ -352,6 +355,7 @@ class GLRenderer:
             "detail_levels": int(detail_levels),
             "use_xi_full": use_xi, "use_psi_full": use_psi, "use_xi_view": use_view,
             "surface_shadows": int(self.features.surface_shadows), "parallax": int(self.features.parallax),
+            "fiber_bend": int(self.features.fiber_bend),
             "xi_view_n_theta": int(view.shape[2]), "xi_single_kind": single_kind,
             "xi_single_n_theta": int(single_view.shape[2]),
             "im_lo": im.lo, "im_hi": im.hi, "im_repeat": [int(r) for r in im.repeat],
@@ -404,7 +408,8 @@ class GLRenderer:
             return pipeline.RenderResult(image, timings, facts)
         tangent = vertex_tangents(lines.points, lines.offsets)
         draws = self._upload_segments(lines, tangent)
-        polyline = _polyline_textures(ctx, lines, tangent) if self.features.parallax else ()
+        polyline = _polyline_textures(ctx, lines, tangent) \
+            if self.features.parallax or self.features.fiber_bend else ()
         # the hair canopy at the polyline points, per light (pipeline.canopy_at_vertices); ones without it
         canopy = np.array([pipeline.canopy_at_vertices(lines, self.cpu.looks, d) for d in self.light_dir]) \
             if self.canopy else np.ones((len(self.light_dir), len(lines.points)))

@@ -29,6 +29,7 @@ struct StripPoint {
     vec3 position, t, n, b, wo;
     float s, u, v, depth, footprint;  // s: the rest arc length; u: the texture coordinate (the view phase's)
     bool drawn;  // false when edge-on (|ω_o − (ω_o·t)t| < DEGENERATE)
+    int segment;  // the polyline segment (its first point) the point's attributes come from
 };
 
 // the strip frame of tangent t seen from wo (strip_shading._strip_frame)
@@ -76,5 +77,6 @@ StripPoint strip_point() {
     strip_frame(p);
     p.s = arclength;
     p.u = view_phase_u(p.t, p.wo, normal, arclength);
+    p.segment = fin.segment;
     return p;
 }

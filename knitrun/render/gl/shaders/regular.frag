@@ -16,6 +16,7 @@ uniform int surface_shadows;     // Features.surface_shadows: lights looked up o
 // per point three texels (x, y, z, rest arc length), (vertex tangent, 0), (yarn frame's N, 0); per curve one texel
 // (its first point, its last point)
 uniform int parallax;
+uniform int fiber_bend;          // Features.fiber_bend: the same polyline texture gives the bend and stretch
 uniform sampler2D polyline;
 uniform sampler2D curve_bounds;
 // the yarn-level bounce (Features.yarn_bounce; pipeline.frame_bounce, computed on the CPU): per polyline point one
@@ -79,8 +80,27 @@ void axial_parallax(inout StripPoint sp) {
         sp.t = normalize(m);
     vec4 pj = polyline_at(j, 0), pk = polyline_at(j + 1, 0);
     sp.s = pj.w + f * (pk.w - pj.w);
+    sp.segment = j;
     strip_frame(sp);
     sp.u = view_phase_u(sp.t, sp.wo, mix(polyline_at(j, 2).xyz, polyline_at(j + 1, 2).xyz, f), sp.s);
+}
+
+// pipeline.fiber_bend: the scale a = max(λ (1 − κ·o), MIN_ALONG) of the fibers' tangent along the yarn on the
+// point's segment j: κ = (t_{j+1} − t_j)/L_j from the vertex tangents, λ = L_j/(σ_{j+1} − σ_j),
+// o = r (v b + √(1 − v²) n) the tube surface seen; 1 on a closed curve's closing segment and on a degenerate segment. Without the parallax the
+// segment is the fragment's own (the CPU's is the one its sample lies on: they differ at a joint, by a sample)
+float along_scale(StripPoint sp) {
+    vec2 bounds = texelFetch(curve_bounds, ivec2(fin.curve % POLYLINE_ROW, fin.curve / POLYLINE_ROW), 0).xy;
+    int j = sp.segment;
+    if (j >= int(bounds.y))
+        return 1.0;
+    vec4 a = polyline_at(j, 0), b = polyline_at(j + 1, 0);
+    float len = distance(a.xyz, b.xyz), d_rest = b.w - a.w;
+    if (!(len > 0.0) || !(d_rest > 0.0))
+        return 1.0;
+    vec3 kappa = (polyline_at(j + 1, 1).xyz - polyline_at(j, 1).xyz) / len;
+    vec3 o = radius * (sp.v * sp.b + sqrt(max(0.0, 1.0 - sp.v * sp.v)) * sp.n);
+    return max(len / d_rest * (1.0 - dot(kappa, o)), MIN_ALONG);
 }
 
 void main() {
@@ -100,7 +120,8 @@ void main() {
     float cov = sample_mip(coverage_tex, texture_levels, level, u, v).r;
     vec3 tex = sample_mip(tangent_tex, texture_levels, level, u, v).rgb;
     float alpha = clamp(cov, 0.0, 1.0);
-    vec3 tf = tex.x * t + tex.y * b + tex.z * n;
+    float along = fiber_bend != 0 ? along_scale(sp) : 1.0;
+    vec3 tf = along * tex.x * t + tex.y * b + tex.z * n;
     tf = length(tf) < 1e-6 ? t : normalize(tf);
     float spread2 = tangent_spread(tex, cov);
     float theta_o = clamped_asin(dot(t, wo));
