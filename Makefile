@@ -42,10 +42,10 @@ demo: setup
 	@echo "demo outputs in $(OUT)/ (open demo_patch.png, demo_patch.gif and the *_preview.png images)"
 
 test: setup
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder
 
 test-slow: setup
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m slow
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder -m slow
 
 bench: setup
 	$(BIN)/python benchmarks/bench_fibers.py

@@ -2,7 +2,8 @@
 process shares the cores.
 
 ``make test`` runs the tests in two pytest-xdist worker processes (``-n 2 --dist loadfile``: a module's tests stay in
-one worker, so a module's fixtures are built once). Each worker then computes on its share of the cores, Numba's
+one worker, so a module's fixtures are built once; ``--no-loadscope-reorder``: modules are handed out in the order of
+``pytest_collection_modifyitems``). Each worker then computes on its share of the cores, Numba's
 kernels and the BLAS under numpy and scipy alike (``pytest_configure``): two workers running two threads each on two
 cores made the relaxation's least-squares solves 4× slower (OpenBLAS threads spinning while the other worker's ran)
 and the whole run only 14 % faster than one process (BENCHMARKS.md, "The default test run on two workers"). A test
@@ -12,6 +13,7 @@ determinism tests do.
 
 import dataclasses
 import os
+from pathlib import Path
 
 import numba
 import pytest
@@ -20,6 +22,26 @@ from threadpoolctl import threadpool_limits
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
 from tests.helpers import TINY
+
+
+def _bakes(module_path) -> bool:
+    """Whether a test module names knitbake (the package: the bake, the path tracer, the references; or its command
+    line): its first such test compiles the bake's kernels unless another process has cached them."""
+    return "knitbake" in Path(module_path).read_text(encoding="utf-8")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Module order: the first module that bakes or uses the session pack, then every module that does not, then the
+    other baking ones (each group in collection order). ``make test`` hands modules to its two workers in this order
+    (``--no-loadscope-reorder``, each worker taking the next as it finishes one), so one worker compiles the bake's
+    kernels while the other runs the modules that need none of them, instead of both compiling them side by side;
+    the baking modules after it read them from the kernel cache (module docstring)."""
+    modules = {}
+    for item in items:
+        modules.setdefault(str(item.path), []).append(item)
+    baking = [m for m, its in modules.items() if _bakes(m) or any("pack" in it.fixturenames for it in its)]
+    order = baking[:1] + [m for m in modules if m not in baking] + baking[1:]
+    items[:] = [item for m in order for item in modules[m]]
 
 
 def pytest_configure(config):
