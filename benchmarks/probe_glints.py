@@ -38,7 +38,7 @@ from knitbake.fibers.fiber_sweep import sweep_fibers
 from knitbake.trace.reference import _only_curves
 from knitrun.render import pipeline
 from knitrun.render.camera import scene_camera, tan_half_fov
-from knitrun.render.strip_shading import tangent_spread
+from knitrun.render.strip_shading import fiber_bend, tangent_spread
 from knitrun.render.texture_sampling import mip_level, sample_mip
 from knitrun.shading.fiber_bcsdf import P_ALPHA_R
 
@@ -180,7 +180,8 @@ def main(argv=None) -> int:
             u, v = points.arclength[q] / kernel_look.period, min(max(points.v[q], -1.0), 1.0)
             sample_mip(look.tangent, 0, level, u, v, tex)
             sample_mip(look.coverage, 0, level, u, v, cov)
-            t_f = tex[0] * points.along[q] * t + tex[1] * b + tex[2] * n
+            along = fiber_bend(points.curvature, points.stretch, q, kernel_look.radius, v, n, b)
+            t_f = along * tex[0] * t + tex[1] * b + tex[2] * n
             t_f = t_f / np.linalg.norm(t_f) if np.linalg.norm(t_f) >= 1e-6 else t  # ``_texture_tangent``'s rule
             fiber = fiber if fiber @ t >= 0.0 else -fiber
             rows.append((mismatch(fiber, -ray), mismatch(t, wo), mismatch(t_f, wo),

@@ -1,9 +1,9 @@
-"""The fiber bend (``pipeline.fiber_bend``): the along-yarn scale λ (1 − κ·o) of the regular fibers' tangent on
-analytic curves (an arc seen from its axis, a stretched straight yarn, a bend tighter than the radius, a closing
-segment), and the same scale measured on the reference's own fibers swept along an arc (``sweep_fibers``)."""
+"""The fiber bend (``strip_shading.fiber_bend`` of ``pipeline.segment_bend``'s curvature and stretch): the along-yarn
+scale λ (1 − κ·o) of the regular fibers' tangent on analytic curves (an arc seen from its axis, a stretched straight
+yarn, a bend tighter than the radius, a closing segment), and the same scale measured on the reference's own fibers
+swept along an arc (``sweep_fibers``)."""
 
 import dataclasses
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,7 +12,8 @@ from data_formats.yarn_curves import make_yarn_curves
 from data_formats.yarn_spec import load_preset
 from knitbake.fibers.fiber_set import KIND_REGULAR
 from knitbake.fibers.fiber_sweep import sweep_fibers
-from knitrun.render.pipeline import MIN_ALONG, _Polylines, fiber_bend
+from knitrun.render.pipeline import _Polylines, segment_bend
+from knitrun.render.strip_shading import MIN_ALONG, _strip_frame, fiber_bend
 from knitrun.render.strip_raster import vertex_tangents
 
 RADIUS = 0.05  # cm
@@ -37,7 +38,18 @@ def _points_on(lines, segment, v, view_dir):
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
     n = len(segment)
     return {"segment": segment, "tangent": tangent, "view_dir": np.tile(view_dir, (n, 1)),
-            "v": np.asarray(v, np.float64), "yarn": np.zeros(n, np.int64)}
+            "v": np.asarray(v, np.float64)}
+
+
+def _along(points, lines):
+    """The fiber bend of each point, as ``shade_regular`` takes it: its strip frame from ``_strip_frame``."""
+    curvature, stretch = segment_bend(points, lines)
+    out = []
+    for q in range(len(stretch)):
+        n, b = np.empty(3), np.empty(3)
+        assert _strip_frame(points["tangent"][q], points["view_dir"][q], n, b)
+        out.append(fiber_bend(curvature, stretch, q, RADIUS, points["v"][q], n, b))
+    return np.array(out)
 
 
 def test_an_arc_seen_from_its_axis_tilts_the_outside_fibers_toward_the_yarn_and_the_inside_ones_away():
@@ -46,7 +58,7 @@ def test_an_arc_seen_from_its_axis_tilts_the_outside_fibers_toward_the_yarn_and_
     segment = np.array([100, 200, 300, 100, 200])
     # seen from +z: n = +z, b = n × t points toward the centre (t counter-clockwise), so v = −1 is the outside
     points = _points_on(lines, segment, [-1.0, -1.0, 1.0, 0.0, -0.5], np.array([0.0, 0.0, 1.0]))
-    along = fiber_bend(points, lines, [SimpleNamespace(radius=RADIUS)])
+    along = _along(points, lines)
     expected = [1.1, 1.1, 0.9, 1.0, 1.05]  # 1 − κ·o, o = r (v b + √(1 − v²) n), κ = −(1/R) radial
     np.testing.assert_allclose(along, expected, atol=2e-4)
 
@@ -55,17 +67,17 @@ def test_a_stretched_straight_yarn_tilts_its_fibers_toward_its_tangent_by_the_st
     points = np.stack([np.linspace(0.0, 1.0, 11), np.zeros(11), np.zeros(11)], axis=1)
     lines = _lines(points, rest=np.linspace(0.0, 1.0 / 1.3, 11))
     pts = _points_on(lines, np.arange(10), np.linspace(-1.0, 1.0, 10), np.array([0.0, 0.3, 1.0]) / np.sqrt(1.09))
-    np.testing.assert_allclose(fiber_bend(pts, lines, [SimpleNamespace(radius=RADIUS)]), 1.3, rtol=1e-12)
+    np.testing.assert_allclose(_along(pts, lines), 1.3, rtol=1e-12)
 
 
 def test_a_bend_tighter_than_the_radius_folds_no_fiber_and_a_closing_segment_is_left_alone():
     lines = _lines(_arc(0.8 * RADIUS))
     pts = _points_on(lines, np.array([200]), [1.0], np.array([0.0, 0.0, 1.0]))  # the inside: 1 − 1.25 < 0
-    assert fiber_bend(pts, lines, [SimpleNamespace(radius=RADIUS)])[0] == MIN_ALONG
+    assert _along(pts, lines)[0] == MIN_ALONG
     last = len(lines.points) - 1  # a closed curve's closing segment starts at the last point
     pts = {"segment": np.array([last]), "tangent": np.array([[0.0, 1.0, 0.0]]), "view_dir": np.array([[0.0, 0, 1]]),
-           "v": np.array([1.0]), "yarn": np.zeros(1, np.int64)}
-    assert fiber_bend(pts, lines, [SimpleNamespace(radius=RADIUS)])[0] == 1.0
+           "v": np.array([1.0])}
+    assert _along(pts, lines)[0] == 1.0
 
 
 @pytest.mark.parametrize("stretch", [1.0, 1.2])

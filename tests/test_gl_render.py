@@ -115,7 +115,7 @@ def test_a_bent_yarn_is_split_into_triangles_as_the_cpu_splits_it(tmp_path, pack
 
 def test_the_fiber_bend_agrees_and_moves_the_image(tmp_path, pack):
     """``Features.fiber_bend`` on the arc above: the GL fragments read the bend and stretch of their segment from the
-    polyline texture as ``pipeline.fiber_bend`` computes them, so the backends agree as they do without it
+    polyline texture as ``pipeline.segment_bend`` gives them, so the backends agree as they do without it
     (0.0049 at the yarn scale, measured; 0.0054 without the bend), and the bend moves the image 17× as much (0.085)."""
     camera = ORTHO.replace("width = 64", "width = 160").replace("height = 48", "height = 120")
     a = np.linspace(0.0, 1.5 * np.pi, 25)

@@ -152,7 +152,8 @@ def test_light_between_a_blocking_yarns_fibers_reaches_the_point_directly():
     n = 16
     tangent, view, flat, full, off = _kernel_frames(n, seed=11)
     ds = np.stack([np.full((4, 3), x) for x in (0.7, 0.2, 0.3, 0.1, 0.3)])
-    points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64), np.ones(n))
+    points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64), np.zeros((n, 3)),
+                    np.ones(n))
     sun = np.array([[0.3, 0.6, 1.0]]) / np.linalg.norm([0.3, 0.6, 1.0])
 
     def shaded(visibility, gap, beyond=None):
@@ -192,7 +193,8 @@ def test_environment_shading_matches_quadrature_for_1_16_64_lobes():
     for j in (1, 16, 64):
         fit = fit_srbf(sky, n_lobes=j, seed=0)
         rgb, alpha = np.zeros((n, 3)), np.zeros(n)
-        points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64), np.ones(n))
+        points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64),
+                        np.zeros((n, 3)), np.ones(n))
         look = Look(ROUGH, np.ones((5, 4, 3)), 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, D_F, D_B)
         shade_regular(np.arange(n), points, look, off, flat, full, no_detail(), no_lights(n),
                       Lobes(fit.directions, fit.sharpness, fit.weights, np.ones((j, n)), np.zeros(4)), no_lights(n),
@@ -1223,7 +1225,8 @@ def test_the_directional_lights_take_the_first_detail_and_the_environment_the_se
     no-detail image's, the sky's (lobes and cells) b ×, and both lights together a × sun + b × sky."""
     n = 12
     tangent, view, flat, full, off = _kernel_frames(n, seed=7)
-    points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64), np.ones(n))
+    points = Points(view, tangent, np.zeros(n), np.zeros(n), np.full(n, 1e-3), np.zeros(n, np.int64), np.zeros((n, 3)),
+                    np.ones(n))
     table = im.bake_im_table(ROUGH, TEST_SHAPE, nodes=4)[0]
     i_m = im_table_from(table, im.im_axes(TEST_SHAPE))
     fit = fit_srbf(sky_image(32, 64), n_lobes=4, seed=0)

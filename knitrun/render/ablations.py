@@ -61,7 +61,7 @@ own). Alone it lowered the error on three patches of four but darkened the grazi
 (without it 1.174 of the reference's brightness, with it 1.041).
 
 ``fiber_bend`` tilts the regular fibers as the curve's bend and stretch tilt the reference's swept fibers
-(``pipeline.fiber_bend``: the texture tangent's component along the yarn scaled by λ (1 − κ·o); both backends, the
+(``strip_shading.fiber_bend``: the texture tangent's component along the yarn scaled by λ (1 − κ·o); both backends, the
 ablation ``no_bend`` shades every fiber as on a straight yarn at rest). The default since stop 69: on the four
 patches the yarn-scale error over the instance floor falls 1.35 / 1.29 / 1.39 / 1.72× → 1.22 / 1.22 / 1.34 / 1.59×
 (directional, grazing, sky, simulated; the straight yarns do not move), because the single scattering lies where
@@ -174,7 +174,7 @@ class Features:
     view_xi: bool = True  # with closed_xi: ξ closed at every view (correction/xi_view) where the pack has it
     multiple_scattering: bool = True  # False: single scattering alone (DS density factors d_f = d_b = 0)
     parallax: bool = True  # the regular points' texture coordinate and tangent where the tube's seen surface lies
-    fiber_bend: bool = True  # the regular fibers tilted by the curve's bend and stretch (pipeline.fiber_bend)
+    fiber_bend: bool = True  # the regular fibers tilted by the curve's bend and stretch (strip_shading)
     yarn_bounce: bool = True  # light the neighbouring yarns scatter onto a yarn under directional lights
     split_xi: bool = True  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms) where the pack
     # has it, else the one closed ξ

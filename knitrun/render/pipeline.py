@@ -77,8 +77,9 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    angle to where the reference's fibers meet it. Hairs keep their own strip's attributes.
    Fiber bend (``Features.fiber_bend``, the default since stop 69): the textures hold a straight yarn at rest, but
    where the curve bends or stretches the reference's swept fibers tilt toward its tangent on the outside of the
-   bend and on a stretched yarn, away from it on the inside; the regular points scale their texture tangent's
-   component along t by ``fiber_bend`` (λ (1 − κ·o)), before the fiber frame is built. Hairs are not scaled.
+   bend and on a stretched yarn, away from it on the inside; the regular points carry their segment's curvature and
+   stretch (``segment_bend``) and the shading scales their texture tangent's component along t by λ (1 − κ·o)
+   (``strip_shading.fiber_bend``) before the fiber frame is built. Hairs are not scaled.
 6. ``resolve``: coverage-weighted MSAA resolve, the second layer over the background, the front over that
    (``strip_shading.resolve_behind``), the flyaway layers on top, the K-th first.
 
@@ -965,49 +966,32 @@ def _stacked(layers: list) -> dict:
 
 
 def _kernel_points(points, lines, looks, bend: bool = False) -> Points:
-    """The shading kernels' view of a set of shading points (``shading_inputs.Points``); with ``bend`` their fibers'
-    along-yarn scale (``fiber_bend``), else ones (hairs; ``Features.fiber_bend`` off)."""
+    """The shading kernels' view of a set of shading points (``shading_inputs.Points``); with ``bend`` the curvature
+    and stretch of each point's segment (``segment_bend``, for ``strip_shading.fiber_bend``), else none (zeros and
+    ones: hairs; ``Features.fiber_bend`` off)."""
+    n = len(points["v"])
+    curvature, stretch = segment_bend(points, lines) if bend else (np.zeros((n, 3)), np.ones(n))
     return Points(points["view_dir"], points["tangent"], view_phase_arclength(points, lines, looks),
-                  points["v"].astype(np.float64), points["footprint"], points["curve"].astype(np.int64),
-                  fiber_bend(points, lines, looks) if bend else np.ones(len(points["v"])))
+                  points["v"].astype(np.float64), points["footprint"], points["curve"].astype(np.int64), curvature,
+                  stretch)
 
 
-MIN_ALONG = 0.05  # floor of the along-yarn scale: inside a bend tighter than the radius the fibers would fold
-
-
-def fiber_bend(points, lines, looks) -> np.ndarray:
-    """(N,) the along-yarn scale a of each regular point's fibers: how a bend and a stretch of the yarn tilt them
-    (module docstring, step 5; SHADING.md §2, "Fiber bend").
-
-    The reference sweeps the straight procedural yarn along the curve: a fiber at offset o from the axis (in the
-    normal plane of a rotation-minimising frame) at rest arc length σ lies at c(σ) + o(σ), whose derivative is
-    λ (1 − κ·o) t + o′(σ), o′ the twist of the straight yarn, λ = |dc/dσ| the stretch and κ the curvature vector
-    (dt/ds, toward the centre of the bend). The textures hold the straight yarn at rest (a = 1), so the fiber
-    tangent is the texture's with its component along t scaled by a = max(λ (1 − κ·o), ``MIN_ALONG``): on the
-    outside of a bend (κ·o < 0) and on a stretched yarn the fibers turn toward the yarn's tangent, on the inside
-    away from it. o = r (v b + √(1 − v²) n), the tube surface the camera sees at (v) in the strip frame (n toward the
-    camera, b = n × t). Per polyline segment j (the point's, after the axial parallax): κ = (t_{j+1} − t_j)/L_j with
-    the rasterizer's vertex tangents, λ = L_j / (σ_{j+1} − σ_j), L_j the segment's current length; a = 1 on a closed
-    curve's closing segment and on segments of zero length."""
-    n_points = len(points["v"])
-    if n_points == 0:
-        return np.ones(0)
+def segment_bend(points, lines):
+    """(curvature (N, 3), stretch (N,)) of each point's polyline segment j (its ``segment``, after the axial
+    parallax): κ = (t_{j+1} − t_j)/L_j with the rasterizer's vertex tangents (1/length, toward the centre of the
+    bend) and λ = L_j / (σ_{j+1} − σ_j), L_j the segment's current length and σ the rest arc length; 0 and 1 on a
+    closed curve's closing segment and on a segment of zero length or rest length. What the fiber bend reads
+    (``strip_shading.fiber_bend``; module docstring, step 5)."""
+    j = np.asarray(points["segment"], np.int64)
+    if len(j) == 0:
+        return np.zeros((0, 3)), np.ones(0)
     tangents = vertex_tangents(lines.points, lines.offsets)
     last = np.zeros(len(lines.points), bool)
     last[np.asarray(lines.offsets[1:], np.int64) - 1] = True  # a curve's last point starts no open segment
-    j = np.asarray(points["segment"], np.int64)
     k = np.where(last[j], j, j + 1)
     length = np.linalg.norm(lines.points[k] - lines.points[j], axis=1)
     d_rest = lines.rest[k] - lines.rest[j]
     ok = (k > j) & (length > 0.0) & (d_rest > 0.0)
     length, d_rest = np.where(ok, length, 1.0), np.where(ok, d_rest, 1.0)
-    kappa = np.where(ok[:, None], (tangents[k] - tangents[j]) / length[:, None], 0.0)
-    stretch = np.where(ok, length / d_rest, 1.0)
-    t, wo = points["tangent"].astype(np.float64), points["view_dir"].astype(np.float64)
-    n = wo - (wo * t).sum(axis=1, keepdims=True) * t
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)  # edge-on points are not drawn anyway
-    b = np.cross(n, t)
-    v = np.clip(points["v"].astype(np.float64), -1.0, 1.0)
-    radius = np.array([look.radius for look in looks], np.float64)[np.asarray(points["yarn"], np.int64)]
-    offset = radius[:, None] * (v[:, None] * b + np.sqrt(1.0 - v * v)[:, None] * n)
-    return np.maximum(stretch * (1.0 - (kappa * offset).sum(axis=1)), MIN_ALONG)
+    curvature = np.where(ok[:, None], (tangents[k] - tangents[j]) / length[:, None], 0.0)
+    return np.ascontiguousarray(curvature), np.where(ok, length / d_rest, 1.0)

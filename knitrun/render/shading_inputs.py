@@ -13,8 +13,8 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
 ``Points``         ``view_dir`` (N, 3) unit toward the camera, ``tangent`` (N, 3) unit yarn tangent,
                    ``arclength`` (N,) rest arc length shifted by the view phase, ``v`` (N,) across the strip
                    in [−1, 1], ``footprint`` (N,) pixel size at the point, ``curve`` (N,) int64 curve index,
-                   ``along`` (N,) the scale of the fiber tangent's component along the yarn (the fiber bend,
-                   ``pipeline.fiber_bend``; ones for hairs)
+                   ``curvature`` (N, 3) and ``stretch`` (N,) of the point's polyline segment
+                   (``pipeline.segment_bend``, for ``strip_shading.fiber_bend``; zeros and ones for hairs)
 ``Corrections``    ``xi_full``, ``psi_full`` (N_v, N_θ, N_φ, 3) or (0, 1, 1, 3) for "use the factors";
                    ``xi_m``, ``xi_n``, ``psi_gm``, ``psi_gn`` (N_v, N, 3) factors (ASSET_PACK.md §6–7);
                    ``xi_view`` (N_v, N_θi, N_θo, N_φ, 3), ξ closed at every view, or (0, 1, 1, 1, 3): when it
@@ -52,7 +52,8 @@ class Points(NamedTuple):
     v: np.ndarray
     footprint: np.ndarray
     curve: np.ndarray
-    along: np.ndarray
+    curvature: np.ndarray
+    stretch: np.ndarray
 
 
 class Corrections(NamedTuple):

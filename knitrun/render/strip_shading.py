@@ -16,7 +16,7 @@ Regular fibers (``shade_regular``), per point, angles by ``ASSET_PACK.md`` §3
 t the yarn tangent (G-buffer), ω_o toward the camera, n = normalize(ω_o − (ω_o·t)t), b = n × t, u = s/period,
 v ∈ [−1, 1]. Textures (trilinear, mip level from the pixel footprint): coverage c(u, v) is the point's alpha;
 the coverage-premultiplied tangent gives the shading fiber tangent t_f (t where it vanishes), its component along t
-scaled by the point's fiber bend (``Points.along``, ``pipeline.fiber_bend``). Per directional light
+scaled by the point's fiber bend (``fiber_bend``). Per directional light
 (toward ω_i, irradiance E, yarn-level visibility V from the shadow map):
 
     yarn angles   θ_i, θ_o against t;  θ_d = (θ_o − θ_i)/2;  φ = φ_o − φ_i = −atan2(ω_i·b, ω_i·n)
@@ -418,10 +418,31 @@ def _fiber_lit(psi):
     return min(max((psi[0] + psi[1] + psi[2]) / 3.0, 0.0), 1.0)
 
 
+MIN_ALONG = 0.05  # floor of the fiber bend's scale: inside a bend tighter than the radius the fibers would fold
+
+
+@njit(cache=True)
+def fiber_bend(curvature, stretch, q, radius, v, n, b):
+    """The fiber bend of point q (beyond Huang et al. 2025; SHADING.md §2): the scale a of the fibers' tangent along
+    the yarn where its curve bends and stretches. The reference sweeps the straight procedural yarn along the curve
+    (``knitbake.fibers.fiber_sweep``): a fiber at offset o from the axis (in the normal plane of a
+    rotation-minimising frame) at rest arc length σ lies at c(σ) + o(σ), whose derivative is λ (1 − κ·o) t + o′(σ),
+    o′ the twist of the straight yarn, λ the stretch and κ the curvature vector (``curvature[q]``, ``stretch[q]``:
+    ``pipeline.segment_bend``). The textures hold the straight yarn at rest (a = 1), so a = max(λ (1 − κ·o),
+    ``MIN_ALONG``) with o = r (v b + √(1 − v²) n), the tube surface the camera sees at v in the strip frame (n, b):
+    on the outside of a bend (κ·o < 0) and on a stretched yarn the fibers turn toward the yarn's tangent, on the
+    inside away from it."""
+    depth = math.sqrt(max(0.0, 1.0 - v * v))
+    k_dot_o = 0.0
+    for k in range(3):
+        k_dot_o += curvature[q, k] * radius * (v * b[k] + depth * n[k])
+    return max(stretch[q] * (1.0 - k_dot_o), MIN_ALONG)
+
+
 @njit(cache=True)
 def _texture_tangent(tex, t, n, b, tf, along):
     """World fiber tangent from a coverage-premultiplied strip-frame vector, its component along t scaled by
-    ``along`` (the fiber bend, ``pipeline.fiber_bend``; 1 for hairs); t where it vanishes."""
+    ``along`` (``fiber_bend``; 1 for hairs); t where it vanishes."""
     for k in range(3):
         tf[k] = along * tex[0] * t[k] + tex[1] * b[k] + tex[2] * n[k]
     norm = math.sqrt(dot(tf, tf))
@@ -495,7 +516,8 @@ def shade_regular(idx, points, look, corrections, tangent, coverage, detail, lig
             sample_mip(tangent, 0, level, u, v, tex)
             alpha[q] = min(max(cov[0], 0.0), 1.0)
             sample_mip(detail, 0, level, u, v, fiber_detail)  # the directional lights' and the environment's
-            _texture_tangent(tex, t, n, b, tf, points.along[q])
+            along = fiber_bend(points.curvature, points.stretch, q, look.radius, v, n, b)
+            _texture_tangent(tex, t, n, b, tf, along)
             spread2 = tangent_spread(tex, cov[0])
             theta_o = longitudinal_angle(t, wo)
             theta_o_f = longitudinal_angle(tf, wo)

@@ -37,7 +37,8 @@ the lights up on the tube surface seen (the fragment's position moved r âˆš(1 âˆ
 lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from the fragment's segment as
 ``pipeline.parallax_shift`` does, first to the segment its sample lies on (a fragment's sample may lie past its own
 segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; ``Features.fiber_bend`` reads
-the bend and stretch of the segment it ends on from the same texture (``pipeline.fiber_bend``);
+the bend and stretch of the segment it ends on from the same texture (``pipeline.segment_bend``,
+``strip_shading.fiber_bend``);
 ``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is computed on the CPU (``pipeline.frame_bounce``,
 the lights' visibility at the points from the CPU twin's shadow maps: one more map per directional light and
 frame) and uploaded as a texture of the points (``_bounce_texture``), which a fragment interpolates along its
@@ -144,7 +145,7 @@ def gl_constants() -> str:
         f"const float NO_YARN = {NO_YARN!r};",
         f"const float PCF_RADIUS = {PCF_RADIUS!r};",
         f"const float PARALLAX_MAX_SIN = {pipeline.PARALLAX_MAX_SIN!r};",
-        f"const float MIN_ALONG = {pipeline.MIN_ALONG!r};",
+        f"const float MIN_ALONG = {strip_shading.MIN_ALONG!r};",
         f"const float OWN_STRIP_MAX = {OWN_STRIP_MAX!r};",
         f"const int PARALLAX_STEPS = {PARALLAX_STEPS};",
         f"const int POLYLINE_ROW = {POLYLINE_ROW};",

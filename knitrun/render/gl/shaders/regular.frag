@@ -85,11 +85,11 @@ void axial_parallax(inout StripPoint sp) {
     sp.u = view_phase_u(sp.t, sp.wo, mix(polyline_at(j, 2).xyz, polyline_at(j + 1, 2).xyz, f), sp.s);
 }
 
-// pipeline.fiber_bend: the scale a = max(λ (1 − κ·o), MIN_ALONG) of the fibers' tangent along the yarn on the
-// point's segment j: κ = (t_{j+1} − t_j)/L_j from the vertex tangents, λ = L_j/(σ_{j+1} − σ_j),
-// o = r (v b + √(1 − v²) n) the tube surface seen; 1 on a closed curve's closing segment and on a degenerate
-// segment. Without the parallax the segment is the fragment's own (the CPU's is the one its sample lies on: they
-// differ at a joint, by a sample)
+// strip_shading.fiber_bend (pipeline.segment_bend): the scale a = max(λ (1 − κ·o), MIN_ALONG) of the fibers' tangent
+// along the yarn on the point's segment j: κ = (t_{j+1} − t_j)/L_j from the vertex tangents, λ = L_j/(σ_{j+1} − σ_j),
+// o = r (v b + √(1 − v²) n) the tube surface seen; 1 on a closed curve's closing segment and on a degenerate segment.
+// Without the parallax the segment is the fragment's own (the CPU's is the one its sample lies on: they differ at a
+// joint, by a sample)
 float along_scale(StripPoint sp) {
     vec2 bounds = texelFetch(curve_bounds, ivec2(fin.curve % POLYLINE_ROW, fin.curve / POLYLINE_ROW), 0).xy;
     int j = sp.segment;
