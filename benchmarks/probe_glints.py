@@ -3,19 +3,19 @@ the places a scene's strips are darkest against the reference.
 
 Reads a ``bench_compare.py --out`` folder (``<scene>/reference.exr`` and ``strip_full.exr``). Both images are filtered
 to the scene's projected yarn diameter d (``knitbake.compare.report.yarn_diameter_px``); of the reference's lit pixels
-(above ``LIT`` of its largest) the fraction ``--worst`` where the strips' error is largest and the strips darker are
-the *missed* pixels. For those and for ``--sample`` lit pixels drawn at random, the ray through the pixel's centre is
-met with the reference's own fibers (``knitbake.fibers.fiber_sweep.sweep_fibers`` of the scene's curves with the
-reference's fiber seed, the scene's seed, as ``knitbake.trace.reference.build_reference`` draws them): the fiber
-segment it crosses first, near the strips' shading point there (the pixel's heaviest, ``shading_points``; a pixel
-whose ray meets no fiber there is left out, and counted). Each pixel gives three tangents: that fiber's, the strips'
-yarn tangent and the strips' shading tangent t_f (the pack's tangent texture read as ``shade_regular`` reads it,
-after the axial parallax), with the specular mismatch |θ_i + θ_o − 2α_R| of each against the scene's one directional
-light (R is 1° wide for cotton: a fiber glints within a few degrees of it), the tilt of the fiber and of t_f from
-the yarn tangent (its angle; its components along the strip frame's b, across the strip, and n, toward the camera; how
-the two tilts correlate there: how much of the fiber's direction the texture predicts), and the fiber's tangent less
-t_f against the texture's own tangent spread (Toksvig, ``strip_shading.tangent_spread``), which the shading widens
-the lobes by.
+(above ``LIT`` of its largest) the fraction ``--worst`` where the strips' error is largest and the strips darker are the
+*missed* pixels. For those and for ``--sample`` lit pixels drawn at random, the ray through the pixel's centre is met
+with the reference's own fibers (``knitbake.fibers.fiber_sweep.sweep_fibers`` of the scene's curves with the reference's
+fiber seed, the scene's seed, as ``knitbake.trace.reference.build_reference`` draws them): the fiber segment it crosses
+first, near the strips' shading point there (the pixel's heaviest, ``shading_points``; a pixel whose ray meets no fiber
+there is left out, and counted). Each pixel gives three tangents: that fiber's, the strips' yarn tangent and the strips'
+shading tangent t_f (the pack's tangent texture read as ``shade_regular`` reads it, after the axial parallax and with
+the fiber bend of the renderer's ``Features``), with the specular mismatch |θ_i + θ_o − 2α_R| of each against the
+scene's one directional light (R is 1° wide for cotton: a fiber glints within a few degrees of it), the tilt of the
+fiber and of t_f from the yarn tangent (its angle; its components along the strip frame's b, across the strip, and n,
+toward the camera; how the two tilts correlate there: how much of the fiber's direction the texture predicts), and the
+fiber's tangent less t_f against the texture's own tangent spread (Toksvig, ``strip_shading.tangent_spread``), which the
+shading widens the lobes by.
 
     .venv/bin/python benchmarks/probe_glints.py --pack out/bench/cotton1_standard_66.h5 \\
         --compare-dir out/compare66b [--scene simulated_patch_directional] [--worst 0.05] [--sample 3000]
