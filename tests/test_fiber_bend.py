@@ -25,7 +25,7 @@ def _arc(bend_radius, n=401, angle=np.pi / 2):
     return np.stack([bend_radius * np.cos(a), bend_radius * np.sin(a), np.zeros(n)], axis=1)
 
 
-def _lines(points, rest=None, closed_segment=False):
+def _lines(points, rest=None):
     rest = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))]) if rest is None \
         else rest
     return _Polylines(points, np.array([0, len(points)]), rest, np.zeros(1, np.int64), np.zeros_like(points))
