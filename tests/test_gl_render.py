@@ -261,6 +261,16 @@ def test_the_bodys_glow_on_its_hairs_follows_the_cpu_renderer(tmp_path, pack):
                           Features(hair_glow=False))
 
 
+def test_the_neighbours_light_on_the_hairs_follows_the_cpu_renderer(tmp_path, pack):
+    """``Features.hair_bounce`` (the default) on three side-by-side yarns with their flyaways under the sun: GLSL
+    reads the neighbours' light arriving at the polyline points (``pipeline.frame_bounce``, a second texture) along
+    the hair's segment and adds what the CPU's ``strip_shading.hair_bounce`` adds, to 2 % in the mean and 6 % per
+    pixel."""
+    side_by_side = [straight() + [0.0, dy, 0.0] for dy in (-0.045, 0.0, 0.045)]
+    _term_follows_the_cpu(write_scene(tmp_path, side_by_side, camera=ORTHO, lights=SUN, name="hair_bounce"), pack,
+                          Features(hair_bounce=False))
+
+
 def test_the_hairs_behind_the_body_follow_the_cpu_renderer(tmp_path, pack):
     """``Features.hairs_behind`` (the default) on the flyaway layer lit from behind the yarn: the GLSL share of the
     hairs behind the body (read from the regular coverage texture) adds what the CPU's adds, to 2 % in the mean and

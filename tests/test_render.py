@@ -955,7 +955,8 @@ def test_the_hairs_of_two_yarns_both_show_in_the_gap_between_them(tmp_path, pack
     With one layer the gap shows A's hairs alone, even where A's strip holds no hair and B's does; with two, B's
     hairs composited under A's: A alone + t_A (B alone − background), t_A A's transmittance (from A drawn over two
     backgrounds). Each yarn is drawn "alone" with the other moved out of view, so that it keeps its curve index (the
-    flyaway variant hashes it)."""
+    flyaway variant hashes it), and without the neighbours' light on the hairs (``Features.hair_bounce``), which
+    lights A's hairs by B where both are drawn."""
     camera = """[camera]
 position = [0.0, 0.0, 1.0]
 look_at = [0.0, 0.0, 0.0]
@@ -974,7 +975,7 @@ irradiance = [2.0, 2.0, 2.0]"""  # from the camera: neither yarn shadows the gap
         scene = load_scene(write_scene(tmp_path, curves, camera=camera, lights=light, name="pair"))
         scene = dataclasses.replace(scene, background=background,
                                     render=dataclasses.replace(scene.render, hair_layers=layers))
-        return render(scene, {"cotton1": str(pack)}).image.astype(np.float64)
+        return render(scene, {"cotton1": str(pack)}, Features(hair_bounce=False)).image.astype(np.float64)
 
     one, two = draw([a, b]), draw([a, b], 2)
     a_alone, a_light, b_alone = draw([a, b + away]), draw([a, b + away], 1, (0.6, 0.7, 0.8)), draw([a + away, b])

@@ -75,6 +75,13 @@ the reference's does (its own error over its floor on the simulated patch 2.03 �
 spreads what its fibers scatter, not the light that crosses between them (``yarn_bounce.tube_optics``): until stop
 49 it spread all of T_Y, τ_Y included, and the example patches came out 10–18 % too bright with it
 (BENCHMARKS.md, "Issue 13: light that neighbouring yarns scatter", "Issue 13: the default model of stop 49").
+Since stop 70 its tube phase is the pack's own straight yarn's (``correction/radiance_view`` over v) instead of a
+Lambertian cylinder's, and ``hair_bounce`` lets the hairs of the flyaway layer take the neighbours' light too
+(``strip_shading.hair_bounce``; both backends; the ablation ``no_hair_bounce`` leaves it to the bodies): the bounce was
+0.45–0.56 of the light the example patches' yarns send each other in the reference (``benchmarks/probe_inter_yarn.py``,
+the red examples), and is 0.82–0.87 with both; the directional patches' brightness goes from 0.938–1.002 of the
+reference's to 0.992–1.033 (BENCHMARKS.md, "Issue 13: the neighbours' light by the yarn's own phase, and on the hairs
+(stop 70)").
 
 ``split_xi`` shades with ξ closed apart on single and multiple scattering (the pack's ``correction/xi_view_ss`` and
 ``_ms``, or the diagonal's ``xi_closed_ss``, ``_ms``; schema 2.5, baked by every quality preset since stop 56, before
@@ -149,9 +156,10 @@ plain DS, + ξ (the paper's), + Ψ^Fiber (with the fiber-level detail), + yarn-l
 closed on the renderer (at every view), + flyaways (= the full model, the default); every rung draws the surface
 lookups and the parallax. Then the full model without the tables, with the paper's factored tables, without the
 detail, with the paper's ξ, with ξ closed on the diagonal only, without the axial parallax, without the fiber
-bend, without the yarn-level bounce, with the lookups on the axis plane, with one ξ closed on single and multiple
-scattering together, with two blocking yarns counted, without the body's glow on its hairs, with every hair seen over a body taken to lie in
-front of it and without other yarns' hair layers dimming the directional lights.
+bend, without the yarn-level bounce, without it on the hairs, with the lookups on the axis plane, with one ξ closed
+on single and multiple scattering together, with two blocking yarns counted, without the body's glow on its hairs,
+with every hair seen over a body taken to lie in front of it and without other yarns' hair layers dimming the
+directional lights.
 ``ABLATION_LABELS`` gives each a label; ``regular_fibers`` drops an ablation's flyaway layer.
 """
 
@@ -176,6 +184,7 @@ class Features:
     parallax: bool = True  # the regular points' texture coordinate and tangent where the tube's seen surface lies
     fiber_bend: bool = True  # the regular fibers tilted by the curve's bend and stretch (strip_shading)
     yarn_bounce: bool = True  # light the neighbouring yarns scatter onto a yarn under directional lights
+    hair_bounce: bool = True  # with yarn_bounce: onto its hairs too (strip_shading.hair_bounce)
     split_xi: bool = True  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms) where the pack
     # has it, else the one closed ξ
     two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
@@ -202,6 +211,7 @@ ABLATIONS = {
     "no_parallax": Features(parallax=False),
     "no_bend": Features(fiber_bend=False),
     "no_bounce": Features(yarn_bounce=False),
+    "no_hair_bounce": Features(hair_bounce=False),
     "axis_shadows": Features(surface_shadows=False),
     "whole_xi": Features(split_xi=False),
     "two_blockers": Features(two_blockers=True),
@@ -219,6 +229,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "no_parallax": "full without the axial parallax",
                    "no_bend": "full with every fiber tilted as on a straight yarn at rest",
                    "no_bounce": "full without the yarn-level bounce",
+                   "no_hair_bounce": "full without the yarn-level bounce on the hairs",
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "whole_xi": "full with one ξ closed on single and multiple scattering together",
                    "two_blockers": "full with two blocking yarns counted",

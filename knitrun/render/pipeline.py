@@ -112,10 +112,11 @@ from knitrun.render.shading_inputs import Lights, Lobes, Points, no_rows
 from knitrun.render.shadow_map import behind_map, build_shadow_map, own_strip_depth, shadow_visibility
 from knitrun.render.strip_raster import (rasterize_before, rasterize_behind, rasterize_visibility, vertex_tangent,
                                          vertex_tangents)
-from knitrun.render.strip_shading import (flyaway_coverage, no_shading_points, past_blockers, resolve, resolve_behind,
-                                          same_surface, shade_flyaway, shade_regular, shading_points)
+from knitrun.render.strip_shading import (flyaway_coverage, hair_bounce, no_shading_points, past_blockers, resolve,
+                                          resolve_behind, same_surface, shade_flyaway, shade_regular, shading_points)
 from knitrun.render.texture_sampling import no_texture
-from knitrun.render.yarn_bounce import BounceLights, BounceYarns, bounce_at_points, tube_optics, vertex_bounce
+from knitrun.render.yarn_bounce import (BounceLights, BounceYarns, bounce_at_points, lambert_phase, tube_optics,
+                                        vertex_bounce)
 from knitrun.render.yarn_look import load_look, no_full_table, no_view_table, ones_factor, shading_look
 from knitrun.shading.builtin_sky import environment_image
 from knitrun.shading.im_lookup import im_slices, no_im_table
@@ -749,10 +750,10 @@ class Renderer:
                 for look, a in zip(looks, albedo)}
         ms_dir, ms_e, ms_vis = ms_lights(lobe_dir, lobe_lambda, lobe_w, lobe_vis)
         facts["ms_lights"] = int(len(ms_dir))
-        bounce = [no_rows()] * len(layers)
+        bounce, fly_arriving = [no_rows()] * len(layers), None
         if bounce_on:
-            bounce = _yarn_bounce(lines, looks, camera, light_dir, light_e, at_bounce, vertex_vis, vertex_beyond,
-                                  layers, facts)
+            bounce, fly_arriving = _yarn_bounce(lines, looks, camera, light_dir, light_e, at_bounce, vertex_vis,
+                                                vertex_beyond, layers, fly_points, facts)
         lap("shadow")
 
         if self._compile_helper is not None:  # its kernels are in the cache by now, or soon: load them, not compile
@@ -787,6 +788,8 @@ class Renderer:
                               no_rows() if glow is None else glow,
                               Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1], lobe_albedo[k]), self.im_slices[k],
                               fly_rgb, fly_alpha, fly_transmit)
+                if fly_arriving is not None and features.hair_bounce:  # the neighbours' light on the hairs
+                    fly_rgb[idx] += hair_bounce(fly_arriving[idx], self.kernel_looks[k][0].params)
             if not features.hair_light:  # the split of ``Features.hair_light``: opaque black hairs
                 fly_rgb[:] = 0.0
                 fly_transmit[:] = 0.0
@@ -853,20 +856,23 @@ def bounce_drawn(features: Features, looks, n_lights: int) -> bool:
         all(look.hull_albedo is not None and look.hull_transmittance is not None for look in looks)
 
 
-def _yarn_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond, layers, facts) -> list:
-    """The yarn-level bounce radiance (N, 3) of each layer's points (``frame_bounce`` interpolated along their
-    curves); ``facts["yarn_bounce"]`` gets the vertices' mean covered fraction of the sphere and mean bounce
-    radiance."""
-    vertex, covered = frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond)
+def _yarn_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond, layers, fly_points,
+                 facts) -> tuple:
+    """(the yarn-level bounce radiance (N, 3) of each layer's points, the neighbours' light arriving at the flyaway
+    points (N_fly, 3) or None without them): ``frame_bounce``'s values interpolated along the curves;
+    ``facts["yarn_bounce"]`` gets the vertices' mean covered fraction of the sphere and mean bounce radiance."""
+    vertex, covered, arriving = frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond)
     if len(covered):
         facts["yarn_bounce"] = bounce_facts(vertex, covered)
-    out = []
-    for layer in layers:
-        values = np.empty((len(layer["weight"]), 3))
-        bounce_at_points(np.ascontiguousarray(layer["segment"], np.int64),
-                         np.ascontiguousarray(layer["arclength"], np.float64), lines.rest, vertex, values)
-        out.append(values)
-    return out
+
+    def at_points(points, per_vertex):
+        values = np.empty((len(points["weight"]), 3))
+        bounce_at_points(np.ascontiguousarray(points["segment"], np.int64),
+                         np.ascontiguousarray(points["arclength"], np.float64), lines.rest, per_vertex, values)
+        return values
+
+    return [at_points(layer, vertex) for layer in layers], None if fly_points is None else at_points(fly_points,
+                                                                                                      arriving)
 
 
 def glow_on(features: Features) -> bool:
@@ -926,13 +932,30 @@ def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, verte
     else:
         view = np.asarray(camera.position, np.float64) - lines.points
         view = view / np.maximum(np.linalg.norm(view, axis=1, keepdims=True), 1e-300)
+    reflect, transmit = tube_optics(albedo, transmit, gap[:, None])
     yarns = BounceYarns(lines.points, vertex_tangents(lines.points, lines.offsets),
                         np.repeat(np.arange(len(lines.entry)), np.diff(lines.offsets)), lines.offsets, lines.rest,
-                        np.array([looks[k].radius for k in lines.entry], np.float64),
-                        *tube_optics(albedo, transmit, gap[:, None]), np.ascontiguousarray(view, np.float64))
+                        np.array([looks[k].radius for k in lines.entry], np.float64), reflect + transmit,
+                        np.ascontiguousarray(view, np.float64), bounce_phases(looks),
+                        np.asarray(lines.entry, np.int64))
     direct = past_blockers.py_func(vertex_vis, vertex_beyond, gap[None, :])  # numpy: no array kernel to compile
-    vertex, covered = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
-    return _between(full.rest, at, vertex), _between(full.rest, at, covered[:, None])[:, 0]
+    vertex, covered, arriving = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
+    return (_between(full.rest, at, vertex), _between(full.rest, at, covered[:, None])[:, 0],
+            _between(full.rest, at, arriving))
+
+
+def bounce_phases(looks) -> np.ndarray:
+    """(entries, …): each yarn entry's tube phase for the bounce on the shared grid (``YarnLook.tube_phase``, from
+    its pack's ``correction/radiance_view``; a Lambertian cylinder's, ``yarn_bounce.lambert_phase``, where the pack
+    has none)."""
+    out = []
+    for look in looks:
+        if look.tube_phase is not None:
+            out.append(look.tube_phase)
+        else:
+            out.append(lambert_phase(*tube_optics(np.reshape(look.hull_albedo, 3),
+                                                  np.reshape(look.hull_transmittance, 3), look.gap)))
+    return np.ascontiguousarray(np.stack(out), np.float64)
 
 
 def _thinned(lines, at) -> _Polylines:

@@ -102,6 +102,13 @@ from the axis sees the (infinite) tube over the solid angle Ω = 4 asin(1/ρ) an
 extended source as its albedo a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the
 camera, averaged over the depths the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
 
+The neighbours' light on the hairs (``Features.hair_bounce``, the default since knit's stop 70; ``hair_bounce``; GLSL
+the same line in ``flyaway.frag``): the yarn-level bounce (``knitrun.render.yarn_bounce``) also gives, per polyline
+point, the neighbouring yarns' light arriving there over all directions, I = Σ_j w_ij L_ji (the bounce before the
+receiving tube's phase); a hair of the flyaway layer returns I a/(4π) toward the camera, a its albedo A_R + A_TT + A_D
+spread evenly over the sphere (as for the body's glow), I interpolated along the curve by rest arc length. In the
+reference the hairs carry a third of the light the example patches' yarns send each other (BENCHMARKS.md, stop 70).
+
 Zinke's density factors d_f, d_b come with the look (``Look.d_f``, ``d_b``: ``dual_scattering.D_F``, ``D_B``); both
 0 (``Features.multiple_scattering`` False) leave single scattering alone, the split that ``benchmarks/probe_split.py``
 compares with the reference traced with one scattering event.
@@ -692,6 +699,14 @@ def _glow_between(tube, albedo, v, wb, wn, cos_l, lo, hi, weight, out):
         share = weight * cos_l * INV_PI2 * cylinder_solid_angle(rho) / (4.0 * math.pi) / HAIR_DEPTHS
         for ch in range(3):
             out[ch] += share * (tube[0, ch] * g + tube[1, ch] * g_forward) * albedo[ch]
+
+
+def hair_bounce(arriving, params) -> np.ndarray:
+    """(N, 3): the radiance toward the camera that hairs return of the neighbouring yarns' light ``arriving`` (N, 3),
+    I of ``yarn_bounce.vertex_bounce`` at the hairs' points, for the BCSDF ``params`` of their yarn (module docstring,
+    "The neighbours' light on the hairs"): I (A_R + A_TT + A_D)/(4π)."""
+    albedo = params[P_A_R:P_A_R + 3] + params[P_A_TT:P_A_TT + 3] + params[P_A_D:P_A_D + 3]
+    return np.asarray(arriving, np.float64) * albedo / (4.0 * math.pi)
 
 
 @njit(parallel=True, cache=True)

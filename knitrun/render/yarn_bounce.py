@@ -21,34 +21,35 @@ directional lights of irradiance E_L toward ω_L:
   over the segments within ``reach`` = ``REACH_RADII``·r; Ω_i = Σ_j Ω_ij, and the fraction of the sphere they
   cover, overlaps counted as for randomly placed occluders, f_i = 1 − exp(−Ω_i / 4π). Each segment's share is
   w_ij = Ω_ij · 4π f_i / Ω_i (so Σ_j w_ij = 4π f_i).
-* **A tube's phase.** A tube lit by a distant light of irradiance E at angle θ to its normal plane intercepts
-  E·2r·cos θ per unit length. It scatters R_Y = ρ_Y − T_Y of it back toward the light's side and S_Y = T_Y − τ_Y
-  forward through itself (``tube_optics``; ρ_Y and T_Y the pack's hull albedo and transmittance, ASSET_PACK.md §10,
-  τ_Y its gap transmittance, ``yarn_look.gap_transmittance``). The rest of T_Y, τ_Y, is light that crossed between
-  the fibers unscattered: it goes on along the light's direction, where the receiving yarn's own direct term
-  already has it (``strip_shading.past_blockers`` lets τ_Y through a blocker), and toward the camera it is the
-  layer behind the strip (``pipeline``, ``render.layers``), so it is not spread again here. (Spreading all of T_Y
-  counted cotton's τ_Y ≈ 0.16 of its T_Y ≈ 0.46 twice: the white-yarn knit patches came out 10–18 % too bright
-  with the bounce, BENCHMARKS.md "Issue 13: the default model of stop 49".) Each part is spread over the
-  directions in the tube's normal plane as a Lambertian cylinder spreads its light: seen at angle α (in the normal
-  plane) from the direction toward the light, the back-scattered part has radiance R_Y·E·cos θ/π² · g(α) and the
-  forward part S_Y·E·cos θ/π² · g(π − α), with
+* **A tube's phase.** Φ(ω_i → ω_o; t) is the mean radiance over a yarn's projected width seen from ω_o when a
+  distant light of unit irradiance shines on it from ω_i, by the angles of ``fiber_frame`` (θ_i, θ_o, φ against the
+  tangent t): the pack's ``correction/radiance_view`` averaged over v (ASSET_PACK.md §6: the bake's straight yarn,
+  path traced, every order of scattering, the light that crosses between the fibers not in it), in the entry's
+  colour (``yarn_look.tube_phase``). Where the pack lacks it, the phase of a Lambertian cylinder that scatters
+  R_Y = ρ_Y − T_Y back toward the light's side and S_Y = T_Y − τ_Y forward through itself (``tube_optics``,
+  ``lambert_phase``):
 
-      g(α) = (π/4) (sin α + (π − α) cos α),   α ∈ [0, π]                   (mean 1 over the circle; g(0) = π²/4)
+      Φ = cos θ_i (R_Y g(|φ|) + S_Y g(π − |φ|)) / π²,   g(α) = (π/4) (sin α + (π − α) cos α)   (mean 1 over α)
 
-  so the tube's mean scattered radiance over all directions is (ρ_Y − τ_Y)·E·cos θ/π²: in a uniform environment
-  of radiance L it intercepts 2π² r L and scatters (ρ_Y − τ_Y) L, the hull albedo less what passes between its
-  fibers. P(α) = R_Y g(α) + S_Y g(π − α) below.
+  Both send, over all directions, the tube's hull albedo less the light between its fibers, ρ_Y − τ_Y (cotton1
+  standard: the table's ∫Φ dω_i, cos²-weighted over θ_o, 0.60 / 0.56 / 0.46 against ρ_Y − τ_Y = 0.62 / 0.58 / 0.48),
+  but not alike: cotton's fibers send more sideways and less straight back than a Lambertian cylinder (at φ = 90°,
+  θ = 0: 0.070 against 0.050), and a neighbour sits beside a yarn, its light arriving from the side. With the
+  Lambertian phase the bounce was 0.27–0.46 of the light two parallel or crossing yarns send each other in the
+  reference and 0.45–0.56 of the example patches' (BENCHMARKS.md, stop 70). τ_Y, the light that crosses between
+  the fibers unscattered, goes on along the light's direction, where the receiving yarn's own direct term already
+  has it (``strip_shading.past_blockers`` lets τ_Y through a blocker); spreading it again counted it twice
+  (BENCHMARKS.md "Issue 13: the default model of stop 49").
 * **Neighbour to receiver.** Segment j sends toward vertex i (direction d from j to i) the radiance
-  L_ji = Σ_L E_L V_d cos θ_L P_j(α_jL) / π², α_jL the angle between ω_L and d in j's normal plane, V_d = V + (1 −
-  V) τ_Y the light reaching j past the other yarns (``strip_shading.past_blockers``; the mean of j's two vertices).
-* **Receiver to camera.** Vertex i receives L_ji over w_ij from −d and sends toward the camera (ω_o, in its normal
-  plane at angle α'_ij from −d) what a tube lit by an irradiance L_ji w_ij from −d sends there:
+  L_ji = Σ_L E_L V_d Φ_j(ω_L → d), V_d = V + (1 − V) τ_Y the light reaching j past the other yarns
+  (``strip_shading.past_blockers``; the mean of j's two vertices).
+* **Receiver to camera.** Vertex i receives L_ji over w_ij from −d and sends toward the camera ω_o what a tube lit
+  by an irradiance L_ji w_ij from −d sends there:
 
-      B_i = Σ_j w_ij L_ji cos θ'_ij P_i(α'_ij) / π² / (1 − ρ f_i)           (RGB)
+      B_i = Σ_j w_ij L_ji Φ_i(−d → ω_o) / (1 − ρ f_i)           (RGB)
 
-  θ'_ij the angle of d to i's normal plane; the last factor adds the further bounces, self-similarly (the
-  neighbours are among neighbours too: L_n = ē + ρ f L_n, ρ = R_Y + S_Y the scattered albedo).
+  the last factor adds the further bounces, self-similarly (the neighbours are among neighbours too: L_n = ē + ρ f
+  L_n, ρ = R_Y + S_Y the scattered albedo).
 
 The shading points take B interpolated along their curve by rest arc length (``bounce_at_points``) and add it to
 their radiance before the fiber-level detail (``strip_shading.shade_regular``): a yarn-level term, not corrected by
@@ -58,11 +59,16 @@ yarn's times the colour for a pack without them); a pack without ρ_Y and T_Y ha
 here: its lobes' inter-reflection carries that light.
 
 Implementation: what a pair needs that does not depend on the receiver (the segment's axis and length, mean
-tangent, the light projected on its normal plane and what it sends, E V_d cos θ_L R_Y and … S_Y) is computed once
-per segment (``_senders``); the segments are sorted by the cell of their midpoint on a uniform grid of cell
-``reach`` (a counting sort), so a vertex finds every segment whose midpoint lies within reach in its own and the
-26 neighbouring cells; each vertex's sums are its own (``prange`` over vertices, no shared output). Angles enter
-the phase by their cosines (``lambert_pair``: one arc cosine per phase).
+tangent, its yarn's phase table, each light's θ_i and E V_d) is computed once per segment (``_senders``); the phase
+tables of every yarn entry share one grid (``PHASE_THETA`` × ``PHASE_THETA`` × ``PHASE_PHI`` cells, ``phase_grid``)
+and are read trilinearly by the pack's interpolation rule (``phase_at``, ``table_lookup.axis_cell``); the segments
+are sorted by the cell of their midpoint on a uniform grid of cell ``reach`` (a counting sort), so a vertex finds
+every segment whose midpoint lies within reach in its own and the 26 neighbouring cells; each vertex's sums are its
+own (``prange`` over vertices, no shared output).
+
+**Hairs.** The sum without the receiver's phase, I_i = Σ_j w_ij L_ji / (1 − ρ f_i), is the neighbours' light
+arriving at vertex i over all directions: the hairs of the flyaway layer take it (``strip_shading.hair_bounce``,
+``Features.hair_bounce``).
 """
 
 from __future__ import annotations
@@ -73,17 +79,23 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from data_formats.conventions import PHI_RANGE, THETA_RANGE
+from knitrun.shading.fiber_frame import azimuth_difference, longitudinal_angle
+from knitrun.shading.table_lookup import axis_cell, lookup_axis
 
 REACH_RADII = 8.0  # neighbours counted within this many yarn radii of a vertex (about one stitch of a knit)
 CONTACT_RADII = 2.0  # the nearest a neighbouring axis counts: touching tubes
 INV_PI2 = 1.0 / (math.pi * math.pi)
+PHASE_THETA = 33  # cells per θ axis of the shared phase grid (a standard pack's 17 and a draft's 9 fall on it)
+PHASE_PHI = 36  # cells of its φ axis (10° each)
 
 
 class BounceYarns(NamedTuple):
     """The polylines as the bounce kernel reads them: ``points`` (P, 3), ``tangent`` (P, 3) unit, ``curve`` (P,) int64
-    curve of each vertex, ``offsets`` (C + 1,), ``rest`` (P,) rest arc length, ``radius`` (C,), ``reflect`` and
-    ``transmit`` (P, 3) the tube's R_Y and S_Y at each vertex (in its colour, ``tube_optics``), ``toward_camera``
-    (P, 3) unit."""
+    curve of each vertex, ``offsets`` (C + 1,), ``rest`` (P,) rest arc length, ``radius`` (C,), ``scattered`` (P, 3)
+    the tube's scattered albedo R_Y + S_Y at each vertex (in its colour, ``tube_optics``), ``toward_camera`` (P, 3)
+    unit, ``phase`` (K, ``PHASE_THETA``, ``PHASE_THETA``, ``PHASE_PHI``, 3) the tube phases Φ on the shared grid
+    (``phase_grid``; axes θ_i, θ_o, φ, channel) and ``phase_of`` (C,) int64 each curve's."""
 
     points: np.ndarray
     tangent: np.ndarray
@@ -91,9 +103,10 @@ class BounceYarns(NamedTuple):
     offsets: np.ndarray
     rest: np.ndarray
     radius: np.ndarray
-    reflect: np.ndarray
-    transmit: np.ndarray
+    scattered: np.ndarray
     toward_camera: np.ndarray
+    phase: np.ndarray
+    phase_of: np.ndarray
 
 
 def tube_optics(albedo, transmittance, gap):
@@ -105,6 +118,49 @@ def tube_optics(albedo, transmittance, gap):
     return np.clip(albedo - transmittance, 0.0, 1.0), np.clip(transmittance - gap, 0.0, 1.0)
 
 
+def phase_centres(n: int, lo: float, hi: float) -> np.ndarray:
+    """The n cell centres over [lo, hi] (ASSET_PACK.md §4.2)."""
+    return lo + (np.arange(n) + 0.5) * (hi - lo) / n
+
+
+def lambert_phase(reflect, transmit) -> np.ndarray:
+    """(``PHASE_THETA``, ``PHASE_THETA``, ``PHASE_PHI``, 3): the phase Φ of a Lambertian cylinder that scatters
+    ``reflect`` R_Y (3,) back toward the light's side and ``transmit`` S_Y (3,) forward (module docstring), at the
+    shared grid's cell centres: the bounce's phase for a pack without ``correction/radiance_view``."""
+    theta = phase_centres(PHASE_THETA, *THETA_RANGE)
+    alpha = np.abs(phase_centres(PHASE_PHI, *PHI_RANGE))
+    g = np.array([lambert_pair(math.cos(a)) for a in alpha])  # (N_φ, 2): g(|φ|), g(π − |φ|)
+    lobe = g[:, :1] * np.asarray(reflect, np.float64) + g[:, 1:] * np.asarray(transmit, np.float64)  # (N_φ, 3)
+    out = np.cos(theta)[:, None, None, None] * lobe[None, None] * INV_PI2
+    return np.ascontiguousarray(np.broadcast_to(out, (PHASE_THETA, PHASE_THETA, PHASE_PHI, 3)))
+
+
+def phase_grid(table) -> np.ndarray:
+    """A phase table (N_θi, N_θo, N_φ, 3) on any grid of cell centres (θ over ``THETA_RANGE``, clamp; φ over
+    ``PHI_RANGE``, repeat) resampled to the shared grid's centres by the pack's interpolation rule."""
+    out = np.asarray(table, np.float64)
+    for axis, (n, lo, hi, wrap) in enumerate(((PHASE_THETA, *THETA_RANGE, "clamp"),
+                                              (PHASE_THETA, *THETA_RANGE, "clamp"),
+                                              (PHASE_PHI, *PHI_RANGE, "repeat"))):
+        moved = np.moveaxis(out, axis, 0)
+        out = np.moveaxis(lookup_axis(moved, phase_centres(n, lo, hi), lo, hi, wrap), 0, axis)
+    return np.ascontiguousarray(out)
+
+
+@njit(cache=True)
+def phase_at(table, theta_i, theta_o, phi, out):
+    """out[:3] = the phase ``table`` (``PHASE_THETA``, ``PHASE_THETA``, ``PHASE_PHI``, 3) at (θ_i, θ_o, φ), trilinear
+    by ASSET_PACK.md §4.3 (θ clamp, φ repeat)."""
+    a0, a1, fa = axis_cell(theta_i, THETA_RANGE[0], THETA_RANGE[1], table.shape[0], False)
+    b0, b1, fb = axis_cell(theta_o, THETA_RANGE[0], THETA_RANGE[1], table.shape[1], False)
+    c0, c1, fc = axis_cell(phi, PHI_RANGE[0], PHI_RANGE[1], table.shape[2], True)
+    for ch in range(3):
+        lo = ((1.0 - fb) * ((1.0 - fc) * table[a0, b0, c0, ch] + fc * table[a0, b0, c1, ch]) +
+              fb * ((1.0 - fc) * table[a0, b1, c0, ch] + fc * table[a0, b1, c1, ch]))
+        hi = ((1.0 - fb) * ((1.0 - fc) * table[a1, b0, c0, ch] + fc * table[a1, b0, c1, ch]) +
+              fb * ((1.0 - fc) * table[a1, b1, c0, ch] + fc * table[a1, b1, c1, ch]))
+        out[ch] = (1.0 - fa) * lo + fa * hi
+
 class BounceLights(NamedTuple):
     """Directional lights: ``direction`` (L, 3) unit toward the light, ``irradiance`` (L, 3), ``direct`` (L, P) the
     light reaching each vertex past the other yarns (V_d)."""
@@ -115,16 +171,18 @@ class BounceLights(NamedTuple):
 
 
 def vertex_bounce(yarns: BounceYarns, lights: BounceLights, reach_radii: float = REACH_RADII):
-    """(B (P, 3), f (P,)): the bounce radiance toward the camera at each vertex and the fraction of its sphere the
-    neighbours cover (module docstring). Zero where no neighbour lies within ``reach_radii`` radii."""
+    """(B (P, 3), f (P,), I (P, 3)): the bounce radiance toward the camera at each vertex, the fraction of its sphere
+    the neighbours cover and the neighbours' light arriving there over all directions, I = Σ_j w_ij L_ji / (1 − ρ f)
+    (module docstring, "Hairs"). Zero where no neighbour lies within ``reach_radii`` radii."""
     n = len(yarns.points)
-    out, covered = np.zeros((n, 3)), np.zeros(n)
+    out, covered, arriving = np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3))
     if n < 2 or len(yarns.radius) == 0 or len(lights.direction) == 0:
-        return out, covered
+        return out, covered, arriving
     senders = _senders(yarns, lights, float(reach_radii * yarns.radius.max()))
     if len(senders.length):
-        _vertex_bounce(yarns, senders, float(reach_radii), out, covered)
-    return out, covered
+        _vertex_bounce(yarns, senders, np.ascontiguousarray(lights.direction, np.float64), float(reach_radii), out,
+                       covered, arriving)
+    return out, covered, arriving
 
 
 class _Senders(NamedTuple):
@@ -132,12 +190,11 @@ class _Senders(NamedTuple):
     of cell ``cell`` (S segments; ``cell_start`` (cells + 1,) the first segment of each cell by key (i·ny + j)·nz + k,
     ``dims`` (3,) the grid's cells per axis, ``origin`` (3,) its corner). Per segment: ``start`` (S, 3) its first
     point, ``axis`` (S, 3) unit and ``length``, ``mid`` (S, 3), ``tangent`` (S, 3) the mean of its vertices' tangents
-    (normalised; zero where they cancel), ``curve``, ``rest_mid`` its midpoint's rest arc length, ``radius``; per
-    light L, ``toward_light`` (S, L, 3) the light's direction projected on the segment's normal plane, unit (zero
-    where the light runs along it), and what the segment sends toward a direction at angle α from it in that plane
-    over the phase factors: ``back`` (S, L, 3) E V_d cos θ_L R_Y and ``forward`` E V_d cos θ_L S_Y (module docstring,
-    "Neighbour to receiver"; the radiance is back·g(α) + forward·g(π − α)). Everything a pair needs that does not
-    depend on the pair, computed once per segment instead of once per receiving vertex."""
+    (normalised; zero where they cancel), ``curve``, ``rest_mid`` its midpoint's rest arc length, ``radius``,
+    ``phase_of`` its yarn's phase table; per light L, ``theta_light`` (S, L) the light's θ_i against the tangent and
+    ``power`` (S, L, 3) E V_d (module docstring, "Neighbour to receiver": the radiance it sends toward d is
+    power · Φ(θ_i, θ_d, φ)). Everything a pair needs that does not depend on the pair, computed once per segment
+    instead of once per receiving vertex."""
 
     start: np.ndarray
     axis: np.ndarray
@@ -147,9 +204,9 @@ class _Senders(NamedTuple):
     curve: np.ndarray
     rest_mid: np.ndarray
     radius: np.ndarray
-    toward_light: np.ndarray
-    back: np.ndarray
-    forward: np.ndarray
+    phase_of: np.ndarray
+    theta_light: np.ndarray
+    power: np.ndarray
     cell_start: np.ndarray
     dims: np.ndarray
     origin: np.ndarray
@@ -167,15 +224,9 @@ def _senders(yarns: BounceYarns, lights: BounceLights, cell: float) -> _Senders:
     norm = np.linalg.norm(tangent, axis=1, keepdims=True)
     tangent = np.where(norm > 0.0, tangent / np.where(norm > 0.0, norm, 1.0), tangent)
     light = np.asarray(lights.direction, np.float64)  # (L, 3)
-    along = tangent @ light.T  # (S, L)
-    across = light[None, :, :] - along[:, :, None] * tangent[:, None, :]  # (S, L, 3)
-    cos_l = np.linalg.norm(across, axis=2)  # cos θ_L: the light's part normal to the segment
-    lit = cos_l > 1e-12
-    toward_light = np.where(lit[:, :, None], across / np.where(lit, cos_l, 1.0)[:, :, None], 0.0)
+    theta_light = np.arcsin(np.clip(tangent @ light.T, -1.0, 1.0))  # (S, L)
     direct = 0.5 * (lights.direct[:, j] + lights.direct[:, j + 1]).T  # (S, L) V_d, the mean of the two vertices
-    power = np.where(lit, direct * cos_l, 0.0)[:, :, None] * np.asarray(lights.irradiance, np.float64)[None]
-    back = power * (0.5 * (yarns.reflect[j] + yarns.reflect[j + 1]))[:, None, :]
-    forward = power * (0.5 * (yarns.transmit[j] + yarns.transmit[j + 1]))[:, None, :]
+    power = direct[:, :, None] * np.asarray(lights.irradiance, np.float64)[None]
     origin = mid.min(axis=0) if len(j) else np.zeros(3)
     ijk = np.floor((mid - origin) / cell).astype(np.int64)
     dims = ijk.max(axis=0) + 1 if len(j) else np.ones(3, np.int64)
@@ -189,9 +240,9 @@ def _senders(yarns: BounceYarns, lights: BounceLights, cell: float) -> _Senders:
         return np.ascontiguousarray(x[order])
 
     return _Senders(c(a), c(axis), c(length), c(mid), c(tangent), c(curve).astype(np.int64),
-                    c(0.5 * (yarns.rest[j] + yarns.rest[j + 1])), c(yarns.radius[curve]), c(toward_light), c(back),
-                    c(forward), cell_start, dims.astype(np.int64), origin, float(cell))
-
+                    c(0.5 * (yarns.rest[j] + yarns.rest[j + 1])), c(yarns.radius[curve]),
+                    c(np.asarray(yarns.phase_of, np.int64)[curve]), c(theta_light), c(power), cell_start,
+                    dims.astype(np.int64), origin, float(cell))
 
 @njit(cache=True)
 def segment_solid_angle(x, a, b, width, nearest):
@@ -225,41 +276,25 @@ def lambert_pair(cos_alpha):
     return 0.25 * math.pi * (sin_a + (math.pi - alpha) * c), 0.25 * math.pi * (sin_a - alpha * c)
 
 
-@njit(cache=True)
-def _cos_across(t0, t1, t2, d0, d1, d2, w0, w1, w2):
-    """(|d projected on the normal plane of t|, the cosine of the angle between that projection and ``w``, a unit
-    vector in the plane; 2 when the projection vanishes: no angle)."""
-    c = d0 * t0 + d1 * t1 + d2 * t2
-    a0, a1, a2 = d0 - c * t0, d1 - c * t1, d2 - c * t2
-    na = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    if na < 1e-12:
-        return na, 2.0
-    return na, (a0 * w0 + a1 * w1 + a2 * w2) / na
-
-
 @njit(parallel=True, cache=True)
-def _vertex_bounce(yarns, senders, reach_radii, out, covered):
+def _vertex_bounce(yarns, senders, light_dir, reach_radii, out, covered, arriving):
     points, tangent, curve = yarns.points, yarns.tangent, yarns.curve
     dims, cell = senders.dims, senders.cell
     for i in prange(points.shape[0]):
         c = curve[i]
         reach = reach_radii * yarns.radius[c]
         x0, x1, x2 = points[i, 0], points[i, 1], points[i, 2]
-        ti0, ti1, ti2 = tangent[i, 0], tangent[i, 1], tangent[i, 2]
-        # the view projected on the receiver's normal plane, unit (the receiver's phase angle is measured from it)
-        v0, v1, v2 = yarns.toward_camera[i, 0], yarns.toward_camera[i, 1], yarns.toward_camera[i, 2]
-        e = v0 * ti0 + v1 * ti1 + v2 * ti2
-        v0, v1, v2 = v0 - e * ti0, v1 - e * ti1, v2 - e * ti2
-        nv = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        seen = nv >= 1e-12  # a view along the yarn: no phase angle, the vertex sends nothing toward the camera
-        if seen:
-            v0, v1, v2 = v0 / nv, v1 / nv, v2 / nv
-        r0, r1, r2 = yarns.reflect[i, 0], yarns.reflect[i, 1], yarns.reflect[i, 2]
-        f0, f1, f2 = yarns.transmit[i, 0], yarns.transmit[i, 1], yarns.transmit[i, 2]
+        ti = tangent[i]
+        view = yarns.toward_camera[i]
+        theta_view = longitudinal_angle(ti, view)
+        received = yarns.phase[yarns.phase_of[c]]
+        sent_phase, seen_phase = np.empty(3), np.empty(3)
+        toward = np.empty(3)  # from i toward the neighbour, −d: where its light comes from
+        away = np.empty(3)  # d, from the neighbour toward i
         gi = int(math.floor((x0 - senders.origin[0]) / cell))
         gj = int(math.floor((x1 - senders.origin[1]) / cell))
         gk = int(math.floor((x2 - senders.origin[2]) / cell))
-        total, s0, s1, s2 = 0.0, 0.0, 0.0, 0.0
+        total, s0, s1, s2, a0, a1, a2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         for ci in range(max(gi - 1, 0), min(gi + 2, dims[0])):
             for cj in range(max(gj - 1, 0), min(gj + 2, dims[1])):
                 for ck in range(max(gk - 1, 0), min(gk + 2, dims[2])):
@@ -281,38 +316,35 @@ def _vertex_bounce(yarns, senders, reach_radii, out, covered):
                         if not w > 0.0:
                             continue
                         total += w
-                        if not seen:
-                            continue
-                        d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
-                        # the receiver: light from −d, seen from the view
-                        cos_r, cos_alpha_r = _cos_across(ti0, ti1, ti2, -d0, -d1, -d2, v0, v1, v2)
-                        if cos_alpha_r > 1.5:
-                            continue
-                        g_r, g_rf = lambert_pair(cos_alpha_r)
-                        tj0, tj1, tj2 = senders.tangent[m, 0], senders.tangent[m, 1], senders.tangent[m, 2]
-                        for light in range(senders.back.shape[1]):
-                            _, cos_alpha_l = _cos_across(tj0, tj1, tj2, d0, d1, d2, senders.toward_light[m, light, 0],
-                                                         senders.toward_light[m, light, 1],
-                                                         senders.toward_light[m, light, 2])
-                            if cos_alpha_l > 1.5:
-                                continue
-                            g_l, g_lf = lambert_pair(cos_alpha_l)
-                            k = w * cos_r
-                            s0 += k * (senders.back[m, light, 0] * g_l + senders.forward[m, light, 0] * g_lf) * (
-                                r0 * g_r + f0 * g_rf)
-                            s1 += k * (senders.back[m, light, 1] * g_l + senders.forward[m, light, 1] * g_lf) * (
-                                r1 * g_r + f1 * g_rf)
-                            s2 += k * (senders.back[m, light, 2] * g_l + senders.forward[m, light, 2] * g_lf) * (
-                                r2 * g_r + f2 * g_rf)
+                        away[0], away[1], away[2] = d0 / dist, d1 / dist, d2 / dist
+                        toward[0], toward[1], toward[2] = -away[0], -away[1], -away[2]
+                        # the receiver: lit from −d, seen from the view
+                        phase_at(received, longitudinal_angle(ti, toward), theta_view,
+                                 azimuth_difference(ti, view, toward), seen_phase)
+                        tj = senders.tangent[m]
+                        sent = yarns.phase[senders.phase_of[m]]
+                        theta_d = longitudinal_angle(tj, away)
+                        for light in range(senders.power.shape[1]):
+                            wl = light_dir[light]
+                            # what the neighbour sends toward i: lit from the light, seen from d
+                            phase_at(sent, senders.theta_light[m, light], theta_d,
+                                     azimuth_difference(tj, away, wl), sent_phase)
+                            e0 = w * senders.power[m, light, 0] * sent_phase[0]
+                            e1 = w * senders.power[m, light, 1] * sent_phase[1]
+                            e2 = w * senders.power[m, light, 2] * sent_phase[2]
+                            a0, a1, a2 = a0 + e0, a1 + e1, a2 + e2
+                            s0, s1, s2 = s0 + e0 * seen_phase[0], s1 + e1 * seen_phase[1], s2 + e2 * seen_phase[2]
         if total <= 0.0:
             continue
         f = -math.expm1(-total / (4.0 * math.pi))
         covered[i] = f
-        share = 4.0 * math.pi * f / total * INV_PI2 * INV_PI2
-        out[i, 0] = s0 * share / max(1.0 - min(max(r0 + f0, 0.0), 1.0) * f, 1e-6)
-        out[i, 1] = s1 * share / max(1.0 - min(max(r1 + f1, 0.0), 1.0) * f, 1e-6)
-        out[i, 2] = s2 * share / max(1.0 - min(max(r2 + f2, 0.0), 1.0) * f, 1e-6)
-
+        share = 4.0 * math.pi * f / total
+        rho = yarns.scattered[i]
+        k0 = share / max(1.0 - min(max(rho[0], 0.0), 1.0) * f, 1e-6)
+        k1 = share / max(1.0 - min(max(rho[1], 0.0), 1.0) * f, 1e-6)
+        k2 = share / max(1.0 - min(max(rho[2], 0.0), 1.0) * f, 1e-6)
+        out[i, 0], out[i, 1], out[i, 2] = s0 * k0, s1 * k1, s2 * k2
+        arriving[i, 0], arriving[i, 1], arriving[i, 2] = a0 * k0, a1 * k1, a2 * k2
 
 @njit(parallel=True, cache=True)
 def bounce_at_points(segment, arclength, rest, vertex, out):

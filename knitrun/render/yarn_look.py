@@ -48,6 +48,7 @@ from knitrun.render.hair_canopy import hair_shells
 from knitrun.render.interreflection import interreflected_visibility
 from knitrun.render.shading_inputs import Corrections, Look
 from knitrun.render.texture_sampling import MipStack, empty_mip_stack, mip_stack
+from knitrun.render.yarn_bounce import phase_grid
 from knitrun.shading.dual_scattering import (D_B, D_F, DS_NAMES, TABLE_NAMES, backscatter_terms, fiber_counts,
                                              pack_tables, transmittance_count)
 from knitrun.shading.fiber_bcsdf import params_from_pack, tinted
@@ -65,6 +66,7 @@ ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema
 TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
 BY_COLOUR = {ALBEDO_TABLE: "interreflection/albedo_by_colour",  # optional: absent from packs of schema < 2.6
              TRANSMITTANCE_TABLE: "interreflection/transmittance_by_colour"}
+TUBE_PHASE_TABLE = "correction/radiance_view"  # optional (schema ≥ 2.4): the yarn-level bounce's phase, ``tube_phase``
 
 
 DETAIL_MAX = 4.0  # cap on the fiber-level detail D (a texel far brighter than its row: a lone lit fiber)
@@ -106,6 +108,7 @@ class YarnLook:
     hull_albedo: np.ndarray | None  # (3,) ρ_Y in the colour (``yarn_bounce``); None: no ρ_Y in the pack, or not read
     hull_transmittance: np.ndarray | None  # (3,) T_Y in the colour (``yarn_bounce``); None: no T_Y, or not read
     hull_from: str  # how ρ_Y and T_Y were put in the colour (``hull_colour``), for RenderResult.facts
+    tube_phase: np.ndarray | None  # the bounce's phase Φ in the colour on ``yarn_bounce.phase_grid``; None: no table
     yarn_albedo: float | None  # luminance of hull_albedo (``interreflection``); None: the pack has no ρ_Y
     im: IMTable | None  # the I_M^{TT,D} table for ``im_lookup.im_kernel``
     residuals: dict  # xi / psi factorization residuals, for reports
@@ -239,6 +242,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         names.append(ALBEDO_TABLE)
     if transmission and TRANSMITTANCE_TABLE in stored:
         names.append(TRANSMITTANCE_TABLE)
+    if transmission and ALBEDO_TABLE in stored and TUBE_PHASE_TABLE in stored:
+        names.append(TUBE_PHASE_TABLE)
     names += [BY_COLOUR[n] for n in (ALBEDO_TABLE, TRANSMITTANCE_TABLE) if n in names and BY_COLOUR[n] in stored]
     missing = [n for n in names if n not in stored and f"{n}/mip0" not in stored]
     if corrections and full_tables:
@@ -294,6 +299,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
                  "the white yarn's times the colour (the pack has no curves against the colour, schema < 2.6)")
     residuals = {n.split("/")[1]: float(pack.tables[n]) for n in ("correction/xi_residual", "shadowing/psi_residual")
                  if corrections}
+    phase = None
+    if TUBE_PHASE_TABLE in names and hull_albedo is not None:
+        phase = tube_phase(pack.tables[TUBE_PHASE_TABLE], pack.tables[ALBEDO_TABLE], hull_albedo, gap)
     return YarnLook(
         name=spec.name, params=params, ds=_tinted_ds(pack.tables, colour),
         xi_full=tables.get("correction/xi", no_full_table()), xi_view=tables.get(VIEW_XI, no_view_table()),
@@ -316,7 +324,7 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         d_f=D_F, d_b=D_B, xi_from=xi_from,
         warnings=warnings,
         twist_sign=-1.0 if geometry.ply_clockwise else 1.0,
-        hull_albedo=hull_albedo, hull_transmittance=hull_transmittance, hull_from=hull_from,
+        hull_albedo=hull_albedo, hull_transmittance=hull_transmittance, hull_from=hull_from, tube_phase=phase,
         yarn_albedo=None if hull_albedo is None else float(hull_albedo @ LUMINANCE), im=im,
         residuals=residuals)
 
@@ -337,6 +345,19 @@ def hull_colour(pack, name: str, colour) -> np.ndarray:
         i0, i1, f = axis_cell(float(colour[c]), lo, hi, table.shape[0], False)
         out[c] = (1.0 - f) * table[i0, c] + f * table[i1, c]
     return out
+
+
+def tube_phase(radiance_view, white_albedo, albedo, gap: float) -> np.ndarray:
+    """The yarn-level bounce's tube phase Φ (``yarn_bounce`` module docstring) on the shared grid
+    (``yarn_bounce.phase_grid``): the pack's ``correction/radiance_view`` (N_v, N_θi, N_θo, N_φ, 3) of the white
+    yarn averaged over v, each channel scaled to the colour by what the tube scatters, (ρ_Y − τ_Y) in the colour
+    (``albedo``, ``hull_colour``) over the white yarn's (``white_albedo``), τ_Y ``gap``. The scale keeps the white
+    yarn's angular shape: a darker colour holds less multiple scattering, whose share of the shape it leaves as it
+    is (an approximation, the hull's own curve against the colour gives the amount)."""
+    white = np.asarray(white_albedo, np.float64) - gap
+    scale = np.divide(np.clip(np.asarray(albedo, np.float64) - gap, 0.0, None), white, out=np.zeros(3),
+                      where=white > 1e-9)
+    return phase_grid(np.asarray(radiance_view, np.float64).mean(axis=0) * scale)
 
 
 def shading_look(look: YarnLook) -> tuple:

@@ -449,7 +449,7 @@ class GLRenderer:
             tex.use(location=unit)
             _set(self.regular, name, unit)
         _set(self.regular, "yarn_bounce", int(self.bounce))
-        for tex in bounce:
+        for tex in bounce[:1]:
             tex.use(location=ATLAS_UNITS[6])
             _set(self.regular, "bounce_tex", ATLAS_UNITS[6])
         fly_entries = [d for d in draws if "fly_tex0" in self.looks[d[0]][1]]
@@ -482,6 +482,10 @@ class GLRenderer:
             variants = self._variant_table(lines)
             variants.use(location=ATLAS_UNITS[3])
             _set(self.flyaway, "fly_variant", ATLAS_UNITS[3])
+            _set(self.flyaway, "yarn_bounce", int(self.bounce and self.features.hair_bounce))
+            for tex in bounce[1:]:  # the neighbours' light on the hairs (Features.hair_bounce)
+                tex.use(location=ATLAS_UNITS[6])
+                _set(self.flyaway, "bounce_tex", ATLAS_UNITS[6])
             for k, vao, count in fly_entries:
                 self._look_uniforms(self.flyaway, k)
                 _set(self.flyaway, "strip_half_width", self.looks[k][0]["flyaway_half_width"])
@@ -512,9 +516,9 @@ class GLRenderer:
 
     def _bounce_texture(self, lines, camera, canopy, facts):
         """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce``, on the CPU: the lights'
-        visibility there from the CPU twin's shadow maps, times the hair canopy ``canopy`` (L, P) at the points) as a
-        one-texture tuple for ``regular.frag``: point i at (i mod POLYLINE_ROW, i // POLYLINE_ROW), (bounce RGB, rest
-        arc length)."""
+        visibility there from the CPU twin's shadow maps, times the hair canopy ``canopy`` (L, P) at the points) as
+        textures of the points, point i at (i mod POLYLINE_ROW, i // POLYLINE_ROW): (bounce RGB, rest arc length) for
+        ``regular.frag``, then (the neighbours' light arriving, rest arc length) for ``flyaway.frag``."""
         cpu = self.cpu
         radius = np.array([cpu.looks[k].radius for k in lines.entry])
         at = pipeline.bounce_vertices(lines, cpu.looks)
@@ -522,13 +526,16 @@ class GLRenderer:
         size = self.scene.render.shadow_map_size
         vis = np.array([pipeline._visibility(lines, radius, d, size, 0.0, receivers, cpu.shadow_depth)[0]
                         for d in self.light_dir]) * canopy[:, at]
-        vertex, covered = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at, vis,
-                                                np.ones_like(vis))
+        vertex, covered, arriving = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at,
+                                                          vis, np.ones_like(vis))
         facts["yarn_bounce"] = pipeline.bounce_facts(vertex, covered)
         n = len(lines.points)
-        data = np.zeros((-(-n // POLYLINE_ROW) * POLYLINE_ROW, 4), np.float32)
-        data[:n, :3], data[:n, 3] = vertex, lines.rest
-        return (_texture2d(self.ctx, data.reshape(-1, POLYLINE_ROW, 4)),)
+        textures = []
+        for values in (vertex, arriving):
+            data = np.zeros((-(-n // POLYLINE_ROW) * POLYLINE_ROW, 4), np.float32)
+            data[:n, :3], data[:n, 3] = values, lines.rest
+            textures.append(_texture2d(self.ctx, data.reshape(-1, POLYLINE_ROW, 4)))
+        return tuple(textures)
 
     def _canopy_texture(self, lines, canopy):
         """The hair canopy ``canopy`` (L, P) at the frame's polyline points as a one-texture tuple for both passes:

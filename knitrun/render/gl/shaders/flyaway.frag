@@ -158,6 +158,10 @@ void main() {
     axis_cell(theta_o_f, -HALF_PI, HALF_PI, textureSize(ds_table, 0).x, false, i0, i1, fr);
     vec3 tau = clamp(ds_row(R_A_F, i0, i1, fr), 0.0, 1.0);
     out_cover = vec4(alpha * (1.0 - tau), 1.0);
+    Params p = yarn_params();
+    // strip_shading.hair_bounce: the neighbouring yarns' light arriving here, returned evenly over the sphere
+    vec3 rgb = yarn_bounce != 0 ? bounce_at(fin.segment, sp.s) * (p.a_r + p.a_tt + p.a_d) / (4.0 * PI) : vec3(0.0);
+    out_radiance = vec4(alpha * rgb, 1.0);
     // the hair's own frame: x along t_f, y toward the camera in its normal plane; a hair seen end-on covers but
     // scatters nothing toward the camera
     vec3 ny = sp.wo - dot(sp.wo, tf) * tf;
@@ -176,8 +180,6 @@ void main() {
     // (pipeline.strip_receivers with flyaway): its own yarn's shadow is hair_light's, not the map's
     vec3 half_width = cross(sp.wo, sp.t);
     vec3 offset = length(half_width) > 0.0 ? flyaway_half_width * sp.v * normalize(half_width) : vec3(0.0);
-    Params p = yarn_params();
-    vec3 rgb = vec3(0.0);
     for (int l = 0; l < n_lights; ++l) {
         vec3 w = light_dir[l];
         float phi_f = azimuth_difference(tf, sp.wo, w);

@@ -19,19 +19,6 @@ uniform int parallax;
 uniform int fiber_bend;          // Features.fiber_bend: the same polyline texture gives the bend and stretch
 uniform sampler2D polyline;
 uniform sampler2D curve_bounds;
-// the yarn-level bounce (Features.yarn_bounce; pipeline.frame_bounce, computed on the CPU): per polyline point one
-// texel (bounce RGB, rest arc length), POLYLINE_ROW points a row
-uniform int yarn_bounce;
-uniform sampler2D bounce_tex;
-
-// yarn_bounce.bounce_at_points: the bounce interpolated by rest arc length s along segment i (its first point)
-vec3 bounce_at(int i, float s) {
-    vec4 a = texelFetch(bounce_tex, ivec2(i % POLYLINE_ROW, i / POLYLINE_ROW), 0);
-    vec4 b = texelFetch(bounce_tex, ivec2((i + 1) % POLYLINE_ROW, (i + 1) / POLYLINE_ROW), 0);
-    float ds = b.w - a.w;
-    return mix(a.rgb, b.rgb, ds > 0.0 ? clamp((s - a.w) / ds, 0.0, 1.0) : 0.0);
-}
-
 vec4 polyline_at(int i, int k) {
     return texelFetch(polyline, ivec2(3 * (i % POLYLINE_ROW) + k, i / POLYLINE_ROW), 0);
 }

@@ -64,6 +64,20 @@ float canopy_at(int l, int i, float s) {
     return mix(a.x, b.x, ds > 0.0 ? clamp((s - a.y) / ds, 0.0, 1.0) : 0.0);
 }
 
+// the yarn-level bounce (Features.yarn_bounce; pipeline.frame_bounce, computed on the CPU): per polyline point one
+// texel (RGB, rest arc length), POLYLINE_ROW points a row; the regular pass reads the bounce radiance, the flyaway
+// pass the neighbours' light arriving (Features.hair_bounce)
+uniform int yarn_bounce;
+uniform sampler2D bounce_tex;
+
+// yarn_bounce.bounce_at_points: bounce_tex interpolated by rest arc length s along segment i (its first point)
+vec3 bounce_at(int i, float s) {
+    vec4 a = texelFetch(bounce_tex, ivec2(i % POLYLINE_ROW, i / POLYLINE_ROW), 0);
+    vec4 b = texelFetch(bounce_tex, ivec2((i + 1) % POLYLINE_ROW, (i + 1) / POLYLINE_ROW), 0);
+    float ds = b.w - a.w;
+    return mix(a.rgb, b.rgb, ds > 0.0 ? clamp((s - a.w) / ds, 0.0, 1.0) : 0.0);
+}
+
 // interreflection.channel_visibility: V'_c of the visibility whose V' (inter-reflected with yarn_albedo) is vp
 vec3 channel_visibility(float vp) {
     float r = clamp(yarn_albedo, 0.0, 1.0);
