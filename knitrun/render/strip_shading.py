@@ -101,6 +101,8 @@ tube of ``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal
 from the axis sees the (infinite) tube over the solid angle Ω = 4 asin(1/ρ) and, taking its BCSDF's response to that
 extended source as its albedo a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the
 camera, averaged over the depths the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
+The tube keeps the Lambertian cylinder's phase here, where the bounce reads the pack's (``yarn_bounce``): the pack's
+moved no patch and cost the lone straight yarn 0.02× its floor (BENCHMARKS.md, stop 70).
 
 The neighbours' light on the hairs (``Features.hair_bounce``, the default since knit's stop 70; ``hair_bounce``; GLSL
 the same line in ``flyaway.frag``): the yarn-level bounce (``knitrun.render.yarn_bounce``) also gives, per polyline
