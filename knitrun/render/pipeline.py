@@ -871,8 +871,8 @@ def _yarn_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, verte
                          np.ascontiguousarray(points["arclength"], np.float64), lines.rest, per_vertex, values)
         return values
 
-    return [at_points(layer, vertex) for layer in layers], None if fly_points is None else at_points(fly_points,
-                                                                                                      arriving)
+    hairs = None if fly_points is None else at_points(fly_points, arriving)
+    return [at_points(layer, vertex) for layer in layers], hairs
 
 
 def glow_on(features: Features) -> bool:

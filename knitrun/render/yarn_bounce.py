@@ -161,6 +161,7 @@ def phase_at(table, theta_i, theta_o, phi, out):
               fb * ((1.0 - fc) * table[a1, b1, c0, ch] + fc * table[a1, b1, c1, ch]))
         out[ch] = (1.0 - fa) * lo + fa * hi
 
+
 class BounceLights(NamedTuple):
     """Directional lights: ``direction`` (L, 3) unit toward the light, ``irradiance`` (L, 3), ``direct`` (L, P) the
     light reaching each vertex past the other yarns (V_d)."""
@@ -243,6 +244,7 @@ def _senders(yarns: BounceYarns, lights: BounceLights, cell: float) -> _Senders:
                     c(0.5 * (yarns.rest[j] + yarns.rest[j + 1])), c(yarns.radius[curve]),
                     c(np.asarray(yarns.phase_of, np.int64)[curve]), c(theta_light), c(power), cell_start,
                     dims.astype(np.int64), origin, float(cell))
+
 
 @njit(cache=True)
 def segment_solid_angle(x, a, b, width, nearest):
@@ -345,6 +347,7 @@ def _vertex_bounce(yarns, senders, light_dir, reach_radii, out, covered, arrivin
         k2 = share / max(1.0 - min(max(rho[2], 0.0), 1.0) * f, 1e-6)
         out[i, 0], out[i, 1], out[i, 2] = s0 * k0, s1 * k1, s2 * k2
         arriving[i, 0], arriving[i, 1], arriving[i, 2] = a0 * k0, a1 * k1, a2 * k2
+
 
 @njit(parallel=True, cache=True)
 def bounce_at_points(segment, arclength, rest, vertex, out):
