@@ -10,10 +10,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from data_formats.conventions import cell_centres
 from knitrun.render.ablations import ABLATIONS, Features, combined, regular_fibers
 from knitrun.render.strip_raster import vertex_tangents
 from knitrun.render.yarn_bounce import (CONTACT_RADII, INV_PI2, PHASE_PHI, PHASE_THETA, BounceLights, BounceYarns,
-                                        lambert_pair, lambert_phase, phase_at, phase_centres, phase_grid,
+                                        lambert_pair, lambert_phase, phase_at, phase_grid,
                                         segment_solid_angle, tube_optics, vertex_bounce)
 from knitrun.render.yarn_look import tube_phase
 from tests.helpers import FRONT, SUN, straight, write_scene
@@ -140,7 +141,7 @@ def test_the_lambert_table_is_the_lambertian_cylinder_and_scatters_its_albedo_in
         phase_at(table, theta_i, theta_o, phi, got)
         np.testing.assert_allclose(got, _lambert(reflect, transmit, theta_i, phi), atol=0.01 * peak.max())
     # ∫ over the sphere of ω_i: dω = cos θ_i dθ_i dφ, midpoint rule on a fine grid
-    theta, phi = phase_centres(90, -math.pi / 2, math.pi / 2), phase_centres(180, -math.pi, math.pi)
+    theta, phi = cell_centres(-math.pi / 2, math.pi / 2, 90), cell_centres(-math.pi, math.pi, 180)
     weight = np.cos(theta) * (math.pi / 90) * (2 * math.pi / 180)
     for theta_o in (0.0, 0.7, -1.2):
         total = np.zeros(3)
@@ -156,7 +157,7 @@ def test_the_packs_phase_is_its_yarn_averaged_over_v_in_the_colour():
     along θ_o and φ and linear in θ_i inside the outer centres comes back as it was), each channel scaled by what
     the tube scatters in the colour, (ρ_Y − τ_Y) over the white yarn's; a channel that scatters no more than its gap
     light sends nothing."""
-    theta = phase_centres(9, -math.pi / 2, math.pi / 2)
+    theta = cell_centres(-math.pi / 2, math.pi / 2, 9)
     per_theta = 0.05 + 0.01 * theta  # linear in θ_i
     view = np.broadcast_to(per_theta[None, :, None, None, None], (4, 9, 9, 5, 3)).copy()
     view[0] *= 0.5  # rows of v that differ: the mean is taken over them
@@ -164,15 +165,15 @@ def test_the_packs_phase_is_its_yarn_averaged_over_v_in_the_colour():
     white, gap = np.array([0.78, 0.74, 0.64]), 0.16
     same = tube_phase(view, white, white, gap)
     assert same.shape == (PHASE_THETA, PHASE_THETA, PHASE_PHI, 3)
-    inside = np.abs(phase_centres(PHASE_THETA, -math.pi / 2, math.pi / 2)) <= theta[-1]
-    expected = 0.05 + 0.01 * phase_centres(PHASE_THETA, -math.pi / 2, math.pi / 2)
+    inside = np.abs(cell_centres(-math.pi / 2, math.pi / 2, PHASE_THETA)) <= theta[-1]
+    expected = 0.05 + 0.01 * cell_centres(-math.pi / 2, math.pi / 2, PHASE_THETA)
     np.testing.assert_allclose(same[inside, 3, 7, 1], expected[inside], rtol=1e-12)
     red = tube_phase(view, white, np.array([0.575, 0.228, 0.10]), gap)
     np.testing.assert_allclose(red / np.where(same > 0, same, 1), np.broadcast_to(
         [(0.575 - gap) / (0.78 - gap), (0.228 - gap) / (0.74 - gap), 0.0], same.shape), rtol=1e-12)
     # a smooth table on a draft pack's grid, resampled to the shared one, reads back its samples at their centres
     # (φ repeats across its ends)
-    phi = phase_centres(5, -math.pi, math.pi)
+    phi = cell_centres(-math.pi, math.pi, 5)
     coarse = (1.0 + 0.3 * np.sin(theta)[:, None, None, None] + 0.2 * np.cos(theta)[None, :, None, None]
               + 0.1 * np.cos(phi)[None, None, :, None]) * np.array([1.0, 0.5, 0.25])
     fine = phase_grid(coarse)

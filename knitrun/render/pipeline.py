@@ -789,7 +789,7 @@ class Renderer:
                               Lobes(lobe_dir, lobe_lambda, lobe_w, lobe_vis[-1], lobe_albedo[k]), self.im_slices[k],
                               fly_rgb, fly_alpha, fly_transmit)
                 if fly_arriving is not None and features.hair_bounce:  # the neighbours' light on the hairs
-                    fly_rgb[idx] += hair_bounce(fly_arriving[idx], self.kernel_looks[k][0].params)
+                    fly_rgb[idx] += hair_bounce(fly_arriving[idx], looks[k].params)
             if not features.hair_light:  # the split of ``Features.hair_light``: opaque black hairs
                 fly_rgb[:] = 0.0
                 fly_transmit[:] = 0.0

@@ -79,7 +79,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from data_formats.conventions import PHI_RANGE, THETA_RANGE
+from data_formats.conventions import PHI_RANGE, THETA_RANGE, cell_centres
 from knitrun.shading.fiber_frame import azimuth_difference, longitudinal_angle
 from knitrun.shading.table_lookup import axis_cell, lookup_axis
 
@@ -118,17 +118,12 @@ def tube_optics(albedo, transmittance, gap):
     return np.clip(albedo - transmittance, 0.0, 1.0), np.clip(transmittance - gap, 0.0, 1.0)
 
 
-def phase_centres(n: int, lo: float, hi: float) -> np.ndarray:
-    """The n cell centres over [lo, hi] (ASSET_PACK.md §4.2)."""
-    return lo + (np.arange(n) + 0.5) * (hi - lo) / n
-
-
 def lambert_phase(reflect, transmit) -> np.ndarray:
     """(``PHASE_THETA``, ``PHASE_THETA``, ``PHASE_PHI``, 3): the phase Φ of a Lambertian cylinder that scatters
     ``reflect`` R_Y (3,) back toward the light's side and ``transmit`` S_Y (3,) forward (module docstring), at the
     shared grid's cell centres: the bounce's phase for a pack without ``correction/radiance_view``."""
-    theta = phase_centres(PHASE_THETA, *THETA_RANGE)
-    alpha = np.abs(phase_centres(PHASE_PHI, *PHI_RANGE))
+    theta = cell_centres(*THETA_RANGE, PHASE_THETA)
+    alpha = np.abs(cell_centres(*PHI_RANGE, PHASE_PHI))
     g = np.array([lambert_pair(math.cos(a)) for a in alpha])  # (N_φ, 2): g(|φ|), g(π − |φ|)
     lobe = g[:, :1] * np.asarray(reflect, np.float64) + g[:, 1:] * np.asarray(transmit, np.float64)  # (N_φ, 3)
     out = np.cos(theta)[:, None, None, None] * lobe[None, None] * INV_PI2
@@ -143,7 +138,7 @@ def phase_grid(table) -> np.ndarray:
                                               (PHASE_THETA, *THETA_RANGE, "clamp"),
                                               (PHASE_PHI, *PHI_RANGE, "repeat"))):
         moved = np.moveaxis(out, axis, 0)
-        out = np.moveaxis(lookup_axis(moved, phase_centres(n, lo, hi), lo, hi, wrap), 0, axis)
+        out = np.moveaxis(lookup_axis(moved, cell_centres(lo, hi, n), lo, hi, wrap), 0, axis)
     return np.ascontiguousarray(out)
 
 
