@@ -95,14 +95,14 @@ body add light.
 The body's glow on its hairs (``Features.hair_glow``, the default; ``body_glow``; GLSL ``body_glow``): a hair beside its
 yarn's body (|v_strip| > 1), or over it (since stop 56; in front of it, and behind it with the share b since stop 57),
 is also lit by the light the body scatters, which in front light is 42 % of what the path-traced reference shows beside
-the body (light that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13: the flyaway draw"). The body is the
-tube of ``knitrun.render.yarn_bounce``'s phase: lit by E at θ_L from its normal plane it sends toward a point at angle α
+the body (light that needs both the R and the TT lobe: BENCHMARKS.md, "Issue 13: the flyaway draw"). The body is a
+Lambertian tube (``yarn_bounce.lambert_pair``): lit by E at θ_L from its normal plane it sends toward a point at angle α
 (in the normal plane) from the light the radiance E V cos θ_L (R_Y g(α) + S_Y g(π − α))/π²; a hair at distance ρ radii
 from the axis sees the (infinite) tube over the solid angle Ω = 4 asin(1/ρ) and, taking its BCSDF's response to that
 extended source as its albedo a = A_R + A_TT + A_D spread evenly over the sphere, returns L_b Ω/(4π) a toward the
 camera, averaged over the depths the hair may have (as ``_hair_light``). V is the hair's own visibility of the light.
-The tube keeps the Lambertian cylinder's phase here, where the bounce reads the pack's (``yarn_bounce``): the pack's
-moved no patch and cost the lone straight yarn 0.02× its floor (BENCHMARKS.md, stop 70).
+The bounce reads the pack's tube phase instead (``yarn_bounce``); here the pack's moved no patch and cost the lone
+straight yarn 0.02× its floor (BENCHMARKS.md, stop 70).
 
 The neighbours' light on the hairs (``Features.hair_bounce``, the default since knit's stop 70; ``hair_bounce``; GLSL
 the same line in ``flyaway.frag``): the yarn-level bounce (``knitrun.render.yarn_bounce``) also gives, per polyline
