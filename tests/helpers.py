@@ -159,6 +159,17 @@ irradiance = [2.0, 2.0, 2.0]"""  # from behind a yarn the FRONT camera sees, and
 SKY = """[[lights]]
 type = "environment"
 builtin = "sky\""""
+SIDE = """[camera]
+position = [0.0, -1.0, 0.12]
+look_at = [0.0, 0.0, 0.12]
+up = [0.0, 0.0, 1.0]
+fov_deg = 30.0
+width = 48
+height = 48"""  # from the side, at the middle of three yarns stacked 0.12 cm apart (z = 0, 0.12, 0.24)
+OVERHEAD_SUN = """[[lights]]
+type = "directional"
+direction = [0.0, 0.0, 1.0]
+irradiance = [2.0, 2.0, 2.0]"""  # straight down a stack: the bottom yarn lies behind two
 
 
 def straight(n=9, length=0.6, z=0.0):

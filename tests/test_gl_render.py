@@ -15,7 +15,7 @@ from knitbake.compare.image_metrics import yarn_scale_metrics
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render import pipeline
 from knitrun.render.gl import gl_renderer
-from tests.helpers import BACKLIT, FRONT, SKY, SUN, straight, write_scene
+from tests.helpers import BACKLIT, FRONT, OVERHEAD_SUN, SIDE, SKY, SUN, straight, write_scene
 
 # orthographic, yarns along the image axes: the strips' edges then cross the same samples in both renderers (the
 # driver's 4× positions have the CPU pattern's x and y values), so the images agree to rounding
@@ -214,6 +214,28 @@ def test_the_yarn_bounce_agrees_and_moves_the_image(tmp_path, pack):
     assert gl.mean() > 1.01 * plain.mean()
 
 
+def test_two_blocking_yarns_agree_and_darken_the_yarn_behind_both(tmp_path, pack, monkeypatch):
+    """``Features.two_blockers`` on three yarns stacked under a sun from above, seen from the side: the lights'
+    second yarn layer is peeled by the driver (``depth.frag``) as ``strip_raster.rasterize_behind`` peels it, and
+    what lies behind two yarns takes τ_Y² where one blocker let τ_Y through. The backends agree with it as without
+    it, and it moves the image by far more than they differ, on the bottom yarn alone. The CPU's hairs over a body
+    take that body's lookups (``pipeline.SHARE_REACH``), this backend's their own; here the two differ in kind (the
+    sun tilted so that the top yarn's shadow covers the bottom yarn's surface but not its axis: a hair there lies
+    behind one yarn, the surface behind two), so the CPU twin shares nothing, as this backend."""
+    monkeypatch.setattr(pipeline, "same_surface", lambda *args: args[-1].fill(-1))
+    stack = [straight(z=z) for z in (0.24, 0.12, 0.0)]
+    sun = OVERHEAD_SUN.replace("[0.0, 0.0, 1.0]", "[0.0, 0.15, 1.0]")
+    path = write_scene(tmp_path, stack, camera=SIDE, lights=sun, name="stack")
+    gl, cpu = _both(path, pack, Features(two_blockers=True))
+    one, one_cpu = _both(path, pack)
+    assert abs(gl.mean() / cpu.mean() - 1) < 5e-3
+    assert _yarn_l1(gl, cpu) < 6e-3 and _yarn_l1(one, one_cpu) < 6e-3
+    assert _yarn_l1(gl, one) > 10 * _yarn_l1(gl, cpu)
+    change = np.abs(gl - one).max(axis=(1, 2))
+    assert change[: int(0.6 * len(change))].max() < 0.05 * change.max()  # the upper yarns' rows do not move
+    assert gl.mean() < 0.97 * one.mean()
+
+
 def test_frames_an_empty_scene_and_the_renderer_interface(tmp_path, pack):
     path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     renderer = gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)})
@@ -312,7 +334,7 @@ def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
     assert "\n" not in str(e.value)
     one = load_scene(write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="one"))
     for features, says in [(Features(multiple_scattering=False), "single scattering"),
-                           (Features(two_blockers=True), "two_blockers"), (Features(hair_light=False), "hair_light")]:
+                           (Features(hair_light=False), "hair_light")]:
         with pytest.raises(FormatError, match=says) as e:
             gl_renderer.GLRenderer(one, {"cotton1": str(pack)}, features)
         assert "\n" not in str(e.value)

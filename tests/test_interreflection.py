@@ -22,7 +22,7 @@ from knitrun.render.pipeline import Renderer
 from knitrun.render.yarn_look import gap_transmittance, hull_colour, load_look
 from knitrun.shading.dual_scattering import transmittance_count
 from knitrun.shading.table_lookup import lookup_theta
-from tests.helpers import FRONT, SKY, SUN, straight, write_scene
+from tests.helpers import FRONT, OVERHEAD_SUN, SIDE, SKY, SUN, straight, write_scene
 from tests.test_render import _render
 
 
@@ -260,19 +260,6 @@ def test_a_yarn_in_another_yarns_shadow_gets_the_light_the_yarn_lets_through(tmp
     with_term = _render(scene, pack)
     assert with_term.facts["n_cross"]["cotton1"].startswith("transmittance")
     assert np.all(with_term.image >= without.image - 1e-6) and with_term.image.mean() > without.image.mean()
-
-
-SIDE = """[camera]
-position = [0.0, -1.0, 0.12]
-look_at = [0.0, 0.0, 0.12]
-up = [0.0, 0.0, 1.0]
-fov_deg = 30.0
-width = 48
-height = 48"""
-OVERHEAD_SUN = """[[lights]]
-type = "directional"
-direction = [0.0, 0.0, 1.0]
-irradiance = [2.0, 2.0, 2.0]"""
 
 
 def test_two_blocking_yarns_let_less_light_between_their_fibers_than_one(tmp_path, pack):

@@ -917,7 +917,8 @@ def bounce_vertices(lines, looks) -> np.ndarray:
 
 
 def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond) -> tuple:
-    """(bounce radiance (P, 3), covered fraction of the sphere (P,)) at the frame's polyline vertices under the
+    """(bounce radiance (P, 3), covered fraction of the sphere (P,), the neighbours' light arriving (P, 3), which
+    the hairs take: ``yarn_bounce.vertex_bounce``'s I) at the frame's polyline vertices under the
     directional lights (``yarn_bounce.vertex_bounce``): computed at the points ``at`` (``bounce_vertices``) on the
     polylines through them, from the lights' visibility ``vertex_vis`` (L, len(at)) there (and ``vertex_beyond``,
     the fraction at most one yarn blocks, ``Lights.beyond``), and interpolated between them by rest arc length.

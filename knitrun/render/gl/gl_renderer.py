@@ -15,7 +15,9 @@ What runs where
   segments with their neighbours (GL_LINES_ADJACENCY); a geometry shader builds the camera-facing strips
   (``shaders/strip.geom``, the quads of ``strip_raster``). Pass 1, per directional light and per SRBF lobe: the
   strips seen from the light camera of ``shadow_map.build_shadow_map`` into a tile of a depth atlas (lights at
-  ``shadow_map_size``, lobes at a quarter, at least 64). Pass 2: the strips seen from the scene camera into a
+  ``shadow_map_size``, lobes at a quarter, at least 64); with ``Features.two_blockers`` the lights' maps are drawn
+  twice, the second time peeled (``shaders/depth.frag``: only strips more than the first layer's radius behind it,
+  ``strip_raster.rasterize_behind``'s rule) into an atlas of the second yarn layer. Pass 2: the strips seen from the scene camera into a
   multisampled float framebuffer; the fragment shader (``shaders/regular.frag``) shades the regular fibers exactly
   as ``shade_regular`` does, with PCSS visibility from the atlases (``shaders/shadow.glsl``), and writes
   α·L + (1 − α)·background. A fragment is shaded at the first sample of the CPU's pattern that lies on its
@@ -28,7 +30,9 @@ Differences from the CPU renderer, by design: single precision; the driver's sam
 CPU's are the Direct3D patterns: the same x and y values at 4×, in other pairs), so edges that are not along the
 image axes cover other samples; a primitive shades one fragment per pixel (a pixel two segments of one curve share
 is shaded twice, each weighted by its own coverage); the shadow maps are rasterised by the driver; the nearest depth
-of a shadow map is the nearest projected polyline point. ``tests/test_gl_render.py`` holds the two renderers
+of a shadow map is the nearest projected polyline point; a flyaway fragment looks its lights up at its own strip
+point, where the CPU's flyaway point over a regular point of its curve takes that point's lookups on the tube
+surface (``pipeline.SHARE_REACH``). ``tests/test_gl_render.py`` holds the two renderers
 together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
 
 Five terms read more than a fragment's own attributes: ``Features.surface_shadows`` looks
@@ -79,9 +83,10 @@ MAX_LIGHTS = 8  # directional lights a scene may have on this backend
 MAX_LOBES = 64  # SRBF lobes (the scene format's largest srbf_count)
 NO_YARN = 3.0e38  # depth of a shadow-map texel no yarn covers
 PCF_RADIUS = 1.5  # texels (shadow_map.shadow_visibility's default)
-ATLAS_UNITS = (23, 24, 25, 26, 27, 28, 29, 30)  # texture units of the light atlas, lobe atlas, cluster weights,
-# flyaway variants, the axial parallax's polyline and curve bounds, the yarn-level bounce and the hair canopy at the
-# polyline points; not 31, moderngl's ``default_texture_unit``, where it binds each texture it creates or writes
+ATLAS_UNITS = (22, 23, 24, 25, 26, 27, 28, 29, 30)  # texture units of the light atlas, lobe atlas, cluster
+# weights, flyaway variants, the axial parallax's polyline and curve bounds, the yarn-level bounce, the hair canopy at
+# the polyline points and the lights' second yarn layer (Features.two_blockers; the peel's floors while it is drawn);
+# not 31, moderngl's ``default_texture_unit``, where it binds each texture it creates or writes
 POLYLINE_ROW = 1024  # polyline points per row of the parallax's texture (regular.frag)
 PARALLAX_STEPS = 64  # segments the parallax walks at most each way (the CPU walks to the curve's end)
 # (a yarn entry's own textures take units 0, 1, … in the order of ``_upload_look``)
@@ -268,9 +273,6 @@ class GLRenderer:
         if not features.hair_light:
             raise FormatError("the GL backend draws the hairs' light; Features.hair_light=False (the split by the "
                               "surface seen first) is the CPU renderer's")
-        if features.two_blockers:
-            raise FormatError("the GL backend counts one blocking yarn (Features.two_blockers); the CPU renderer "
-                              "counts two")
         lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
         if len(lights) > MAX_LIGHTS:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
@@ -421,8 +423,10 @@ class GLRenderer:
         radius = np.array([self.cpu.looks[k].radius for k in lines.entry])
         lo, hi = lines.points.min(axis=0), lines.points.max(axis=0)
         size = scene.render.shadow_map_size
-        light_maps, light_atlas = self._shadow_atlas(draws, self.light_dir, size, np.zeros(len(self.light_dir)), lo,
-                                                     hi, radius.max(), lines.points)
+        # with two_blockers the lights' atlas has a second yarn layer (shadow_map's ``behind``)
+        light_maps, light_atlas, *behind_atlas = self._shadow_atlas(
+            draws, self.light_dir, size, np.zeros(len(self.light_dir)), lo, hi, radius.max(), lines.points,
+            layers=2 if self.features.two_blockers else 1)
         lobe_size = max(64, size // pipeline.LOBE_SHADOW_DIVISOR)
         angular = np.minimum(1.0 / np.sqrt(np.maximum(self.lobe_lambda, 1e-300)), pipeline.MAX_LOBE_ANGULAR_RADIUS)
         lobe_maps, lobe_atlas = self._shadow_atlas(draws, self.lobe_dir, lobe_size, angular, lo, hi, radius.max(),
@@ -444,6 +448,8 @@ class GLRenderer:
         near, far = self._depth_range(camera, lo, hi, radius.max())
         light_atlas.use(location=ATLAS_UNITS[0])
         lobe_atlas.use(location=ATLAS_UNITS[1])
+        for tex in behind_atlas:
+            tex.use(location=ATLAS_UNITS[8])
         self.cluster_weights.use(location=ATLAS_UNITS[2])
         for name, tex, unit in zip(("polyline", "curve_bounds"), polyline, ATLAS_UNITS[4:]):
             tex.use(location=unit)
@@ -466,6 +472,8 @@ class GLRenderer:
             self._light_uniforms(program, light_maps, lobe_maps)
             for name, unit in zip(("light_atlas", "lobe_atlas", "cluster_weights"), ATLAS_UNITS):
                 _set(program, name, unit)
+            _set(program, "two_blockers", int(self.features.two_blockers))
+            _set(program, "behind_atlas", ATLAS_UNITS[8])
         _set(self.regular, "background", background)
         for k, vao, count in draws:
             self._look_uniforms(self.regular, k)
@@ -503,7 +511,8 @@ class GLRenderer:
                 source.release()
             fly_radiance, fly_cover = resolved
             image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
-        for obj in (fbo, colour, depth, light_atlas, lobe_atlas, *layers, *polyline, *bounce, *canopy_tex):
+        for obj in (fbo, colour, depth, light_atlas, *behind_atlas, lobe_atlas, *layers, *polyline, *bounce,
+                    *canopy_tex):
             obj.release()
         for _, arrays, _ in draws:
             for obj in arrays:
@@ -524,10 +533,14 @@ class GLRenderer:
         at = pipeline.bounce_vertices(lines, cpu.looks)
         receivers = [pipeline.axis_receivers(lines, cpu.looks, at)]
         size = self.scene.render.shadow_map_size
-        vis = np.array([pipeline._visibility(lines, radius, d, size, 0.0, receivers, cpu.shadow_depth)[0]
-                        for d in self.light_dir]) * canopy[:, at]
+        two = self.features.two_blockers
+        found = [pipeline._visibility(lines, radius, d, size, 0.0, receivers, cpu.shadow_depth, two)[0]
+                 for d in self.light_dir]
+        # with two blockers (V, V₂) per light, the canopy on V alone (pipeline.Renderer)
+        vis = np.array([f[0] if two else f for f in found]).reshape(len(found), -1) * canopy[:, at]
+        beyond = np.array([f[1] for f in found]).reshape(vis.shape) if two else np.ones_like(vis)
         vertex, covered, arriving = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at,
-                                                          vis, np.ones_like(vis))
+                                                          vis, beyond)
         facts["yarn_bounce"] = pipeline.bounce_facts(vertex, covered)
         n = len(lines.points)
         textures = []
@@ -618,8 +631,10 @@ class GLRenderer:
                             ("aspect", camera.width / camera.height), ("near_plane", near), ("far_plane", far)):
             _set(program, name, value)
 
-    def _shadow_atlas(self, draws, directions, size, angular, lo, hi, radius_max, points):
-        """Render one shadow map per direction into the tiles of an atlas; returns (map descriptions, texture)."""
+    def _shadow_atlas(self, draws, directions, size, angular, lo, hi, radius_max, points, layers=1):
+        """Render one shadow map per direction into the tiles of an atlas; returns (map descriptions, texture) and,
+        with ``layers`` = 2, the atlas of the second yarn layer as a third value (``depth.frag``'s peel: shadow_map's
+        ``behind``)."""
         ctx = self.ctx
         n = len(directions)
         grid = max(1, math.ceil(math.sqrt(n)))
@@ -627,36 +642,53 @@ class GLRenderer:
         if side > ctx.info["GL_MAX_TEXTURE_SIZE"]:
             raise FormatError(f"{n} shadow maps of {size}² texels need a {side}² atlas, more than this GL driver's "
                               f"{ctx.info['GL_MAX_TEXTURE_SIZE']}: lower render.shadow_map_size")
-        atlas = ctx.texture((side, side) if n else (1, 1), 1, dtype="f4")
+        atlases = [ctx.texture((side, side) if n else (1, 1), 1, dtype="f4") for _ in range(layers)]
         maps = []
         if n == 0:
-            atlas.write(np.full(1, NO_YARN, np.float32).tobytes())
-            return maps, atlas
+            for atlas in atlases:
+                atlas.write(np.full(1, NO_YARN, np.float32).tobytes())
+            return (maps, *atlases)
+        floors = ctx.texture((side, side), 1, dtype="f4") if layers == 2 else None
         depth = ctx.depth_renderbuffer((side, side))
-        fbo = ctx.framebuffer(color_attachments=[atlas], depth_attachment=depth)
-        fbo.use()
-        ctx.viewport = (0, 0, side, side)
-        fbo.clear(NO_YARN, NO_YARN, NO_YARN, NO_YARN, depth=1.0)
-        ctx.enable(ctx.DEPTH_TEST)
         program = self.depth
-        for i, d in enumerate(directions):
-            cam, sphere = _light_camera(np.asarray(d, float), lo, hi, radius_max, size)
-            gx, gy = i % grid, i // grid
-            ctx.viewport = (gx * size, gy * size, size, size)
-            self._camera_uniforms(program, cam, 0.5 * sphere, 3.5 * sphere)
-            for k, vao, count in draws:
-                _set(program, "strip_half_width", float(self.cpu.looks[k].radius))
-                vao[2].render(ctx.LINES_ADJACENCY, vertices=count)
-            fwd, right, up = cam.basis()
-            d_min = float(np.min((points - cam.position) @ fwd))
-            # GL's rows run upward, so texel row i of a tile is the map's row size − 1 − i (shadow_map.py counts
-            # rows from the top): the map's up is given negated, and shadow.glsl's row from the top is GL's row
-            maps.append({"right": right, "up": -up, "fwd": fwd, "origin": np.asarray(cam.position, float),
-                         "texel": 2 * sphere / size, "d_min": d_min, "tan_angle": math.tan(float(angular[i])),
-                         "size": size, "tile": (gx * size, gy * size)})
-        fbo.release()
+        for layer, atlas in enumerate(atlases):
+            # the first layer (with its peel floors where a second follows), then the second peeled against them
+            fbo = ctx.framebuffer(color_attachments=[atlas] + ([floors] if layer == 0 and floors else []),
+                                  depth_attachment=depth)
+            fbo.use()
+            ctx.viewport = (0, 0, side, side)
+            fbo.clear(NO_YARN, NO_YARN, NO_YARN, NO_YARN, depth=1.0)
+            ctx.enable(ctx.DEPTH_TEST)
+            _set(program, "peel", layer)
+            if layer:
+                floors.use(location=ATLAS_UNITS[8])
+                _set(program, "floor_atlas", ATLAS_UNITS[8])
+            for i, d in enumerate(directions):
+                cam, sphere = _light_camera(np.asarray(d, float), lo, hi, radius_max, size)
+                gx, gy = i % grid, i // grid
+                ctx.viewport = (gx * size, gy * size, size, size)
+                self._camera_uniforms(program, cam, 0.5 * sphere, 3.5 * sphere)
+                for k, vao, count in draws:
+                    _set(program, "strip_half_width", float(self.cpu.looks[k].radius))
+                    vao[2].render(ctx.LINES_ADJACENCY, vertices=count)
+                if layer == 0:
+                    maps.append(self._map_description(cam, sphere, points, angular[i], size, (gx * size, gy * size)))
+            fbo.release()
         depth.release()
-        return maps, atlas
+        if floors is not None:
+            floors.release()
+        return (maps, *atlases)
+
+    @staticmethod
+    def _map_description(cam, sphere, points, angular, size, tile):
+        """shadow.glsl's ShadowMapInfo of the light camera ``cam`` (sphere radius ``sphere``) drawn into ``tile``."""
+        fwd, right, up = cam.basis()
+        d_min = float(np.min((points - cam.position) @ fwd))
+        # GL's rows run upward, so texel row i of a tile is the map's row size − 1 − i (shadow_map.py counts rows
+        # from the top): the map's up is given negated, and shadow.glsl's row from the top is GL's row
+        return {"right": right, "up": -up, "fwd": fwd, "origin": np.asarray(cam.position, float),
+                "texel": 2 * sphere / size, "d_min": d_min, "tan_angle": math.tan(float(angular)), "size": size,
+                "tile": tile}
 
     def _light_uniforms(self, program, light_maps, lobe_maps):
         _set(program, "n_lights", len(self.light_dir))

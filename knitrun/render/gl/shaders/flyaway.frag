@@ -185,9 +185,9 @@ void main() {
         float phi_f = azimuth_difference(tf, sp.wo, w);
         float theta_i_f = clamped_asin(dot(tf, w));
         vec3 f = bcsdf_single(spread_params(p, spread2, phi_f), theta_i_f, theta_o_f, phi_f);
-        float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position,
-                                       shadow_bias + own_strip_depth(offset, sp.t, w), PCF_RADIUS)
-                                  * canopy_at(l, fin.segment, sp.s));
+        float bias = shadow_bias + own_strip_depth(offset, sp.t, w);
+        float lit = past_blockers(pcss(light_atlas, light_map[l], sp.position, bias, PCF_RADIUS)
+                                  * canopy_at(l, fin.segment, sp.s), light_beyond(l, sp.position, bias));
         rgb += light_irradiance[l] * lit * hair_light(on_body, behind, reach, v_strip, sp.t, sp.n, sp.b, w) * f
              * cos(theta_i_f);
         if (use_glow != 0)  // the body's glow, lit as the hair is

@@ -127,12 +127,15 @@ void main() {
     for (int l = 0; l < n_lights; ++l) {
         vec3 w = light_dir[l];
         corrections(v, t, n, b, theta_o, w, true, true, xi, xi_s, psi);
-        float vis = pcss(light_atlas, light_map[l], receiver, shadow_bias + own_strip_depth(offset, raster_t, w),
-                         PCF_RADIUS) * canopy_at(l, fin.segment, bounce_s);
+        float bias = shadow_bias + own_strip_depth(offset, raster_t, w);
+        // the canopy dims V alone (pipeline.Renderer): what it keeps off passes the bodies as under one blocker
+        float vis = pcss(light_atlas, light_map[l], receiver, bias, PCF_RADIUS) * canopy_at(l, fin.segment, bounce_s);
+        float beyond = light_beyond(l, receiver, bias);
         float phi_f = azimuth_difference(tf, wo, w);
+        // strip_shading.yarns_crossed: (V₂ − V) + 2 (1 − V₂) yarns between the point and the light
         ds_kernel(spread_params(p, spread2, phi_f), clamped_asin(dot(tf, w)), theta_o_f, phi_f,
-                  n_occluded + (1.0 - vis) * n_cross_rest, past_blockers(vis) * fiber_lit(psi), true, total, back_direct,
-                  f_scatter, single);
+                  n_occluded + (2.0 - vis - beyond) * n_cross_rest, past_blockers(vis, beyond) * fiber_lit(psi), true,
+                  total, back_direct, f_scatter, single);
         // single scattering (D f cos θ_i) by its ξ, the rest by multiple scattering's (strip_shading.shade_regular)
         rgb += light_irradiance[l] * (xi_s * single + xi * (total - single));
     }

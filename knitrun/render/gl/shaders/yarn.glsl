@@ -25,6 +25,9 @@ uniform vec3 light_dir[MAX_LIGHTS];
 uniform vec3 light_irradiance[MAX_LIGHTS];
 uniform ShadowMapInfo light_map[MAX_LIGHTS];
 uniform sampler2D light_atlas;
+// Features.two_blockers: the maps' second yarn layer, tiles as light_atlas's (depth.frag's peel)
+uniform int two_blockers;
+uniform sampler2D behind_atlas;
 // the hair canopy (Features.hair_canopy; pipeline.canopy_at_vertices, computed on the CPU): per light and polyline
 // point one texel (transmittance, rest arc length), light l's points from row l · canopy_rows, POLYLINE_ROW a row
 uniform int hair_canopy;
@@ -48,9 +51,15 @@ Params yarn_params() {
                   vec3(p_a_d[0], p_a_d[1], p_a_d[2]), p_beta_r, p_beta_tt, p_gamma_tt, p_alpha_r, p_alpha_tt);
 }
 
-// strip_shading.past_blockers: a directional light's light past the other yarns unscattered, V + (1 − V) τ_Y
-float past_blockers(float vis) {
-    return vis + (1.0 - vis) * gap;
+// strip_shading.past_blockers: a directional light's light past the other yarns unscattered,
+// V + (V₂ − V) τ_Y + (1 − V₂) τ_Y², V₂ the fraction at most one yarn blocks (1 without two_blockers)
+float past_blockers(float vis, float beyond) {
+    return vis + (beyond - vis) * gap + (1.0 - beyond) * gap * gap;
+}
+
+// V₂ of light l at a receiver of that bias: PCSS on the second yarn layer with two_blockers, else 1
+float light_beyond(int l, vec3 position, float bias) {
+    return two_blockers != 0 ? pcss(behind_atlas, light_map[l], position, bias, PCF_RADIUS) : 1.0;
 }
 
 // light l's hair canopy interpolated by rest arc length s along segment i, as yarn_bounce.bounce_at_points; 1
