@@ -97,10 +97,11 @@ def test_a_frame_compiles_each_of_its_raster_and_visibility_kernels_once(tmp_pat
     (read-only broadcast views) and ``past_blockers`` (called on arrays by the yarn-level bounce), ~2.6 s of a cold
     frame. ``_depth_test`` is reached only from ``_raster`` and ``_raster_depth``, whose signatures are read here (a
     warm cache loads those, not their callees'): their bound arguments must have the same types."""
-    for lights in (SUN, SKY):  # a shadow map (``_raster_depth``), both layers and the flyaway layer (``_raster``)
+    # a shadow map and its peeled second layer (``_raster_depth``), both layers and the flyaway layer (``_raster``)
+    for lights in (SUN, SKY):
         pipeline.Renderer(_scene(tmp_path, lights), {"cotton1": str(pack)}).render()
     bound_types = {tuple(str(t) for t in signature[-5:-3]) for signature in _raster.signatures}
-    bound_types |= {tuple(str(t) for t in signature[-3:-1]) for signature in _raster_depth.signatures}
+    bound_types |= {tuple(str(t) for t in signature[-4:-2]) for signature in _raster_depth.signatures}
     assert len(bound_types) == 1, bound_types
     assert len(_peel_floor.signatures) == 1, _peel_floor.signatures
     assert len(_interreflect.signatures) == 1, _interreflect.signatures

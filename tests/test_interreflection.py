@@ -264,14 +264,14 @@ def test_a_yarn_in_another_yarns_shadow_gets_the_light_the_yarn_lets_through(tmp
 
 def test_two_blocking_yarns_let_less_light_between_their_fibers_than_one(tmp_path, pack):
     """Three yarns stacked under an overhead sun, seen from the side: counting two blockers
-    (``Features.two_blockers``) leaves the top yarn (none) and the middle one (one blocker) as they were and darkens
-    only the bottom one, behind two yarns (τ_Y² instead of τ_Y, two crossings of the scattered rest); the facts say
+    (``Features.two_blockers``, the default) leaves the top yarn (none) and the middle one (one blocker) as they were
+    and darkens only the bottom one, behind two yarns (τ_Y² instead of τ_Y, two crossings of the scattered rest); the facts say
     how much of the image lies behind one and behind two. Without the yarn-level bounce (``no_bounce``): the middle
     yarn also gets the light the bottom one scatters, which two blockers darken."""
     stack = [straight(z=z) for z in (0.24, 0.12, 0.0)]
     scene = write_scene(tmp_path, stack, camera=SIDE, lights=OVERHEAD_SUN, name="stack")
-    one = _render(scene, pack, features=Features(yarn_bounce=False))
-    two = _render(scene, pack, features=Features(two_blockers=True, yarn_bounce=False))
+    one = _render(scene, pack, features=Features(two_blockers=False, yarn_bounce=False))
+    two = _render(scene, pack, features=Features(yarn_bounce=False))
     assert "two_blockers" not in one.facts
     assert two.facts["two_blockers"]["behind_two_yarns"] > 0.05 and two.facts["two_blockers"]["behind_one_yarn"] > 0.05
     change = np.abs(two.image - one.image).max(axis=(1, 2))

@@ -301,3 +301,25 @@ def test_a_peeled_layer_is_the_next_strip_behind_the_front_one(ortho):
     assert np.array_equal(peeled.depth[where], alone[3].depth[where])
     lone = vis.coverage & ~(alone[2].coverage | alone[3].coverage) & (vis.curve != 1)
     assert lone.sum() > 20 and np.all(peeled.curve[lone] == -1)  # the front strip alone: nothing behind it
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_the_depth_maps_second_layer_is_the_peeled_buffers_depth(ortho):
+    """``rasterize_depth`` with ``behind_gap`` (shadow maps' second layer) gives, bit for bit, the depth of
+    ``rasterize_visibility`` at msaa 1 peeled by ``rasterize_behind`` with that gap per curve, +inf where the peeled
+    buffer has no strip; the first map is the one-layer map. The scene of the test above, one curve's gap larger
+    than the distance to the strip behind it (so the per-curve gap is read, not the first curve's)."""
+    cam = ortho_camera(64, 64) if ortho else Camera(np.array([0.0, 0.0, 6.0]), np.zeros(3), Y_UP, 64, 64,
+                                                    fov_deg=40.0)
+    pts = np.array([[-1.0, 0.0, 0.3], [1.0, 0.0, 0.3], [-1.0, 0.1, 0.25], [1.0, 0.1, 0.25],
+                    [0.0, -1.0, 0.0], [0.0, 1.0, 0.0], [-1.0, -1.0, -0.5], [1.0, 1.0, -0.5]])
+    offsets, rest, radius = [0, 2, 4, 6, 8], np.tile([0.0, 2.0], 4), np.full(4, 0.2)
+    gap = np.array([0.2, 0.2, 0.6, 0.2])  # behind the vertical strip, the diagonal (0.5 away) is skipped
+    front, behind = rasterize_depth(pts, offsets, False, rest, radius, cam, behind_gap=gap)
+    vis = rasterize_visibility(pts, offsets, False, rest, radius, 0, cam, msaa=1)
+    peeled = rasterize_behind(vis, cam, gap)
+    np.testing.assert_array_equal(front, rasterize_depth(pts, offsets, False, rest, radius, cam))
+    expected = np.where(peeled.curve[..., 0] >= 0, peeled.depth[..., 0], np.float32(np.inf))
+    np.testing.assert_array_equal(behind, expected)
+    assert np.isfinite(behind).sum() > 40
+    assert np.any(np.isfinite(front) & ~np.isfinite(behind) & (vis.curve[..., 0] == 2))

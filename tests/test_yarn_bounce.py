@@ -369,7 +369,7 @@ def test_ablations_combine_as_their_changes_to_the_full_model():
     with pytest.raises(ValueError, match="unknown ablation 'bounce'"):
         combined("full+bounce")
     # the flyaway-free probes take the same names
-    assert regular_fibers("diagonal_xi+two_blockers") == Features(view_xi=False, two_blockers=True, flyaways=False)
+    assert regular_fibers("diagonal_xi+one_blocker") == Features(view_xi=False, two_blockers=False, flyaways=False)
     assert regular_fibers("plain_ds") == replace(ABLATIONS["plain_ds"], flyaways=False)
     with pytest.raises(ValueError, match="unknown ablation 'paper_xi'"):
         regular_fibers("paper_xi")

@@ -99,10 +99,12 @@ the four patches' yarn-scale error over the instance floor falls from 1.47 / 1.6
 second shadow layer (``shadow_map``, ``behind``) gives V₂, the fraction of the light that at most one yarn blocks,
 and the light passing between the fibers becomes V + (V₂ − V) τ_Y + (1 − V₂) τ_Y², the scattered rest crossing
 (V₂ − V) + 2 (1 − V₂) yarns (``strip_shading.past_blockers``): under grazing light a point lies behind several
-yarns, and one gap per blocked ray let too much through. Not the default: on the grazing patch, the one example
-scene with points behind two yarns, the error falls from 1.58× to 1.54× the instance floor, the GL backend draws one
-layer, and the frame takes half again as long (BENCHMARKS.md "Issue 13: the yarn's hull in the scene's colour", "Two
-blocking yarns").
+yarns, and one gap per blocked ray let too much through. The default on both backends since stop 71: on the grazing
+patch, the one example scene with points behind two yarns, the mean ratio goes from 1.033 to 0.999 and the
+yarn-scale error from 1.24× to 1.18× the instance floor (1.34× to 1.26× the ensemble floor), the other six scenes do
+not move, and the second layer is a peeled depth pass (+60 ms of a ~1 s CPU frame there; BENCHMARKS.md, "Two
+blocking yarns" (stop 47) and "Issue 13: two blocking yarns by default (stop 71)"). The ablation ``one_blocker``
+counts one.
 
 ``surface_shadows`` looks the lights up on the tube surface the camera sees at a regular point (the strip point moved
 r √(1 − v²) toward the camera, ``pipeline.strip_receivers``) instead of on the strip plane through the yarn's axis, up
@@ -187,7 +189,7 @@ class Features:
     hair_bounce: bool = True  # with yarn_bounce: onto its hairs too (strip_shading.hair_bounce)
     split_xi: bool = True  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms) where the pack
     # has it, else the one closed ξ
-    two_blockers: bool = False  # up to two yarns counted between a point and a directional light (second shadow layer)
+    two_blockers: bool = True  # up to two yarns counted between a point and a directional light (second shadow layer)
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
     hair_glow: bool = True  # hairs beside and over a yarn lit by the light its body scatters (strip_shading.body_glow)
     hairs_behind: bool = True  # hairs seen through a body's gaps lie behind it (strip_shading.behind_share)
@@ -214,7 +216,7 @@ ABLATIONS = {
     "no_hair_bounce": Features(hair_bounce=False),
     "axis_shadows": Features(surface_shadows=False),
     "whole_xi": Features(split_xi=False),
-    "two_blockers": Features(two_blockers=True),
+    "one_blocker": Features(two_blockers=False),
     "no_hair_glow": Features(hair_glow=False),
     "no_hairs_behind": Features(hairs_behind=False),
     "no_hair_canopy": Features(hair_canopy=False),
@@ -232,7 +234,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "no_hair_bounce": "full without the yarn-level bounce on the hairs",
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "whole_xi": "full with one ξ closed on single and multiple scattering together",
-                   "two_blockers": "full with two blocking yarns counted",
+                   "one_blocker": "full with one blocking yarn counted per ray",
                    "no_hair_glow": "full without the body's glow on its hairs",
                    "no_hairs_behind": "full with every hair seen over a body in front of it",
                    "no_hair_canopy": "full without other yarns' hair layers dimming the directional lights"}

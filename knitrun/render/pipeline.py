@@ -53,13 +53,14 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    lets through the gap transmittance τ_Y of the blocker (``strip_shading.past_blockers``, in the kernels). With
    ``Features.yarn_bounce`` (the default) the directional lights are looked up at the polyline vertices as well,
    and the light the neighbouring yarns scatter onto each vertex (``frame_bounce``, ``knitrun.render.yarn_bounce``)
-   is interpolated to the regular points. With ``Features.two_blockers`` (an ablation) each directional light's map
+   is interpolated to the regular points. With ``Features.two_blockers`` (the default) each directional light's map
    also draws the second yarn layer (``shadow_map``, ``behind``), and V₂, the fraction that at most one yarn blocks,
-   goes to the kernels as ``Lights.beyond`` (1 otherwise): one gap transmittance per yarn crossed, up to two.
+   goes to the kernels as ``Lights.beyond`` (1 with the ablation ``one_blocker``): one gap transmittance per yarn
+   crossed, up to two.
    With ``Features.hair_canopy`` (the default) every receiver's visibility V of each directional light (and the
    bounce vertices') is multiplied by the fraction the other yarns' hair layers let through (``hair_canopy``),
    computed at the polyline points and interpolated along the curves (``_canopy``); V₂ of ``two_blockers`` is not,
-   so the light the canopy keeps off passes at τ_Y as under one blocker, with or without that ablation.
+   so the light the canopy keeps off passes at τ_Y as under one blocker, with one blocker counted or two.
 5. ``shade``: per yarn entry, regular fibers (DS + ξ + Ψ^Fiber, eq. 11 and eq. 17) and flyaways
    (``knitrun.render.strip_shading``). Texture phase: the pack's textures show the yarn seen from azimuth 0 of its yarn
    frame (N, T × N) (the bake's camera looks along −N); a helical yarn seen from azimuth γ looks like the yarn
@@ -485,12 +486,12 @@ def _visibility(lines, radius_of_curve, direction, size, angular_radius, receive
     if len(lines.entry) == 0:
         return [(np.ones(len(r.position)),) * 2 if two_layers else np.ones(len(r.position)) for r in receivers]
     sm = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius_of_curve, direction, size,
-                          lines.points.min(axis=0), lines.points.max(axis=0),
-                          out=None if two_layers else depth_maps.get(size), layers=2 if two_layers else 1)
+                          lines.points.min(axis=0), lines.points.max(axis=0), out=depth_maps.get(size),
+                          layers=2 if two_layers else 1)
+    depth_maps[size] = sm.depth
     unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
     biases = [receiver_bias(r, unit) for r in receivers]
     if not two_layers:
-        depth_maps[size] = sm.depth
         return [shadow_visibility(sm, r.position, bias, angular_radius) for r, bias in zip(receivers, biases)]
     behind = behind_map(sm)
     return [(shadow_visibility(sm, r.position, bias, angular_radius),

@@ -31,7 +31,8 @@ structure          fields (units: scene lengths, radians, linear RGB; N = shadin
 ``Lights``         distant lights: ``direction`` (L, 3) unit toward the light, ``irradiance`` (L, 3),
                    ``visibility`` (L, N) yarn-level, per point (also the multiple-scattering clusters of the
                    SRBF lobes, ``pipeline.ms_lights``), ``beyond`` (L, N) the fraction at most one yarn blocks
-                   (``Features.two_blockers``), or (L, 0) where not counted (1 everywhere; the clusters)
+                   (``Features.two_blockers``, the default), or (L, 0) where not counted (1 everywhere: the
+                   ablation ``one_blocker``; the clusters)
 ``Lobes``          SRBF lobes: ``direction`` (J, 3), ``sharpness`` λ (J,), ``weight`` W (J, 3),
                    ``visibility`` (J, N)
 ``IMSlices``       the I_M^{TT,D} table at each lobe's λ and its other axes (``knitrun.shading.im_lookup``)

@@ -20,8 +20,9 @@ Units and conventions:
   behind its own yarn's strip, which faces the light and so tilts as the light turns toward the yarn's axis: its
   bias grows by that much (``knitrun.render.pipeline``), so its margin from its own strip stays 1.5·radius.
 * ``behind`` (with ``layers`` = 2): the depth of the second yarn along each texel's ray, the nearest strip more
-  than the first one's radius behind it (``strip_raster.rasterize_behind``, depth peeling), +inf where there is
-  none; the same PCSS on it (``behind_map``) gives the fraction of the light that at most one yarn blocks.
+  than the first one's radius behind it (``strip_raster.rasterize_depth`` with ``behind_gap``: depth peeling by
+  ``rasterize_behind``'s rule), +inf where there is none; the same PCSS on it (``behind_map``) gives the fraction
+  of the light that at most one yarn blocks.
 
 PCSS (Fernando 2005) for a light of angular radius θ (``light_angular_radius``, radians; 0 = a delta light):
 
@@ -45,7 +46,7 @@ from numba import njit, prange
 
 from data_formats.conventions import HALF_PI
 from knitrun.render.camera import Camera, view_matrix
-from knitrun.render.strip_raster import rasterize_behind, rasterize_depth, rasterize_visibility
+from knitrun.render.strip_raster import rasterize_depth
 
 MAX_FILTER_TEXELS = 32.0  # cap on the blocker-search and PCF half-widths
 MAX_TAPS = 8  # taps per axis of each filter grid
@@ -138,16 +139,10 @@ def build_shadow_map(points, offsets, closed, rest_arclength, radius, direction,
     centre = 0.5 * (lo + hi)
     up = np.eye(3)[int(np.argmin(np.abs(direction)))]  # the axis least aligned with the light: never parallel
     camera = Camera(centre + 2 * sphere * direction, centre, up, size, size, ortho_height=2 * sphere)
-    if layers == 1:
-        depth = rasterize_depth(points, offsets, closed, rest_arclength, radius, camera, near=0.5 * sphere,
-                                closing_length=closing_length, out=out)
-        return ShadowMap(view_matrix(camera), np.asarray(camera.position, np.float64), 2 * sphere, size, depth)
-    # the visibility buffer's depth is rasterize_depth's, bit for bit (an orthographic camera: the view depth)
-    front = rasterize_visibility(points, offsets, closed, rest_arclength, radius, 0, camera, 1, near=0.5 * sphere,
-                                 closing_length=closing_length)
-    back = rasterize_behind(front, camera, radius)
-    depth, behind = (np.where(v.curve[..., 0] >= 0, v.depth[..., 0], np.float32(np.inf)).astype(np.float32)
-                     for v in (front, back))
+    # the second layer peeled behind the first one's radius (``rasterize_behind``'s rule, without its buffers)
+    depth = rasterize_depth(points, offsets, closed, rest_arclength, radius, camera, near=0.5 * sphere,
+                            closing_length=closing_length, out=out, behind_gap=radius if layers == 2 else None)
+    depth, behind = depth if layers == 2 else (depth, None)
     return ShadowMap(view_matrix(camera), np.asarray(camera.position, np.float64), 2 * sphere, size, depth, behind)
 
 

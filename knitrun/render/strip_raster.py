@@ -253,18 +253,34 @@ def rasterize_strips(points, offsets, closed, rest_arclength, radius, yarn_id, c
 
 
 def rasterize_depth(points, offsets, closed, rest_arclength, radius, camera: Camera, near=1e-3, far=math.inf,
-                    closing_length=None, tile=32, out=None):
+                    closing_length=None, tile=32, out=None, behind_gap=None):
     """The ``depth`` of ``rasterize_strips`` at msaa 1 alone, as a (camera.height, camera.width) float32 map with
     +inf where no strip covers the pixel centre: what a shadow map needs, without writing the other attributes
-    (the same depth test, so the same values bit for bit). ``out`` an array of that shape and dtype to reuse."""
-    tri, tile_start, tile_tris, _, _ = _triangles(points, offsets, closed, rest_arclength, radius, camera, near, far,
-                                                  closing_length, tile)
+    (the same depth test, so the same values bit for bit). ``out`` an array of that shape and dtype to reuse.
+
+    ``behind_gap`` (scene units, (C,) per curve or a scalar): (depth, the depth of the layer behind it), the second
+    map peeled as ``rasterize_behind`` peels a ``rasterize_visibility`` buffer with that gap, bit for bit, +inf where
+    there is none, without writing either buffer's slots."""
+    tri, tile_start, tile_tris, _, seg_curve = _triangles(points, offsets, closed, rest_arclength, radius, camera,
+                                                          near, far, closing_length, tile)
     w, h = int(camera.width), int(camera.height)
     if out is None or out.shape != (h, w) or out.dtype != np.float32:
         out = np.empty((h, w), np.float32)
-    _raster_depth(tri, tile_start, tile_tris, w, h, tile, -(-w // tile), SAMPLE_PATTERNS[1],
-                  float(camera.ortho_height) > 0, tan_half_fov(camera), _NO_BOUND, NO_BOUND, out)
-    return out
+    ortho, tan_half, pattern = float(camera.ortho_height) > 0, tan_half_fov(camera), SAMPLE_PATTERNS[1]
+    peel = behind_gap is not None
+    curve = np.empty((h, w) if peel else (0, 0), np.int32)
+    _raster_depth(tri, tile_start, tile_tris, seg_curve, w, h, tile, -(-w // tile), pattern, ortho, tan_half,
+                  _NO_BOUND, NO_BOUND, out, curve)
+    if not peel:
+        return out
+    n_curves = len(offsets) - 1
+    gap = np.array(np.broadcast_to(np.asarray(behind_gap, np.float64), (n_curves,)))
+    floor = np.empty((h, w, 1))
+    _peel_floor(out.reshape(h, w, 1), curve.reshape(h, w, 1), gap, pattern, ortho, tan_half, floor)
+    behind = np.empty((h, w), np.float32)
+    _raster_depth(tri, tile_start, tile_tris, seg_curve, w, h, tile, -(-w // tile), pattern, ortho, tan_half,
+                  floor, FLOOR, behind, np.empty((0, 0), np.int32))
+    return out, behind
 
 
 def _triangles(points, offsets, closed, rest_arclength, radius, camera, near, far, closing_length, tile):
@@ -643,13 +659,15 @@ def _sample_depth(z, px, py, pattern_s, width, height, ortho, tan_half):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, pattern, ortho, tan_half, bound,
-                  bound_kind, depth):
+def _raster_depth(tri, tile_start, tile_tris, seg_curve, width, height, tile, tiles_x, pattern, ortho, tan_half,
+                  bound, bound_kind, depth, curve):
     """``_raster``'s depth test alone: depth[py, px] of the nearest strip at the pixel's single sample, +inf where
-    none covers it. ``bound`` and ``bound_kind`` come as arguments (``_NO_BOUND``, ``NO_BOUND``), not as the module's
-    constants: as constants Numba typed them as a read-only array and a literal 0 and compiled ``_depth_test`` a
-    second time for them (~0.6 s of a cold first frame)."""
+    none covers it, and its curve in curve[py, px] (−1 none) unless ``curve`` has no rows. ``bound`` and
+    ``bound_kind`` come as arguments (``_NO_BOUND``, ``NO_BOUND``), not as the module's constants: as constants Numba
+    typed them as a read-only array and a literal 0 and compiled ``_depth_test`` a second time for them (~0.6 s of a
+    cold first frame)."""
     n_tiles = tile_start.shape[0] - 1
+    n_seg = seg_curve.shape[0]
     for t in prange(n_tiles):
         x_lo, y_lo = (t % tiles_x) * tile, (t // tiles_x) * tile
         x_hi, y_hi = min(x_lo + tile, width), min(y_lo + tile, height)
@@ -659,8 +677,11 @@ def _raster_depth(tri, tile_start, tile_tris, width, height, tile, tiles_x, patt
                     bound_kind, best_z, best_tri)
         for i in range(y_hi - y_lo):
             for j in range(x_hi - x_lo):
-                depth[y_lo + i, x_lo + j] = np.inf if best_tri[i, j, 0, 0] < 0 else \
+                kept = best_tri[i, j, 0, 0]
+                depth[y_lo + i, x_lo + j] = np.inf if kept < 0 else \
                     _sample_depth(best_z[i, j, 0, 0], x_lo + j, y_lo + i, pattern[0], width, height, ortho, tan_half)
+                if curve.shape[0] > 0:
+                    curve[y_lo + i, x_lo + j] = -1 if kept < 0 else seg_curve[kept % n_seg]
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

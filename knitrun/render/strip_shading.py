@@ -22,19 +22,19 @@ scaled by the point's fiber bend (``fiber_bend``). Per directional light
     yarn angles   θ_i, θ_o against t;  θ_d = (θ_o − θ_i)/2;  φ = φ_o − φ_i = −atan2(ω_i·b, ω_i·n)
     ξ           = ξ(v, θ_d, φ) (the pack's full table), or ξ_M(v, θ_d) ξ_N(v, φ) (its factors)
     Ψ^Fiber_G   = mean_RGB Ψ(v, θ_i, φ), or Ψ_{G,M}(v, θ_i) Ψ_{G,N}(v, φ); clamped to [0, 1]
-    V_d         = V + (1 − V) τ_Y                                         light past the other yarns unscattered:
+    V_d         = V + (V₂ − V) τ_Y + (1 − V₂) τ_Y²                        light past the other yarns unscattered:
                   around them or between their fibers (τ_Y, ``yarn_look.gap_transmittance``; ``past_blockers``)
     D           = V_d · Ψ^Fiber_G                                         fraction lit directly
-    n           = n_occluded + k n_rest,  k = 1 − V                       fibers toward the light when not lit
+    n           = n_occluded + k n_rest,  k = (V₂ − V) + 2 (1 − V₂)        fibers toward the light when not lit
                   (n_rest: the count of the scattered rest, τ_Y + (1 − τ_Y) ā_f^{n_rest} = T_Y, the pack's yarn
                   transmittance; ``Look.n_cross_rest``, ``yarn_look``)
     DS          = DS(θ_i^f, θ_o^f, φ^f; n, D)                             ``dual_scattering.ds_kernel``, fiber frame
     L_o        += E · (ξ_s S + ξ (DS − S))                                S = D f cos θ_i^f, DS's single scattering;
                   ξ_s = ξ but for ξ closed apart on single and multiple scattering (``_corrections``)
 
-with θ^f, φ^f against t_f; with ``Features.two_blockers`` (an ablation) V_d = V + (V₂ − V) τ_Y + (1 − V₂) τ_Y² and
-k = (V₂ − V) + 2 (1 − V₂), V₂ the fraction of the light that at most one yarn blocks (``past_blockers``,
-``yarns_crossed``). V_d (beyond Huang et al. 2025): the shadow map draws yarns as opaque tubes, but a sixth
+with θ^f, φ^f against t_f, V₂ the fraction of the light that at most one yarn blocks (``Features.two_blockers``, the
+default; ``past_blockers``, ``yarns_crossed``; with the ablation ``one_blocker`` V₂ = 1: V_d = V + (1 − V) τ_Y,
+k = 1 − V). V_d (beyond Huang et al. 2025): the shadow map draws yarns as opaque tubes, but a sixth
 of a beam crossing cotton1 meets no fiber, and without it the path-traced fibers in another yarn's shadow showed 2–3×
 the strips' single scattering (BENCHMARKS.md, "Issue 13: light between a blocking yarn's fibers, and light that
 neighbouring yarns scatter"). With ``bounce`` (the ablation ``yarn_bounce``, ``knitrun.render.yarn_bounce``) each
