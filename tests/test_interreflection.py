@@ -265,9 +265,9 @@ def test_a_yarn_in_another_yarns_shadow_gets_the_light_the_yarn_lets_through(tmp
 def test_two_blocking_yarns_let_less_light_between_their_fibers_than_one(tmp_path, pack):
     """Three yarns stacked under an overhead sun, seen from the side: counting two blockers
     (``Features.two_blockers``, the default) leaves the top yarn (none) and the middle one (one blocker) as they were
-    and darkens only the bottom one, behind two yarns (τ_Y² instead of τ_Y, two crossings of the scattered rest); the facts say
-    how much of the image lies behind one and behind two. Without the yarn-level bounce (``no_bounce``): the middle
-    yarn also gets the light the bottom one scatters, which two blockers darken."""
+    and darkens only the bottom one, behind two yarns (τ_Y² instead of τ_Y, two crossings of the scattered rest); the
+    facts say how much of the image lies behind one and behind two. Without the yarn-level bounce (``no_bounce``):
+    the middle yarn also gets the light the bottom one scatters, which two blockers darken."""
     stack = [straight(z=z) for z in (0.24, 0.12, 0.0)]
     scene = write_scene(tmp_path, stack, camera=SIDE, lights=OVERHEAD_SUN, name="stack")
     one = _render(scene, pack, features=Features(two_blockers=False, yarn_bounce=False))
@@ -278,6 +278,21 @@ def test_two_blocking_yarns_let_less_light_between_their_fibers_than_one(tmp_pat
     rows = np.flatnonzero(change > 1e-6)
     assert rows.size and rows.min() >= 0.55 * len(change), rows  # the bottom yarn's rows (row 0 is the top)
     assert np.all(two.image <= one.image + 1e-6) and two.image.mean() < one.image.mean()
+
+
+def test_a_lone_straight_yarn_has_no_second_blocker(tmp_path, pack):
+    """One straight yarn lit from low along its length, as the closure's views light the bake's yarn
+    (``closure.render_bins`` draws them with one blocker counted, for speed): no second yarn layer lies between any
+    of its points and the light, so counting two blockers leaves its image bit for bit."""
+    low = """[[lights]]
+type = "directional"
+direction = [1.0, 0.25, 0.2]
+irradiance = [2.0, 2.0, 2.0]"""
+    scene = write_scene(tmp_path, [straight()], camera=FRONT, lights=low, name="lone")
+    one = _render(scene, pack, features=Features(two_blockers=False))
+    two = _render(scene, pack)
+    assert two.facts["two_blockers"]["behind_two_yarns"] == 0.0 and one.image.max() > 0.0
+    np.testing.assert_array_equal(one.image, two.image)
 
 
 def test_renderer_reports_and_skips_inter_reflection_for_a_pack_without_yarn_albedo(tmp_path, pack):

@@ -186,8 +186,10 @@ def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=No
     out = np.zeros(tuple(shape) + (3,))
     with tempfile.TemporaryDirectory(prefix="knit-closure-") as tmp:
         scene = _scene(Path(tmp), spec, pack)
+        # one straight yarn has no second yarn layer toward a light (V₂ = 1 at every point): the peeled map would
+        # only double each view's cost (BENCHMARKS.md, stop 71)
         renderer = Renderer(scene, features=Features(flyaways=False, view_xi=True, split_xi=split,
-                                                     multiple_scattering=not single))
+                                                     multiple_scattering=not single, two_blockers=False))
         done = 0
         for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
             renderer.scene = _view(scene, spec, theta_i, theta_o, phi, rows)
