@@ -101,10 +101,10 @@ and the light passing between the fibers becomes V + (V₂ − V) τ_Y + (1 − 
 (V₂ − V) + 2 (1 − V₂) yarns (``strip_shading.past_blockers``): under grazing light a point lies behind several
 yarns, and one gap per blocked ray let too much through. The default on both backends since stop 71: on the grazing
 patch, the one example scene with points behind two yarns, the mean ratio goes from 1.033 to 0.999 and the
-yarn-scale error from 1.24× to 1.18× the instance floor (1.34× to 1.26× the ensemble floor), the other six scenes do
-not move, and the second layer is a peeled depth pass (+60 ms of a ~1 s CPU frame there; BENCHMARKS.md, "Two
-blocking yarns" (stop 47) and "Issue 13: two blocking yarns by default (stop 71)"). The ablation ``one_blocker``
-counts one.
+yarn-scale error from 1.24× to 1.18× the instance floor (1.34× to 1.26× the ensemble floor), the other six scenes'
+figures do not move, and the second layer is a peeled depth pass (+90–140 ms of a 0.9–1.1 s CPU frame there;
+BENCHMARKS.md, "Two blocking yarns" (stop 47) and "Issue 13: two blocking yarns by default, on both backends (stop
+71)"). The ablation ``one_blocker`` counts one.
 
 ``surface_shadows`` looks the lights up on the tube surface the camera sees at a regular point (the strip point moved
 r √(1 − v²) toward the camera, ``pipeline.strip_receivers``) instead of on the strip plane through the yarn's axis, up
