@@ -465,8 +465,10 @@ def test_a_lone_yarns_hairs_are_not_shadowed_by_its_own_strip(tmp_path, pack, mo
     mapped = _render(path, pack)
     from knitrun.render import pipeline
 
-    monkeypatch.setattr(pipeline, "_visibility", lambda lines, radius, direction, size, angular, receivers, *rest:
-                        [np.ones(len(r.position)) for r in receivers])
+    def lit_everywhere(lines, radius, direction, size, angular, receivers, depth_maps, two_layers=False):
+        return [(np.ones(len(r.position)),) * 2 if two_layers else np.ones(len(r.position)) for r in receivers]
+
+    monkeypatch.setattr(pipeline, "_visibility", lit_everywhere)
     lit = _render(path, pack)
     assert mapped.facts["flyaway_points_covered"] > 0 and lit.image.max() > 0.0
     np.testing.assert_allclose(mapped.image, lit.image, rtol=1e-6, atol=1e-9)
