@@ -160,10 +160,10 @@ def test_the_closed_xi_reproduces_the_traced_radiance_where_the_papers_does_not(
 
 def test_the_closure_draws_its_lone_yarn_unshadowed_by_its_own_strip(closed_pack, monkeypatch):
     """The closure's renderer draws the full model without flyaways (with the one ξ, which it closes first; one
-    blocker counted: a lone straight yarn has no second layer toward a light). The lone
-    yarn's bins are the same looked up on the tube's surface as on the strip plane; without the tilt of its own strip
-    (``pipeline.receiver_bias`` = the bias alone) they are the same again only where no light runs more than 48° from
-    the yarn's normal plane: on a grid of four θ bins the two middle ones (±22.5°), not the outer ones (±67.5°)."""
+    blocker counted: a lone straight yarn has no second layer toward a light). The lone yarn's bins are the same
+    looked up on the tube's surface as on the strip plane; without the tilt of its own strip (``pipeline.receiver_bias``
+    = the bias alone) they are the same again only where no light runs more than 48° from the yarn's normal plane: on
+    a grid of four θ bins the two middle ones (±22.5°), not the outer ones (±67.5°)."""
     import knitrun.render.pipeline as pipeline
 
     asked = []
