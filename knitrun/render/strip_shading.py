@@ -25,7 +25,7 @@ scaled by the point's fiber bend (``fiber_bend``). Per directional light
     V_d         = V + (V₂ − V) τ_Y + (1 − V₂) τ_Y²                        light past the other yarns unscattered:
                   around them or between their fibers (τ_Y, ``yarn_look.gap_transmittance``; ``past_blockers``)
     D           = V_d · Ψ^Fiber_G                                         fraction lit directly
-    n           = n_occluded + k n_rest,  k = (V₂ − V) + 2 (1 − V₂)        fibers toward the light when not lit
+    n           = n_occluded + k n_rest,  k = (V₂ − V) + 2 (1 − V₂)       fibers toward the light when not lit
                   (n_rest: the count of the scattered rest, τ_Y + (1 − τ_Y) ā_f^{n_rest} = T_Y, the pack's yarn
                   transmittance; ``Look.n_cross_rest``, ``yarn_look``)
     DS          = DS(θ_i^f, θ_o^f, φ^f; n, D)                             ``dual_scattering.ds_kernel``, fiber frame

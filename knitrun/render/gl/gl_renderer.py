@@ -17,10 +17,10 @@ What runs where
   strips seen from the light camera of ``shadow_map.build_shadow_map`` into a tile of a depth atlas (lights at
   ``shadow_map_size``, lobes at a quarter, at least 64); with ``Features.two_blockers`` the lights' maps are drawn
   twice, the second time peeled (``shaders/depth.frag``: only strips more than the first layer's radius behind it,
-  ``strip_raster.rasterize_behind``'s rule) into an atlas of the second yarn layer. Pass 2: the strips seen from the scene camera into a
-  multisampled float framebuffer; the fragment shader (``shaders/regular.frag``) shades the regular fibers exactly
-  as ``shade_regular`` does, with PCSS visibility from the atlases (``shaders/shadow.glsl``), and writes
-  α·L + (1 − α)·background. A fragment is shaded at the first sample of the CPU's pattern that lies on its
+  ``strip_raster.rasterize_behind``'s rule) into an atlas of the second yarn layer. Pass 2: the strips seen from the
+  scene camera into a multisampled float framebuffer; the fragment shader (``shaders/regular.frag``) shades the
+  regular fibers exactly as ``shade_regular`` does, with PCSS visibility from the atlases (``shaders/shadow.glsl``),
+  and writes α·L + (1 − α)·background. A fragment is shaded at the first sample of the CPU's pattern that lies on its
   curve's strip (the CPU shades a pixel once per curve, at its first covered sample). Pass 3: the MSAA resolve
   averages the samples.
 * Table lookups follow ASSET_PACK.md §4.3 by ``texelFetch`` and explicit weights (``axis_cell``), textures
@@ -32,8 +32,9 @@ image axes cover other samples; a primitive shades one fragment per pixel (a pix
 is shaded twice, each weighted by its own coverage); the shadow maps are rasterised by the driver; the nearest depth
 of a shadow map is the nearest projected polyline point; a flyaway fragment looks its lights up at its own strip
 point, where the CPU's flyaway point over a regular point of its curve takes that point's lookups on the tube
-surface (``pipeline.SHARE_REACH``). ``tests/test_gl_render.py`` holds the two renderers
-together (per pixel on axis-aligned orthographic scenes, else at the yarn scale).
+surface (``pipeline.SHARE_REACH``; 0.07 % of the grazing patch's mean, BENCHMARKS.md, stop 71).
+``tests/test_gl_render.py`` holds the two renderers together (per pixel on axis-aligned orthographic scenes, else at
+the yarn scale).
 
 Five terms read more than a fragment's own attributes: ``Features.surface_shadows`` looks
 the lights up on the tube surface seen (the fragment's position moved r √(1 − v²) toward the camera,
@@ -653,8 +654,8 @@ class GLRenderer:
         program = self.depth
         for layer, atlas in enumerate(atlases):
             # the first layer (with its peel floors where a second follows), then the second peeled against them
-            fbo = ctx.framebuffer(color_attachments=[atlas] + ([floors] if layer == 0 and floors else []),
-                                  depth_attachment=depth)
+            peel_floors = [floors] if layer == 0 and floors is not None else []
+            fbo = ctx.framebuffer(color_attachments=[atlas] + peel_floors, depth_attachment=depth)
             fbo.use()
             ctx.viewport = (0, 0, side, side)
             fbo.clear(NO_YARN, NO_YARN, NO_YARN, NO_YARN, depth=1.0)
