@@ -139,3 +139,32 @@ def test_the_same_for_any_thread_count():
     finally:
         numba.set_num_threads(before)
     assert np.array_equal(one, many) and one.min() < 0.9 and np.all(one > 0.0)
+
+
+def test_each_cell_lists_its_segments_nearest_the_light_first_and_the_grid_changes_no_beam(monkeypatch):
+    """The receivers stop at a cell's first segment wholly behind them, so each cell must hold its segments by
+    decreasing top (toward the light, hair reach included); and the grid only prunes: with every segment in one cell
+    the beams meet the same hairs."""
+    import knitrun.render.hair_canopy as hc
+
+    shells = hair_shells(profile(), H)
+    rng = np.random.default_rng(11)
+    tilt = [yarn_along_x(y=y, z=z) @ np.array([[math.cos(a), math.sin(a), 0.0], [-math.sin(a), math.cos(a), 0.0],
+                                                [0.0, 0.0, 1.0]])
+            for (y, z), a in zip(rng.uniform(-0.1, 0.1, (8, 2)), rng.uniform(0.0, math.pi, 8))]
+    lines = lines_of(*tilt)
+    direction = np.array([0.3, -0.4, 1.0])
+    grid = canopy_grid(lines, np.full(8, R), [shells] * 8, direction)
+    assert grid.size.prod() > 100
+    top = np.maximum(grid.toward[grid.first], grid.toward[grid.first + 1]) + grid.reach[grid.seg_curve]
+    for c in range(len(grid.start) - 1):
+        held = top[grid.members[grid.start[c]:grid.start[c + 1]]]
+        assert np.all(np.diff(held) <= 0.0), c
+    receivers = rng.uniform(-0.12, 0.12, (400, 3))
+    curve, arc = rng.integers(0, 8, 400), rng.uniform(0.0, 2.0, 400)
+    fine = canopy_transmittance(grid, receivers, curve, arc)
+    monkeypatch.setattr(hc, "MAX_CELLS", 1)
+    coarse_grid = canopy_grid(lines, np.full(8, R), [shells] * 8, direction)
+    assert coarse_grid.size.prod() <= 9
+    coarse = canopy_transmittance(coarse_grid, receivers, curve, arc)
+    assert fine.min() < 0.9 and np.allclose(fine, coarse, rtol=0.0, atol=1e-12)
