@@ -236,6 +236,43 @@ def test_two_blocking_yarns_agree_and_darken_the_yarn_behind_both(tmp_path, pack
     assert gl.mean() < 0.97 * one.mean()
 
 
+def test_the_bounce_reads_the_light_maps_the_driver_drew(tmp_path, pack, monkeypatch):
+    """The yarn-level bounce looks the lights up in this frame's light atlas read back (``_read_light_maps``), not in
+    maps the CPU draws again: two lights (two tiles of the atlas), each read back equal to the CPU's
+    ``build_shadow_map`` on the texels both cover, both layers, and covering the same texels but for a few on the
+    strips' edges; the bounce then as the CPU twin's."""
+    from knitrun.render.shadow_map import build_shadow_map
+
+    read = []
+    original = gl_renderer.GLRenderer._read_light_maps
+    monkeypatch.setattr(gl_renderer.GLRenderer, "_read_light_maps",
+                        lambda self, *args: read.append(original(self, *args)) or read[-1])
+    stack = [straight(z=z) for z in (0.24, 0.12, 0.0)] + [straight(z=0.12) @ ALONG_Y.T]
+    second = OVERHEAD_SUN.replace("[0.0, 0.0, 1.0]", "[0.5, 0.3, 1.0]").replace("2.0, 2.0, 2.0", "1.0, 1.0, 1.0")
+    path = write_scene(tmp_path, stack, camera=SIDE, lights=OVERHEAD_SUN + "\n" + second, name="stack")
+    scene = dataclasses.replace(load_scene(path), background=(0.0, 0.0, 0.0))
+    renderer = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)})
+    gl = renderer.render()
+    cpu = renderer.cpu.render()
+    lines = pipeline._polylines(scene, renderer.cpu.curves, 0, renderer.cpu.samples_per_segment)
+    radius = np.array([renderer.cpu.looks[k].radius for k in lines.entry])
+    size = scene.render.shadow_map_size
+    assert len(read) == 1 and len(read[0]) == 2
+    for sm, d in zip(read[0], renderer.light_dir):
+        twin = build_shadow_map(lines.points, lines.offsets, False, lines.rest, radius, d, size,
+                                lines.points.min(axis=0), lines.points.max(axis=0), layers=2)
+        # GL's rows run upward: the read-back map's view has the light camera's up negated, its rows flipped
+        assert np.allclose(sm.view, twin.view * [[1.0], [-1.0], [1.0]]) and np.allclose(sm.origin, twin.origin)
+        for ours, theirs in ((sm.depth[::-1], twin.depth), (sm.behind[::-1], twin.behind)):
+            both = np.isfinite(ours) & np.isfinite(theirs)
+            assert both.sum() > 1000
+            assert np.abs(ours[both] - theirs[both]).max() < 1e-5
+            assert (np.isfinite(ours) != np.isfinite(theirs)).sum() < 0.01 * both.sum()
+    ours, theirs = gl.facts["yarn_bounce"], cpu.facts["yarn_bounce"]
+    assert ours["covered_sphere"] == theirs["covered_sphere"] > 0.05
+    assert ours["radiance"] == pytest.approx(theirs["radiance"], rel=2e-3) and min(ours["radiance"]) > 1e-3
+
+
 def test_frames_an_empty_scene_and_the_renderer_interface(tmp_path, pack):
     path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     renderer = gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)})

@@ -489,6 +489,12 @@ def _visibility(lines, radius_of_curve, direction, size, angular_radius, receive
                           lines.points.min(axis=0), lines.points.max(axis=0), out=depth_maps.get(size),
                           layers=2 if two_layers else 1)
     depth_maps[size] = sm.depth
+    return map_visibility(sm, direction, angular_radius, receivers, two_layers)
+
+
+def map_visibility(sm, direction, angular_radius, receivers, two_layers=False) -> list:
+    """``_visibility``'s lookups in a shadow map ``sm`` already drawn toward ``direction`` (with ``two_layers``, its
+    ``behind`` layer too): the CPU's own maps, or the GL backend's read back (its yarn-level bounce)."""
     unit = np.asarray(direction, np.float64) / np.linalg.norm(direction)
     biases = [receiver_bias(r, unit) for r in receivers]
     if not two_layers:

@@ -44,10 +44,11 @@ lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from th
 segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; ``Features.fiber_bend`` reads
 the bend and stretch of the segment it ends on from the same texture (``pipeline.segment_bend``,
 ``strip_shading.fiber_bend``);
-``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is computed on the CPU (``pipeline.frame_bounce``,
-the lights' visibility at the points from the CPU twin's shadow maps: one more map per directional light and
-frame) and uploaded as a texture of the points (``_bounce_texture``), which a fragment interpolates along its
-segment by rest arc length as ``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each
+``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is computed on the
+CPU (``pipeline.frame_bounce``, the lights' visibility at the points looked up in this frame's light atlas read back,
+``_read_light_maps``; until stop 72 the CPU twin drew the maps again, 100–200 ms a light) and uploaded as a texture of
+the points (``_bounce_texture``), which a fragment interpolates along its segment by rest arc length as
+``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each
 directional light that other yarns' hair layers let through, likewise (``pipeline.canopy_at_vertices`` on the CPU,
 one texture of the points per frame, ``_canopy_texture``), read by both passes where they take a light's visibility.
 
@@ -74,7 +75,7 @@ from knitrun.render import pipeline
 from knitrun.render.ablations import Features
 from knitrun.render.camera import Camera, scene_camera
 from knitrun.render.ms_lights import ms_cells
-from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS, OWN_STRIP_MAX
+from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS, OWN_STRIP_MAX, ShadowMap
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, vertex_tangents
 from knitrun.shading import fiber_bcsdf as fb
 
@@ -417,7 +418,6 @@ class GLRenderer:
         # the hair canopy at the polyline points, per light (pipeline.canopy_at_vertices); ones without it
         canopy = np.array([pipeline.canopy_at_vertices(lines, self.cpu.looks, d) for d in self.light_dir]) \
             if self.canopy else np.ones((len(self.light_dir), len(lines.points)))
-        bounce = self._bounce_texture(lines, camera, canopy, facts) if self.bounce else ()
         canopy_tex = self._canopy_texture(lines, canopy) if self.canopy else ()
         lap("load")
 
@@ -428,6 +428,9 @@ class GLRenderer:
         light_maps, light_atlas, *behind_atlas = self._shadow_atlas(
             draws, self.light_dir, size, np.zeros(len(self.light_dir)), lo, hi, radius.max(), lines.points,
             layers=2 if self.features.two_blockers else 1)
+        bounce = self._bounce_texture(lines, camera, canopy, facts,
+                                      self._read_light_maps([light_atlas, *behind_atlas], size, lo, hi, radius.max())) \
+            if self.bounce else ()
         lobe_size = max(64, size // pipeline.LOBE_SHADOW_DIVISOR)
         angular = np.minimum(1.0 / np.sqrt(np.maximum(self.lobe_lambda, 1e-300)), pipeline.MAX_LOBE_ANGULAR_RADIUS)
         lobe_maps, lobe_atlas = self._shadow_atlas(draws, self.lobe_dir, lobe_size, angular, lo, hi, radius.max(),
@@ -524,19 +527,40 @@ class GLRenderer:
         facts["residuals"] = {look.name: look.residuals for look in self.cpu.looks}
         return pipeline.RenderResult(image, timings, facts)
 
-    def _bounce_texture(self, lines, camera, canopy, facts):
+    def _read_light_maps(self, atlases, size, lo, hi, radius_max) -> list:
+        """The lights' shadow maps as the CPU's ``shadow_map.ShadowMap`` (+inf where no yarn), read back from the light
+        atlas drawn this frame (and its second yarn layer, ``atlases[1]``, with ``two_blockers``): the yarn-level
+        bounce looks the lights up on the CPU, in the maps the GPU drew, instead of drawing them again
+        (``_bounce_texture``). GL's rows run upward, so each map's view takes the light camera's up negated, as
+        ``_map_description`` gives it to ``shadow.glsl``: the tiles are used as read, not flipped."""
+        grid = max(1, math.ceil(math.sqrt(len(self.light_dir))))
+        layers = []
+        for atlas in atlases:
+            layer = np.empty((grid * size, grid * size), np.float32)
+            atlas.read_into(layer)
+            np.putmask(layer, layer >= NO_YARN, np.inf)
+            layers.append(layer)
+        maps = []
+        for i, d in enumerate(self.light_dir):
+            cam, sphere = _light_camera(np.asarray(d, float), lo, hi, radius_max, size)
+            fwd, right, up = cam.basis()
+            gx, gy = i % grid, i // grid
+            tiles = [layer[gy * size:(gy + 1) * size, gx * size:(gx + 1) * size] for layer in layers]
+            maps.append(ShadowMap(np.stack([right, -up, fwd]), np.asarray(cam.position, np.float64), 2 * sphere, size,
+                                  tiles[0], tiles[1] if len(tiles) > 1 else None))
+        return maps
+
+    def _bounce_texture(self, lines, camera, canopy, facts, light_maps):
         """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce``, on the CPU: the lights'
-        visibility there from the CPU twin's shadow maps, times the hair canopy ``canopy`` (L, P) at the points) as
-        textures of the points, point i at (i mod POLYLINE_ROW, i // POLYLINE_ROW): (bounce RGB, rest arc length) for
-        ``regular.frag``, then (the neighbours' light arriving, rest arc length) for ``flyaway.frag``."""
+        visibility there from ``light_maps``, this frame's read back by ``_read_light_maps``, times the hair canopy
+        ``canopy`` (L, P) at the points) as textures of the points, point i at (i mod POLYLINE_ROW, i //
+        POLYLINE_ROW): (bounce RGB, rest arc length) for ``regular.frag``, then (the neighbours' light arriving, rest
+        arc length) for ``flyaway.frag``."""
         cpu = self.cpu
-        radius = np.array([cpu.looks[k].radius for k in lines.entry])
         at = pipeline.bounce_vertices(lines, cpu.looks)
         receivers = [pipeline.axis_receivers(lines, cpu.looks, at)]
-        size = self.scene.render.shadow_map_size
         two = self.features.two_blockers
-        found = [pipeline._visibility(lines, radius, d, size, 0.0, receivers, cpu.shadow_depth, two)[0]
-                 for d in self.light_dir]
+        found = [pipeline.map_visibility(sm, d, 0.0, receivers, two)[0] for sm, d in zip(light_maps, self.light_dir)]
         # with two blockers (V, V₂) per light, the canopy on V alone (pipeline.Renderer)
         vis = np.array([f[0] if two else f for f in found]).reshape(len(found), -1) * canopy[:, at]
         beyond = np.array([f[1] for f in found]).reshape(vis.shape) if two else np.ones_like(vis)
