@@ -40,6 +40,24 @@ def test_visibility_limits_and_fixed_point():
     assert np.all(np.isfinite(interreflected_visibility([-1.0, 2.0, 0.0], [2.0, -1.0, 1.0])))
 
 
+def test_visibility_broadcasts_a_row_down_the_lobes_and_writes_in_place():
+    """The renderer's call: every lobe's visibility (L, N) with one albedo per point (1, N), into the visibility
+    itself; the same as the formula element by element, whichever input is the row, and a wrong ``out`` refused."""
+    rng = np.random.default_rng(5)
+    v, rho = rng.uniform(0.0, 1.0, (16, 1000)), rng.uniform(0.0, 1.0, (1, 1000))
+    expected = v / (1.0 - rho * (1.0 - v))
+    np.testing.assert_allclose(interreflected_visibility(v, rho), expected, rtol=1e-15)
+    np.testing.assert_allclose(interreflected_visibility(rho, v), rho / (1.0 - v * (1.0 - rho)), rtol=1e-15)
+    column, row = v[:, :1], rho[0, :5]  # a column against a row: the general broadcast
+    np.testing.assert_allclose(interreflected_visibility(column, row), column / (1 - row * (1 - column)), rtol=1e-15)
+    inplace = v.copy()
+    assert interreflected_visibility(inplace, rho, out=inplace) is inplace
+    np.testing.assert_allclose(inplace, expected, rtol=1e-15)
+    assert interreflected_visibility(np.zeros((16, 0)), np.zeros((1, 0))).shape == (16, 0)  # no points
+    with pytest.raises(ValueError, match="out: expected"):
+        interreflected_visibility(v, rho, out=np.empty((16, 999)))
+
+
 def test_each_channel_takes_its_own_albedo_from_the_luminance_visibility():
     """``channel_visibility``: from V' inter-reflected with the luminance ρ, channel c's V'_c is the visibility
     inter-reflected with ρ_c directly; ρ_c = ρ gives V' back, ρ = 0 (no inter-reflection) V itself; ρ = 1 leaves V'

@@ -34,24 +34,37 @@ import numpy as np
 from numba import njit, prange
 
 
-def interreflected_visibility(visibility, albedo):
+def interreflected_visibility(visibility, albedo, out=None):
     """V' = V / (1 − ρ (1 − V)) (module docstring) for visibility V ∈ [0, 1] and hull albedo ρ ∈ [0, 1]
-    (broadcasting; both clipped to [0, 1]); V' ∈ [V, 1]. One pass over the elements on the machine's threads: the
-    renderer applies it to every lobe's visibility of every shading point (16 × ~850K values a frame, 0.2 s as
-    numpy's chain of temporaries)."""
+    (broadcasting; both clipped to [0, 1]); V' ∈ [V, 1]; into ``out`` if given (C-contiguous, the broadcast shape; it
+    may be ``visibility`` itself). One pass over the elements on the machine's threads: the renderer applies it to
+    every lobe's visibility of every shading point (16 × ~1.2M values a frame under the sky; numpy's chain of
+    temporaries took 0.2 s, and copying the per-point albedo down the lobes before the pass another 0.17 s a set of
+    points, BENCHMARKS.md stop 72: a row the same down every leading axis is read as one row)."""
     v, rho = np.asarray(visibility, np.float64), np.asarray(albedo, np.float64)
     shape = np.broadcast_shapes(v.shape, rho.shape)
-    out = np.empty(shape)
-    _interreflect(_flat(v, shape), _flat(rho, shape), out.reshape(-1))
+    if out is None:
+        out = np.empty(shape)
+    elif out.shape != shape or out.dtype != np.float64 or not (out.flags.c_contiguous and out.flags.writeable):
+        raise ValueError(f"out: expected a writable C-contiguous float64 array of shape {shape}")
+    n = shape[-1] if shape else 1
+    if out.size:
+        _interreflect(_rows(v, shape), _rows(rho, shape), out.reshape(-1, n))
     return out
 
 
-def _flat(a, shape):
-    """``a`` broadcast to ``shape`` as one C-contiguous writable run: the array itself where it already is one,
-    else a copy (a read-only broadcast view would make Numba compile ``_interreflect`` once more)."""
+def _rows(a, shape):
+    """``a`` broadcast to ``shape`` as (rows, n), n = shape[-1], one C-contiguous writable run: a single row where ``a``
+    is the same down every leading axis (the renderer's per-point albedo under every lobe), else every row of
+    ``shape`` (``a`` itself where it already is one, else a copy; a read-only or broadcast view would make Numba
+    compile ``_interreflect`` once more)."""
+    n = shape[-1] if shape else 1
+    if a.size == n and (a.ndim == 0 or a.shape[-1] == n):
+        row = a.reshape(1, n)
+        return row if row.flags.c_contiguous and row.flags.writeable else np.array(row)
     if a.shape == shape and a.flags.c_contiguous and a.flags.writeable:
-        return a.reshape(-1)
-    return np.array(np.broadcast_to(a, shape)).reshape(-1)
+        return a.reshape(-1, n)
+    return np.array(np.broadcast_to(a, shape)).reshape(-1, n)
 
 
 @njit(cache=True, inline='always')
@@ -69,7 +82,12 @@ def channel_visibility(inter, rho, rho_channel):
 
 @njit(parallel=True, cache=True)
 def _interreflect(v, rho, out):
-    for k in prange(v.shape[0]):
-        vk, r = min(max(v[k], 0.0), 1.0), min(max(rho[k], 0.0), 1.0)
+    """out (R, N) from ``v`` and ``rho``, each (R, N) or (1, N): a single row serves every row (``_rows``)."""
+    rows, n = out.shape
+    v_rows, rho_rows = v.shape[0] > 1, rho.shape[0] > 1
+    for index in prange(rows * n):
+        i, k = index // n, index % n
+        vk = min(max(v[i if v_rows else 0, k], 0.0), 1.0)
+        r = min(max(rho[i if rho_rows else 0, k], 0.0), 1.0)
         denominator = 1.0 - r * (1.0 - vk)
-        out[k] = vk / denominator if denominator > 0.0 else 1.0
+        out[i, k] = vk / denominator if denominator > 0.0 else 1.0
