@@ -14,6 +14,7 @@ from data_formats.scene import load_scene
 from knitbake.compare.image_metrics import yarn_scale_metrics
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render import pipeline
+from knitrun.render.camera import scene_camera
 from knitrun.render.gl import gl_renderer
 from tests.helpers import BACKLIT, FRONT, OVERHEAD_SUN, SIDE, SKY, SUN, straight, write_scene
 
@@ -361,6 +362,28 @@ def test_the_hair_canopy_follows_the_cpu_renderer(tmp_path, pack, monkeypatch):
     assert taken_cpu.mean() > 0.1 * plain_cpu.mean() and taken_gl.min() >= -1e-7
     assert abs(taken_gl.mean() / taken_cpu.mean() - 1) < 2e-2
     assert np.abs(taken_gl - taken_cpu).mean() < 6e-2 * np.abs(taken_cpu).mean()
+
+
+def test_the_canopy_is_kept_while_the_frame_and_the_lights_stay(tmp_path, pack, monkeypatch):
+    """A viewer's orbit about a still frame reuses the hair canopy (it depends on the curves and the lights alone):
+    another camera draws without computing it again, and the same image as a renderer that computes it afresh; a
+    turned light computes it again."""
+    calls = []
+    original = pipeline.canopy_at_vertices
+    monkeypatch.setattr(pipeline, "canopy_at_vertices", lambda *args: calls.append(args[2]) or original(*args))
+    path = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.03, 0]], camera=FRONT, lights=SUN, name="c")
+    scene = load_scene(path)
+    renderer = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)})
+    renderer.render()
+    assert len(calls) == 1
+    turned = dataclasses.replace(scene_camera(scene), position=np.array([0.2, -0.3, 1.0]))
+    kept = renderer.render(camera=turned).image
+    assert len(calls) == 1
+    fresh = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}).render(camera=turned).image
+    assert len(calls) == 2 and np.array_equal(kept, fresh)
+    renderer.light_dir = renderer.light_dir @ ALONG_Y.T
+    renderer.render(camera=turned)
+    assert len(calls) == 3 and np.allclose(calls[-1], renderer.light_dir[0])
 
 
 def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):

@@ -46,11 +46,12 @@ the bend and stretch of the segment it ends on from the same texture (``pipeline
 ``strip_shading.fiber_bend``);
 ``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is computed on the
 CPU (``pipeline.frame_bounce``, the lights' visibility at the points looked up in this frame's light atlas read back,
-``_read_light_maps``; until stop 72 the CPU twin drew the maps again, 100–200 ms a light) and uploaded as a texture of
-the points (``_bounce_texture``), which a fragment interpolates along its segment by rest arc length as
-``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each
-directional light that other yarns' hair layers let through, likewise (``pipeline.canopy_at_vertices`` on the CPU,
-one texture of the points per frame, ``_canopy_texture``), read by both passes where they take a light's visibility.
+``_read_light_maps``; until stop 72 the CPU twin drew them again, ~106 ms a light on 2 cores) and uploaded as a
+texture of the points (``_bounce_texture``), which a fragment interpolates along its segment by rest arc length as
+``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each directional light that other
+yarns' hair layers let through, likewise (``pipeline.canopy_at_vertices`` on the CPU, kept while the frame and the
+lights stay, one texture of the points per frame, ``_canopy_texture``), read by both passes where they take a light's
+visibility.
 
 The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
 textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
@@ -301,6 +302,7 @@ class GLRenderer:
         self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)
         self.bounce = pipeline.bounce_drawn(features, self.cpu.looks, len(self.light_dir))
         self.canopy = features.hair_canopy and features.flyaways and len(self.light_dir) > 0
+        self._canopy_of = (None, None)  # (frame, light directions) → the canopy at its polyline points (``render``)
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1,
                                 hair_layers=1)
@@ -415,9 +417,16 @@ class GLRenderer:
         draws = self._upload_segments(lines, tangent)
         polyline = _polyline_textures(ctx, lines, tangent) \
             if self.features.parallax or self.features.fiber_bend else ()
-        # the hair canopy at the polyline points, per light (pipeline.canopy_at_vertices); ones without it
-        canopy = np.array([pipeline.canopy_at_vertices(lines, self.cpu.looks, d) for d in self.light_dir]) \
-            if self.canopy else np.ones((len(self.light_dir), len(lines.points)))
+        # the hair canopy at the polyline points, per light (pipeline.canopy_at_vertices); ones without it. It
+        # depends on the frame's curves and the lights alone, so a viewer's orbit about a still frame reuses it
+        # (83 ms a light on bench_render's 60K-point patch, BENCHMARKS.md stop 72)
+        if not self.canopy:
+            canopy = np.ones((len(self.light_dir), len(lines.points)))
+        elif self._canopy_of[0] == (frame, self.light_dir.tobytes()):
+            canopy = self._canopy_of[1]
+        else:
+            canopy = np.array([pipeline.canopy_at_vertices(lines, self.cpu.looks, d) for d in self.light_dir])
+            self._canopy_of = ((frame, self.light_dir.tobytes()), canopy)
         canopy_tex = self._canopy_texture(lines, canopy) if self.canopy else ()
         lap("load")
 
