@@ -216,9 +216,9 @@ def test_the_yarn_bounce_agrees_and_moves_the_image(tmp_path, pack):
 
 
 def test_two_blocking_yarns_agree_and_darken_the_yarn_behind_both(tmp_path, pack, monkeypatch):
-    """``Features.two_blockers`` (the default) on three yarns stacked under a sun from above, seen from the side: the lights'
-    second yarn layer is peeled by the driver (``depth.frag``) as ``strip_raster.rasterize_behind`` peels it, and
-    what lies behind two yarns takes τ_Y² where one blocker let τ_Y through. The backends agree with it as without
+    """``Features.two_blockers`` (the default) on three yarns stacked under a sun from above, seen from the side: the
+    lights' second yarn layer is peeled by the driver (``depth.frag``) as ``strip_raster.rasterize_behind`` peels it,
+    and what lies behind two yarns takes τ_Y² where one blocker let τ_Y through. The backends agree with it as without
     it, and it moves the image by far more than they differ, on the bottom yarn alone. The CPU's hairs over a body
     take that body's lookups (``pipeline.SHARE_REACH``), this backend's their own; here the two differ in kind (the
     sun tilted so that the top yarn's shadow covers the bottom yarn's surface but not its axis: a hair there lies

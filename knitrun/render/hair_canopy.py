@@ -149,8 +149,8 @@ def canopy_grid(lines, radius_of_curve, shells, direction) -> CanopyGrid | None:
     axis = points[first + 1] - points[first]
     length = np.linalg.norm(axis, axis=1)
     axis = np.divide(axis, length[:, None], out=np.zeros_like(axis), where=length[:, None] > 0.0)
-    return CanopyGrid(points, toward, np.ascontiguousarray(lines.rest, np.float64), first, axis, length, seg_curve, radius, reach,
-                      edges, sigma, start, members, basis, lo, float(cell), size)
+    return CanopyGrid(points, toward, np.ascontiguousarray(lines.rest, np.float64), first, axis, length, seg_curve,
+                      radius, reach, edges, sigma, start, members, basis, lo, float(cell), size)
 
 
 def canopy_transmittance(grid: CanopyGrid | None, position, curve, arclength) -> np.ndarray:

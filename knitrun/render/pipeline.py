@@ -744,7 +744,8 @@ class Renderer:
         albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) \
             if features.interreflection and features.multiple_scattering else np.zeros(len(looks))
         if len(lobe_dir) and albedo.any():
-            lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :], out=v) for v, s in zip(lobe_vis, sets)]
+            lobe_vis = [interreflected_visibility(v, albedo[s["yarn"]][None, :], out=v)
+                        for v, s in zip(lobe_vis, sets)]
         # per yarn, the ρ the lobes were inter-reflected with and ρ_Y per channel, which the kernels take each
         # channel's visibility by (``interreflection.channel_visibility``)
         lobe_albedo = [np.concatenate([[a], np.reshape(look.hull_albedo, 3)]) if a > 0.0 else np.zeros(4)
