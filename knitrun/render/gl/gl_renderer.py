@@ -438,7 +438,7 @@ class GLRenderer:
             draws, self.light_dir, size, np.zeros(len(self.light_dir)), lo, hi, radius.max(), lines.points,
             layers=2 if self.features.two_blockers else 1)
         bounce = self._bounce_texture(lines, camera, canopy, facts,
-                                      self._read_light_maps([light_atlas, *behind_atlas], size, lo, hi, radius.max())) \
+                                      self._read_light_maps([light_atlas, *behind_atlas], light_maps)) \
             if self.bounce else ()
         lobe_size = max(64, size // pipeline.LOBE_SHADOW_DIVISOR)
         angular = np.minimum(1.0 / np.sqrt(np.maximum(self.lobe_lambda, 1e-300)), pipeline.MAX_LOBE_ANGULAR_RADIUS)
@@ -536,26 +536,23 @@ class GLRenderer:
         facts["residuals"] = {look.name: look.residuals for look in self.cpu.looks}
         return pipeline.RenderResult(image, timings, facts)
 
-    def _read_light_maps(self, atlases, size, lo, hi, radius_max) -> list:
+    def _read_light_maps(self, atlases, light_maps) -> list:
         """The lights' shadow maps as the CPU's ``shadow_map.ShadowMap`` (+inf where no yarn), read back from the light
-        atlas drawn this frame (and its second yarn layer, ``atlases[1]``, with ``two_blockers``): the yarn-level
-        bounce looks the lights up on the CPU, in the maps the GPU drew, instead of drawing them again
-        (``_bounce_texture``). GL's rows run upward, so each map's view takes the light camera's up negated, as
-        ``_map_description`` gives it to ``shadow.glsl``: the tiles are used as read, not flipped."""
-        grid = max(1, math.ceil(math.sqrt(len(self.light_dir))))
+        atlas drawn this frame (and its second yarn layer, ``atlases[1]``, with ``two_blockers``), each from its tile
+        and light camera as ``light_maps`` (``_map_description``) gives them to ``shadow.glsl``: the yarn-level bounce
+        looks the lights up on the CPU, in the maps the GPU drew, instead of drawing them again (``_bounce_texture``).
+        GL's rows run upward and the descriptions' up is negated for it, so the tiles are used as read."""
         layers = []
         for atlas in atlases:
-            layer = np.empty((grid * size, grid * size), np.float32)
+            layer = np.empty(atlas.size[::-1], np.float32)
             atlas.read_into(layer)
             np.putmask(layer, layer >= NO_YARN, np.inf)
             layers.append(layer)
         maps = []
-        for i, d in enumerate(self.light_dir):
-            cam, sphere = _light_camera(np.asarray(d, float), lo, hi, radius_max, size)
-            fwd, right, up = cam.basis()
-            gx, gy = i % grid, i // grid
-            tiles = [layer[gy * size:(gy + 1) * size, gx * size:(gx + 1) * size] for layer in layers]
-            maps.append(ShadowMap(np.stack([right, -up, fwd]), np.asarray(cam.position, np.float64), 2 * sphere, size,
+        for m in light_maps:
+            (x, y), size = m["tile"], m["size"]
+            tiles = [layer[y:y + size, x:x + size] for layer in layers]
+            maps.append(ShadowMap(np.stack([m["right"], m["up"], m["fwd"]]), m["origin"], m["texel"] * size, size,
                                   tiles[0], tiles[1] if len(tiles) > 1 else None))
         return maps
 
