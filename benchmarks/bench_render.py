@@ -11,10 +11,13 @@ whole one-shot ``pipeline.render`` per frame (set-up included: ``load`` ~110 ms,
 
     .venv/bin/python benchmarks/bench_render.py [--pack cotton1.h5] [--frames 3] [--light directional|sky16]
         [--no-sweep] [--backend cpu|gl] [--ablation diagonal_xi+no_parallax+no_bounce+axis_shadows]
+        [--bounce-on auto|gpu|cpu]
 
 ``--ablation`` times another model than the default (an ablation or a combination a+b, ``ablations.combined``).
 
-``--backend gl`` times the OpenGL backend (``knitrun.render.gl``) on whatever EGL gives: a GPU, or Mesa's llvmpipe.
+``--backend gl`` times the OpenGL backend (``knitrun.render.gl``) on whatever EGL gives: a GPU, or Mesa's llvmpipe;
+``--bounce-on`` says where its yarn-level bounce's sums run (``GLRenderer``'s ``bounce_on``: the compute shader, the
+Numba kernel, or "auto", the CPU on a software rasteriser and the GPU otherwise).
 
 Without ``--pack`` a draft cotton1 pack is baked (or taken from the bake cache).
 """
@@ -61,7 +64,7 @@ LIGHTS = {"directional": 'type = "directional"\ndirection = [0.4, 0.6, 1.0]\nirr
 
 
 def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", layers=2, features=Features(),
-               hair_layers=RENDER_FIELDS["hair_layers"][0]):
+               hair_layers=RENDER_FIELDS["hair_layers"][0], bounce_on="auto"):
     """(median seconds per frame, its timings, facts, set-up seconds): one renderer set up once (``Renderer`` or
     ``GLRenderer``) with ``features``, then its frames (what a viewer pays per frame)."""
     write_yarn_curves(folder / "patch.h5", stockinette_curves(rows, 21))
@@ -72,7 +75,7 @@ def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", 
     if backend == "gl":
         from knitrun.render.gl.gl_renderer import GLRenderer
 
-        renderer = GLRenderer(scene, {"cotton1": str(pack)}, features)
+        renderer = GLRenderer(scene, {"cotton1": str(pack)}, features, bounce_on=bounce_on)
     else:
         renderer = pipeline.Renderer(scene, {"cotton1": str(pack)}, features=features)
     setup = time.perf_counter() - start
@@ -101,6 +104,8 @@ def main():
                         metavar="K", help="render.hair_layers: the flyaway strips composited per sample (default: "
                                           "the scene format's)")
     parser.add_argument("--ablation", default="full", help="the model timed: an ablation or a combination a+b")
+    parser.add_argument("--bounce-on", choices=("auto", "gpu", "cpu"), default="auto",
+                        help="with --backend gl: where the yarn-level bounce's sums run (GLRenderer's bounce_on)")
     args = parser.parse_args()
     try:
         features = combined(args.ablation)
@@ -115,7 +120,7 @@ def main():
     if args.backend == "gl":
         from knitrun.render.gl.gl_renderer import gl_context
 
-        where = f"GL: {gl_context().info['GL_RENDERER']}"
+        where = f"GL: {gl_context().info['GL_RENDERER']}, bounce on {args.bounce_on}"
     print(f"## Strip renderer (cotton1, {where}, pack {Path(pack).name}, render.layers = {args.layers}, "
           f"render.hair_layers = {args.hair_layers}, model {args.ablation})")
     print("| light | control points | pixels | shading points | set-up ms (once) | frame ms | load | raster | shadow "
@@ -130,7 +135,7 @@ def main():
         cases = cases[:3 if args.backend == "gl" else 2]
     for light, rows, width, height in [c for c in cases if args.light in (None, c[0])]:
         total, timings, facts, setup = time_scene(folder, pack, rows, width, height, light, args.frames, args.backend,
-                                                  args.layers, features, args.hair_layers)
+                                                  args.layers, features, args.hair_layers, args.bounce_on)
         passes = " | ".join(f"{1e3 * timings.get(k, 0.0):.0f}" for k in
                             ("load", "raster", "shadow", "shade", "resolve"))
         points = facts.get("shading_points", "—")

@@ -274,6 +274,86 @@ def test_the_bounce_reads_the_light_maps_the_driver_drew(tmp_path, pack, monkeyp
     assert ours["radiance"] == pytest.approx(theirs["radiance"], rel=2e-3) and min(ours["radiance"]) > 1e-3
 
 
+def _knit_like_yarns(rng):
+    """``BounceYarns`` of five wavy curves of two yarn entries (one with a Lambertian tube's phase, one with a random
+    positive table, so a swapped axis or a wrong wrap shows) crossing over and under each other, and two lights."""
+    from knitrun.render.strip_raster import vertex_tangents
+    from knitrun.render.yarn_bounce import PHASE_PHI, PHASE_THETA, BounceLights, BounceYarns, lambert_phase
+
+    s = np.linspace(0.0, 1.0, 41)
+    curves = [np.stack([s, np.full_like(s, y), 0.03 * np.sin(2 * np.pi * 3 * s + y * 20)], axis=1)
+              for y in (0.0, 0.06, 0.12)]
+    curves += [np.stack([np.full_like(s, x), 0.3 * s - 0.09, 0.03 * np.cos(2 * np.pi * 2 * s)], axis=1)
+               for x in (0.3, 0.36)]
+    points = np.concatenate(curves)
+    offsets = np.cumsum([0] + [len(c) for c in curves]).astype(np.int64)
+    rest = np.concatenate([np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
+                           for c in curves])
+    view = np.array([0.2, -0.4, 2.0]) - points
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    phase = np.stack([lambert_phase(np.array([0.5, 0.3, 0.2]), np.array([0.2, 0.1, 0.05])),
+                      rng.uniform(0.0, 0.1, (PHASE_THETA, PHASE_THETA, PHASE_PHI, 3))])
+    yarns = BounceYarns(points, vertex_tangents(points, offsets),
+                        np.repeat(np.arange(len(curves)), np.diff(offsets)), offsets, rest,
+                        np.array([0.03, 0.03, 0.03, 0.025, 0.025]), rng.uniform(0.3, 0.9, (len(points), 3)), view,
+                        phase, np.array([0, 0, 1, 1, 0], np.int64))
+    direction = np.array([[0.3, 0.2, 1.0], [-0.6, 0.1, 0.5]])
+    lights = BounceLights(direction / np.linalg.norm(direction, axis=1, keepdims=True),
+                          np.array([[2.0, 1.8, 1.5], [0.5, 0.6, 0.7]]), rng.uniform(0.0, 1.0, (2, len(points))))
+    return yarns, lights
+
+
+def test_the_bounce_sums_on_the_gpu_are_the_numba_kernels():
+    """``gl_bounce.gpu_vertex_bounce`` (the compute shader ``bounce.comp``) gives ``yarn_bounce.vertex_bounce``'s B,
+    f and I on crossing curves of two yarn entries under two lights, to single precision: 2e-3 of each largest value
+    (measured 1.0e-3 for B, where the random table's steep cells magnify the single-precision angles of nearly
+    aligned directions; 1.7e-4 on the pack's phase of ``bench_render.py``'s patch), with a bounce on nearly every
+    point. Edits of the shader fail it: the receiver's θ axes swapped (B off by 0.37 of its largest), the sender's
+    azimuth reversed (0.12), φ clamped instead of wrapped (0.020)."""
+    from knitrun.render.gl.gl_bounce import gpu_vertex_bounce
+    from knitrun.render.yarn_bounce import vertex_bounce
+
+    yarns, lights = _knit_like_yarns(np.random.default_rng(7))
+    ctx = gl_renderer.gl_context()
+    ours = gpu_vertex_bounce(ctx, gl_renderer._source, gl_renderer._set, yarns, lights)
+    theirs = vertex_bounce(yarns, lights)
+    assert (theirs[1] > 0).mean() > 0.9 and theirs[0].max() > 0
+    for a, b in zip(ours, theirs):
+        assert a.shape == b.shape and np.all(np.isfinite(a))
+        assert np.abs(a - b).max() < 2e-3 * np.abs(b).max()
+    no_light = lights._replace(direction=np.zeros((0, 3)), irradiance=np.zeros((0, 3)), direct=np.zeros((0, 41 * 5)))
+    assert all(np.all(x == 0) for x in gpu_vertex_bounce(ctx, gl_renderer._source, gl_renderer._set, yarns,
+                                                         no_light))
+
+
+def test_the_bounce_runs_on_the_gpu_or_the_cpu_to_the_same_image(tmp_path, pack):
+    """``GLRenderer(bounce_on=…)``: the frame with the bounce's sums on the GPU equals the frame with them in the
+    Numba kernel to single precision; "auto" takes the CPU on a software rasteriser (llvmpipe, where the kernel is
+    the faster) and the GPU on any other; another word is a one-line error."""
+    crossing = [straight(z=0.0), straight(z=0.07) @ ALONG_Y.T, straight(z=-0.07) @ ALONG_Y.T]
+    path = write_scene(tmp_path, crossing, camera=ORTHO, lights=SUN, name="crossing")
+    scene = dataclasses.replace(load_scene(path), background=(0.0, 0.0, 0.0))
+    frames = {}
+    for where in ("gpu", "cpu"):
+        renderer = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}, Features(flyaways=False), bounce_on=where)
+        assert renderer.setup_facts["bounce_on"] == where
+        frames[where] = renderer.render()
+    gpu, cpu = frames["gpu"], frames["cpu"]
+    assert gpu.facts["yarn_bounce"]["covered_sphere"] == pytest.approx(cpu.facts["yarn_bounce"]["covered_sphere"],
+                                                                       abs=1e-4)
+    assert gpu.facts["yarn_bounce"]["radiance"] == pytest.approx(cpu.facts["yarn_bounce"]["radiance"], rel=1e-4)
+    assert np.abs(gpu.image - cpu.image).max() < 1e-4 * cpu.image.max()
+    plain = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}, Features(flyaways=False, yarn_bounce=False))
+    assert np.abs(gpu.image - plain.render().image).max() > 100 * np.abs(gpu.image - cpu.image).max()
+    auto = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}, Features(flyaways=False))
+    software = gl_renderer.software_renderer(auto.ctx.info["GL_RENDERER"])
+    assert auto.setup_facts["bounce_on"] == ("cpu" if software else "gpu")
+    assert gl_renderer.software_renderer("llvmpipe (LLVM 15.0.6, 256 bits)")
+    assert not gl_renderer.software_renderer("NVIDIA H200/PCIe/SSE2")
+    with pytest.raises(FormatError, match="bounce_on 'tpu': expected one of auto, gpu, cpu"):
+        gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}, bounce_on="tpu")
+
+
 def test_frames_an_empty_scene_and_the_renderer_interface(tmp_path, pack):
     path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN)
     renderer = gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)})

@@ -924,13 +924,15 @@ def bounce_vertices(lines, looks) -> np.ndarray:
     return np.flatnonzero((local % stride[curve] == 0) | (local == counts[curve] - 1)).astype(np.int64)
 
 
-def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond) -> tuple:
+def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, vertex_beyond,
+                 solve=vertex_bounce) -> tuple:
     """(bounce radiance (P, 3), covered fraction of the sphere (P,), the neighbours' light arriving (P, 3), which
     the hairs take: ``yarn_bounce.vertex_bounce``'s I) at the frame's polyline vertices under the
     directional lights (``yarn_bounce.vertex_bounce``): computed at the points ``at`` (``bounce_vertices``) on the
     polylines through them, from the lights' visibility ``vertex_vis`` (L, len(at)) there (and ``vertex_beyond``,
     the fraction at most one yarn blocks, ``Lights.beyond``), and interpolated between them by rest arc length.
-    Both backends draw it."""
+    Both backends draw it; ``solve`` (``BounceYarns``, ``BounceLights``) → (B, f, I) does the sums: the Numba
+    kernel, or the GL backend's compute shader (``gl.gl_bounce``)."""
     full, lines = lines, _thinned(lines, at)
     entry = np.repeat(lines.entry, np.diff(lines.offsets))
     albedo = np.array([look.hull_albedo for look in looks], np.float64).reshape(-1, 3)[entry]
@@ -948,7 +950,7 @@ def frame_bounce(lines, looks, camera, light_dir, light_e, at, vertex_vis, verte
                         np.ascontiguousarray(view, np.float64), bounce_phases(looks),
                         np.asarray(lines.entry, np.int64))
     direct = past_blockers.py_func(vertex_vis, vertex_beyond, gap[None, :])  # numpy: no array kernel to compile
-    vertex, covered, arriving = vertex_bounce(yarns, BounceLights(light_dir, light_e, direct))
+    vertex, covered, arriving = solve(yarns, BounceLights(light_dir, light_e, direct))
     return (_between(full.rest, at, vertex), _between(full.rest, at, covered[:, None])[:, 0],
             _between(full.rest, at, arriving))
 

@@ -59,12 +59,13 @@ yarn's times the colour for a pack without them); a pack without ρ_Y and T_Y ha
 here: its lobes' inter-reflection carries that light.
 
 Implementation: what a pair needs that does not depend on the receiver (the segment's axis and length, mean
-tangent, its yarn's phase table, each light's θ_i and E V_d) is computed once per segment (``_senders``); the phase
-tables of every yarn entry share one grid (``PHASE_THETA`` × ``PHASE_THETA`` × ``PHASE_PHI`` cells, ``phase_grid``)
-and are read trilinearly by the pack's interpolation rule (``phase_at``, ``table_lookup.axis_cell``); the segments
-are sorted by the cell of their midpoint on a uniform grid of cell ``reach`` (a counting sort), so a vertex finds
-every segment whose midpoint lies within reach in its own and the 26 neighbouring cells; each vertex's sums are its
-own (``prange`` over vertices, no shared output).
+tangent, its yarn's phase table, each light's θ_i and E V_d) is computed once per segment (``sender_segments``); the
+phase tables of every yarn entry share one grid (``PHASE_THETA`` × ``PHASE_THETA`` × ``PHASE_PHI`` cells,
+``phase_grid``) and are read trilinearly by the pack's interpolation rule (``phase_at``, ``table_lookup.axis_cell``);
+the segments are sorted by the cell of their midpoint on a uniform grid of cell ``reach`` (a counting sort), so a
+vertex finds every segment whose midpoint lies within reach in its own and the 26 neighbouring cells; each vertex's
+sums are its own (``prange`` over vertices, no shared output). The GL backend runs the same sums in a compute shader
+on these inputs (``knitrun.render.gl.gl_bounce``).
 
 **Hairs.** The sum without the receiver's phase, I_i = Σ_j w_ij L_ji / (1 − ρ f_i), is the neighbours' light
 arriving at vertex i over all directions: the hairs of the flyaway layer take it (``strip_shading.hair_bounce``,
@@ -174,14 +175,14 @@ def vertex_bounce(yarns: BounceYarns, lights: BounceLights, reach_radii: float =
     out, covered, arriving = np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3))
     if n < 2 or len(yarns.radius) == 0 or len(lights.direction) == 0:
         return out, covered, arriving
-    senders = _senders(yarns, lights, float(reach_radii * yarns.radius.max()))
+    senders = sender_segments(yarns, lights, float(reach_radii * yarns.radius.max()))
     if len(senders.length):
         _vertex_bounce(yarns, senders, np.ascontiguousarray(lights.direction, np.float64), float(reach_radii), out,
                        covered, arriving)
     return out, covered, arriving
 
 
-class _Senders(NamedTuple):
+class SenderSegments(NamedTuple):
     """The polyline segments j → j + 1 (within one curve) as senders, sorted by the cell of their midpoint on a grid
     of cell ``cell`` (S segments; ``cell_start`` (cells + 1,) the first segment of each cell by key (i·ny + j)·nz + k,
     ``dims`` (3,) the grid's cells per axis, ``origin`` (3,) its corner). Per segment: ``start`` (S, 3) its first
@@ -209,8 +210,8 @@ class _Senders(NamedTuple):
     cell: float
 
 
-def _senders(yarns: BounceYarns, lights: BounceLights, cell: float) -> _Senders:
-    """The segments of ``yarns`` as ``_Senders`` under ``lights``, on a grid of cell ``cell``."""
+def sender_segments(yarns: BounceYarns, lights: BounceLights, cell: float) -> SenderSegments:
+    """The segments of ``yarns`` as ``SenderSegments`` under ``lights``, on a grid of cell ``cell``."""
     j = np.flatnonzero(yarns.curve[:-1] == yarns.curve[1:]).astype(np.int64)  # segment j → j + 1 within a curve
     a, b = yarns.points[j], yarns.points[j + 1]
     length = np.linalg.norm(b - a, axis=1)
@@ -235,7 +236,7 @@ def _senders(yarns: BounceYarns, lights: BounceLights, cell: float) -> _Senders:
     def c(x):
         return np.ascontiguousarray(x[order])
 
-    return _Senders(c(a), c(axis), c(length), c(mid), c(tangent), c(curve).astype(np.int64),
+    return SenderSegments(c(a), c(axis), c(length), c(mid), c(tangent), c(curve).astype(np.int64),
                     c(0.5 * (yarns.rest[j] + yarns.rest[j + 1])), c(yarns.radius[curve]),
                     c(np.asarray(yarns.phase_of, np.int64)[curve]), c(theta_light), c(power), cell_start,
                     dims.astype(np.int64), origin, float(cell))

@@ -44,10 +44,12 @@ lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from th
 segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; ``Features.fiber_bend`` reads
 the bend and stretch of the segment it ends on from the same texture (``pipeline.segment_bend``,
 ``strip_shading.fiber_bend``);
-``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is computed on the
+``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is prepared on the
 CPU (``pipeline.frame_bounce``, the lights' visibility at the points looked up in this frame's light atlas read back,
-``_read_light_maps``; until stop 72 the CPU twin drew them again, ~106 ms a light on 2 cores) and uploaded as a
-texture of the points (``_bounce_texture``), which a fragment interpolates along its segment by rest arc length as
+``_read_light_maps``; until stop 72 the CPU twin drew them again, ~106 ms a light on 2 cores), its sums over the
+neighbouring segments run in a compute shader (``gl_bounce``, ``shaders/bounce.comp``; the Numba kernel instead on a
+software rasteriser, where it is the faster, or as ``bounce_on`` asks), and it is uploaded as a texture of the points
+(``_bounce_texture``), which a fragment interpolates along its segment by rest arc length as
 ``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each directional light that other
 yarns' hair layers let through, likewise (``pipeline.canopy_at_vertices`` on the CPU, kept while the frame and the
 lights stay, one texture of the points per frame, ``_canopy_texture``), read by both passes where they take a light's
@@ -64,6 +66,7 @@ composited over the regular image as the CPU's resolve does.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from pathlib import Path
@@ -75,9 +78,11 @@ from data_formats.scene import EnvironmentLight
 from knitrun.render import pipeline
 from knitrun.render.ablations import Features
 from knitrun.render.camera import Camera, scene_camera
+from knitrun.render.gl.gl_bounce import gpu_vertex_bounce
 from knitrun.render.ms_lights import ms_cells
 from knitrun.render.shadow_map import MAX_FILTER_TEXELS, MAX_TAPS, OWN_STRIP_MAX, ShadowMap
 from knitrun.render.strip_raster import SAMPLE_PATTERNS, vertex_tangents
+from knitrun.render.yarn_bounce import CONTACT_RADII, PHASE_PHI, PHASE_THETA, vertex_bounce
 from knitrun.shading import fiber_bcsdf as fb
 
 SHADERS = Path(__file__).with_name("shaders")
@@ -94,6 +99,16 @@ POLYLINE_ROW = 1024  # polyline points per row of the parallax's texture (regula
 PARALLAX_STEPS = 64  # segments the parallax walks at most each way (the CPU walks to the curve's end)
 # (a yarn entry's own textures take units 0, 1, … in the order of ``_upload_look``)
 VARIANT_OFFSET = 2  # column of period index 0 in the flyaway variant table (flyaway.frag)
+
+
+BOUNCE_ON = ("auto", "gpu", "cpu")  # where the yarn-level bounce's sums may run (``GLRenderer``)
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swiftshader", "software rasterizer")  # GL_RENDERER of a CPU driver
+
+
+def software_renderer(name: str) -> bool:
+    """Whether ``name`` (the context's GL_RENDERER) is a driver that runs the shaders on the CPU (Mesa's llvmpipe
+    and softpipe, SwiftShader)."""
+    return any(s in name.lower() for s in SOFTWARE_RENDERERS)
 
 
 class GLUnavailable(FormatError):
@@ -157,6 +172,9 @@ def gl_constants() -> str:
         f"const float OWN_STRIP_MAX = {OWN_STRIP_MAX!r};",
         f"const int PARALLAX_STEPS = {PARALLAX_STEPS};",
         f"const int POLYLINE_ROW = {POLYLINE_ROW};",
+        f"const int PHASE_THETA = {PHASE_THETA};",
+        f"const int PHASE_PHI = {PHASE_PHI};",
+        f"const float CONTACT_RADII = {CONTACT_RADII!r};",
         f"#define MAX_LIGHTS {MAX_LIGHTS}",
         f"#define MAX_LOBES {MAX_LOBES}",
     ]
@@ -266,10 +284,15 @@ class GLRenderer:
     ``warnings``, ``setup_timings`` as there (plus ``gl_setup``: context, shaders, textures). Arguments as
     ``pipeline.Renderer``, and ``ctx``: a moderngl context to draw with (default: the headless one of ``gl_context``;
     a window's, for the viewer). ``light_dir`` (L, 3), unit vectors toward the directional lights, may be changed
-    between frames. FormatError (one line) for what this backend cannot draw, GLUnavailable without GL."""
+    between frames. ``bounce_on`` says where the yarn-level bounce's sums run: "gpu" (``gl_bounce``, a compute
+    shader), "cpu" (the Numba kernel) or "auto" (the default): the GPU unless the context is a software rasteriser
+    (``software_renderer``), on which the Numba kernel is the faster. FormatError (one line) for what this backend
+    cannot draw, GLUnavailable without GL."""
 
     def __init__(self, scene, packs=None, features: Features = Features(), samples_per_segment: int = 4,
-                 use_cache: bool = True, progress=None, ctx=None):
+                 use_cache: bool = True, progress=None, ctx=None, bounce_on: str = "auto"):
+        if bounce_on not in BOUNCE_ON:
+            raise FormatError(f"bounce_on {bounce_on!r}: expected one of {', '.join(BOUNCE_ON)}")
         if not features.multiple_scattering:
             raise FormatError("the GL backend draws the full light transport; Features.multiple_scattering=False "
                               "(single scattering alone) is drawn by the CPU renderer")
@@ -301,11 +324,13 @@ class GLRenderer:
         self.light_dir = np.array([light.unit_direction for light in lights], np.float64).reshape(-1, 3)
         self.light_e = np.array([light.irradiance for light in lights], np.float64).reshape(-1, 3)
         self.bounce = pipeline.bounce_drawn(features, self.cpu.looks, len(self.light_dir))
+        software = software_renderer(self.ctx.info["GL_RENDERER"])
+        self.bounce_on = ("cpu" if software else "gpu") if bounce_on == "auto" else bounce_on
         self.canopy = features.hair_canopy and features.flyaways and len(self.light_dir) > 0
         self._canopy_of = (None, None)  # (frame, light directions) → the canopy at its polyline points (``render``)
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1,
-                                hair_layers=1)
+                                hair_layers=1, bounce_on=self.bounce_on)
 
     @property
     def frame_count(self):
@@ -557,11 +582,11 @@ class GLRenderer:
         return maps
 
     def _bounce_texture(self, lines, camera, canopy, facts, light_maps):
-        """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce``, on the CPU: the lights'
-        visibility there from ``light_maps``, this frame's read back by ``_read_light_maps``, times the hair canopy
-        ``canopy`` (L, P) at the points) as textures of the points, point i at (i mod POLYLINE_ROW, i //
-        POLYLINE_ROW): (bounce RGB, rest arc length) for ``regular.frag``, then (the neighbours' light arriving, rest
-        arc length) for ``flyaway.frag``."""
+        """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce``: the lights' visibility
+        there from ``light_maps``, this frame's read back by ``_read_light_maps``, times the hair canopy ``canopy``
+        (L, P) at the points; the sums where ``bounce_on`` says) as textures of the points, point i at (i mod
+        POLYLINE_ROW, i // POLYLINE_ROW): (bounce RGB, rest arc length) for ``regular.frag``, then (the neighbours'
+        light arriving, rest arc length) for ``flyaway.frag``."""
         cpu = self.cpu
         at = pipeline.bounce_vertices(lines, cpu.looks)
         receivers = [pipeline.axis_receivers(lines, cpu.looks, at)]
@@ -570,8 +595,10 @@ class GLRenderer:
         # with two blockers (V, V₂) per light, the canopy on V alone (pipeline.Renderer)
         vis = np.array([f[0] if two else f for f in found]).reshape(len(found), -1) * canopy[:, at]
         beyond = np.array([f[1] for f in found]).reshape(vis.shape) if two else np.ones_like(vis)
+        solve = vertex_bounce if self.bounce_on == "cpu" else \
+            functools.partial(gpu_vertex_bounce, self.ctx, _source, _set)
         vertex, covered, arriving = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at,
-                                                          vis, beyond)
+                                                          vis, beyond, solve)
         facts["yarn_bounce"] = pipeline.bounce_facts(vertex, covered)
         n = len(lines.points)
         textures = []
