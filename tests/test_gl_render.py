@@ -444,26 +444,32 @@ def test_the_hair_canopy_follows_the_cpu_renderer(tmp_path, pack, monkeypatch):
     assert np.abs(taken_gl - taken_cpu).mean() < 6e-2 * np.abs(taken_cpu).mean()
 
 
-def test_the_canopy_is_kept_while_the_frame_and_the_lights_stay(tmp_path, pack, monkeypatch):
-    """A viewer's orbit about a still frame reuses the hair canopy (it depends on the curves and the lights alone):
-    another camera draws without computing it again, and the same image as a renderer that computes it afresh; a
-    turned light computes it again."""
-    calls = []
+def test_the_canopy_and_the_bounces_light_are_kept_while_the_frame_and_the_lights_stay(tmp_path, pack, monkeypatch):
+    """A viewer's orbit about a still frame reuses the hair canopy and the lights' visibility at the bounce's points
+    (with the light atlas's read-back): both depend on the curves and the lights alone. Another camera draws without
+    computing either again, and the same image as a renderer that computes them afresh; a turned light computes both
+    again."""
+    calls, reads = [], []
     original = pipeline.canopy_at_vertices
     monkeypatch.setattr(pipeline, "canopy_at_vertices", lambda *args: calls.append(args[2]) or original(*args))
+    read = gl_renderer.GLRenderer._read_light_maps
+    monkeypatch.setattr(gl_renderer.GLRenderer, "_read_light_maps",
+                        lambda self, *args: reads.append(self.light_dir.copy()) or read(self, *args))
     path = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.03, 0]], camera=FRONT, lights=SUN, name="c")
     scene = load_scene(path)
     renderer = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)})
     renderer.render()
-    assert len(calls) == 1
+    assert len(calls) == 1 and len(reads) == 1
     turned = dataclasses.replace(scene_camera(scene), position=np.array([0.2, -0.3, 1.0]))
-    kept = renderer.render(camera=turned).image
-    assert len(calls) == 1
-    fresh = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}).render(camera=turned).image
-    assert len(calls) == 2 and np.array_equal(kept, fresh)
+    kept = renderer.render(camera=turned)
+    assert len(calls) == 1 and len(reads) == 1
+    fresh = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}).render(camera=turned)
+    assert len(calls) == 2 and len(reads) == 2 and np.array_equal(kept.image, fresh.image)
+    assert kept.facts["yarn_bounce"] == fresh.facts["yarn_bounce"] and kept.facts["yarn_bounce"]["radiance"][0] > 0
     renderer.light_dir = renderer.light_dir @ ALONG_Y.T
     renderer.render(camera=turned)
     assert len(calls) == 3 and np.allclose(calls[-1], renderer.light_dir[0])
+    assert len(reads) == 3 and np.allclose(reads[-1], renderer.light_dir)
 
 
 def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):

@@ -51,9 +51,11 @@ neighbouring segments run in a compute shader (``gl_bounce``, ``shaders/bounce.c
 software rasteriser, where it is the faster, or as ``bounce_on`` asks), and it is uploaded as a texture of the points
 (``_bounce_texture``), which a fragment interpolates along its segment by rest arc length as
 ``yarn_bounce.bounce_at_points`` does; ``Features.hair_canopy``, the fraction of each directional light that other
-yarns' hair layers let through, likewise (``pipeline.canopy_at_vertices`` on the CPU, kept while the frame and the
-lights stay, one texture of the points per frame, ``_canopy_texture``), read by both passes where they take a light's
-visibility.
+yarns' hair layers let through, likewise (``pipeline.canopy_at_vertices`` on the CPU, one texture of the points per
+frame, ``_canopy_texture``), read by both passes where they take a light's visibility. What depends on the frame's
+curves and the lights alone, the canopy and the lights' visibility at the bounce's points (with the atlas's
+read-back, which waits for the GPU to draw it), is kept while they stay: a viewer's orbit about a still frame
+computes neither again.
 
 The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
 textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
@@ -327,7 +329,10 @@ class GLRenderer:
         software = software_renderer(self.ctx.info["GL_RENDERER"])
         self.bounce_on = ("cpu" if software else "gpu") if bounce_on == "auto" else bounce_on
         self.canopy = features.hair_canopy and features.flyaways and len(self.light_dir) > 0
-        self._canopy_of = (None, None)  # (frame, light directions) → the canopy at its polyline points (``render``)
+        # what depends on the frame's curves and the lights alone, kept while they stay (``render``): a viewer's orbit
+        # about a still frame reuses it. (frame, light directions) → {"canopy": the hair canopy at the polyline points,
+        # "bounce_light": the lights' visibility at the bounce's points}
+        self._light_side = (None, {})
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1,
                                 hair_layers=1, bounce_on=self.bounce_on)
@@ -445,13 +450,17 @@ class GLRenderer:
         # the hair canopy at the polyline points, per light (pipeline.canopy_at_vertices); ones without it. It
         # depends on the frame's curves and the lights alone, so a viewer's orbit about a still frame reuses it
         # (83 ms a light on bench_render's 60K-point patch, BENCHMARKS.md stop 72)
+        key = (frame, self.light_dir.tobytes())
+        if self._light_side[0] != key:
+            self._light_side = (key, {})
+        kept = self._light_side[1]
         if not self.canopy:
             canopy = np.ones((len(self.light_dir), len(lines.points)))
-        elif self._canopy_of[0] == (frame, self.light_dir.tobytes()):
-            canopy = self._canopy_of[1]
+        elif "canopy" in kept:
+            canopy = kept["canopy"]
         else:
-            canopy = np.array([pipeline.canopy_at_vertices(lines, self.cpu.looks, d) for d in self.light_dir])
-            self._canopy_of = ((frame, self.light_dir.tobytes()), canopy)
+            canopy = kept["canopy"] = np.array([pipeline.canopy_at_vertices(lines, self.cpu.looks, d)
+                                                for d in self.light_dir])
         canopy_tex = self._canopy_texture(lines, canopy) if self.canopy else ()
         lap("load")
 
@@ -462,9 +471,10 @@ class GLRenderer:
         light_maps, light_atlas, *behind_atlas = self._shadow_atlas(
             draws, self.light_dir, size, np.zeros(len(self.light_dir)), lo, hi, radius.max(), lines.points,
             layers=2 if self.features.two_blockers else 1)
-        bounce = self._bounce_texture(lines, camera, canopy, facts,
-                                      self._read_light_maps([light_atlas, *behind_atlas], light_maps)) \
-            if self.bounce else ()
+        if self.bounce and "bounce_light" not in kept:  # the read-back waits for the atlas: once per frame and lights
+            maps = self._read_light_maps([light_atlas, *behind_atlas], light_maps)
+            kept["bounce_light"] = self._bounce_light(lines, canopy, maps)
+        bounce = self._bounce_texture(lines, camera, facts, *kept["bounce_light"]) if self.bounce else ()
         lobe_size = max(64, size // pipeline.LOBE_SHADOW_DIVISOR)
         angular = np.minimum(1.0 / np.sqrt(np.maximum(self.lobe_lambda, 1e-300)), pipeline.MAX_LOBE_ANGULAR_RADIUS)
         lobe_maps, lobe_atlas = self._shadow_atlas(draws, self.lobe_dir, lobe_size, angular, lo, hi, radius.max(),
@@ -581,20 +591,26 @@ class GLRenderer:
                                   tiles[0], tiles[1] if len(tiles) > 1 else None))
         return maps
 
-    def _bounce_texture(self, lines, camera, canopy, facts, light_maps):
-        """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce``: the lights' visibility
-        there from ``light_maps``, this frame's read back by ``_read_light_maps``, times the hair canopy ``canopy``
-        (L, P) at the points; the sums where ``bounce_on`` says) as textures of the points, point i at (i mod
-        POLYLINE_ROW, i // POLYLINE_ROW): (bounce RGB, rest arc length) for ``regular.frag``, then (the neighbours'
-        light arriving, rest arc length) for ``flyaway.frag``."""
-        cpu = self.cpu
-        at = pipeline.bounce_vertices(lines, cpu.looks)
-        receivers = [pipeline.axis_receivers(lines, cpu.looks, at)]
+    def _bounce_light(self, lines, canopy, light_maps) -> tuple:
+        """(the bounce's points ``at`` (``pipeline.bounce_vertices``), the lights' visibility there (L, len(at)) and
+        the fraction at most one yarn blocks (L, len(at)), ``pipeline.Lights.beyond``): looked up in ``light_maps``,
+        this frame's read back by ``_read_light_maps``, times the hair canopy ``canopy`` (L, P) at the points. It
+        depends on the frame's curves and the lights alone (``render`` keeps it while they stay)."""
+        at = pipeline.bounce_vertices(lines, self.cpu.looks)
+        receivers = [pipeline.axis_receivers(lines, self.cpu.looks, at)]
         two = self.features.two_blockers
         found = [pipeline.map_visibility(sm, d, 0.0, receivers, two)[0] for sm, d in zip(light_maps, self.light_dir)]
         # with two blockers (V, V₂) per light, the canopy on V alone (pipeline.Renderer)
         vis = np.array([f[0] if two else f for f in found]).reshape(len(found), -1) * canopy[:, at]
         beyond = np.array([f[1] for f in found]).reshape(vis.shape) if two else np.ones_like(vis)
+        return at, vis, beyond
+
+    def _bounce_texture(self, lines, camera, facts, at, vis, beyond):
+        """The yarn-level bounce at the frame's polyline points (``pipeline.frame_bounce`` from the lights' visibility
+        ``vis`` and ``beyond`` at its points ``at``, ``_bounce_light``; the sums where ``bounce_on`` says) as
+        textures of the points, point i at (i mod POLYLINE_ROW, i // POLYLINE_ROW): (bounce RGB, rest arc length)
+        for ``regular.frag``, then (the neighbours' light arriving, rest arc length) for ``flyaway.frag``."""
+        cpu = self.cpu
         solve = vertex_bounce if self.bounce_on == "cpu" else \
             functools.partial(gpu_vertex_bounce, self.ctx, _source, _set)
         vertex, covered, arriving = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at,
