@@ -57,8 +57,8 @@ RENDER_FIELDS = {
     "frame": (0, 0, 2**31 - 1, "frame of the yarn curves to draw (0-based)"),
     "layers": (2, 1, 2, "layers of regular strips the CPU strip renderer composites per sample (2: the yarn behind a "
                         "strip shows through its partial coverage)"),
-    "hair_layers": (3, 1, 8, "flyaway strips the CPU strip renderer composites per sample, the nearest first (3: the "
-                             "hairs of three yarns where their strips overlap)"),
+    "hair_layers": (3, 1, 8, "flyaway strips the strip renderer composites per sample, the nearest first (3: the "
+                             "hairs of three yarns where their strips overlap; both backends)"),
 }
 
 

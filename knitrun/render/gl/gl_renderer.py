@@ -57,11 +57,14 @@ curves and the lights alone, the canopy and the lights' visibility at the bounce
 read-back, which waits for the GPU to draw it), is kept while they stay: a viewer's orbit about a still frame
 computes neither again.
 
-The flyaway layer (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
-textures) against the regular pass's depth, each fragment writing its depth less the largest yarn radius, so a
-sample keeps the nearest flyaway strip where no regular strip is nearer than that radius (the CPU's first flyaway
-layer: the CPU draws ``render.hair_layers`` of them, this backend one, and its CPU twin one);
-``shaders/flyaway.frag`` shades it as ``shade_flyaway`` does into two targets, A·L and A·(1 − τ), whose resolves are
+The flyaway layers (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
+textures) once per layer of ``render.hair_layers`` K, each fragment with its depth less the largest yarn radius;
+its sample mask keeps the samples where no regular strip is nearer than that radius (the regular pass's depth, a
+multisampled depth texture) and, from the second layer on, where it lies beyond the previous layer's flyaway strip
+(that layer's depth texture: depth peeling), and the depth test keeps the nearest such strip of each sample: the K
+nearest flyaway strips of a sample, as ``strip_raster.rasterize_before`` finds them (until knit's stop 73 this
+backend drew K = 1, its patches 2.5–5 % darker than the CPU's default of three, BENCHMARKS.md);
+``shaders/flyaway.frag`` shades each as ``shade_flyaway`` does into two targets, A·L and A·(1 − τ), whose resolves are
 composited over the regular image as the CPU's resolve does.
 """
 
@@ -100,6 +103,7 @@ ATLAS_UNITS = (22, 23, 24, 25, 26, 27, 28, 29, 30)  # texture units of the light
 POLYLINE_ROW = 1024  # polyline points per row of the parallax's texture (regular.frag)
 PARALLAX_STEPS = 64  # segments the parallax walks at most each way (the CPU walks to the curve's end)
 # (a yarn entry's own textures take units 0, 1, … in the order of ``_upload_look``)
+HAIR_DEPTH_UNITS = (20, 21)  # the regular pass's depth and the previous flyaway layer's peel target (flyaway.frag)
 VARIANT_OFFSET = 2  # column of period index 0 in the flyaway variant table (flyaway.frag)
 
 
@@ -306,10 +310,10 @@ class GLRenderer:
             raise FormatError(f"the scene has {len(lights)} directional lights; the GL backend draws at most "
                               f"{MAX_LIGHTS}")
         self.ctx = gl_context() if ctx is None else ctx
-        # one layer of strips and one of flyaway strips (depth peeling and the K nearest hair strips are not ported,
-        # SCENE.md ``layers``, ``hair_layers``): the CPU twin (shading inputs; the image the tests compare with) draws
-        # what this one does; facts["layers"] and facts["hair_layers"] say so
-        scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, layers=1, hair_layers=1))
+        # one layer of strips (the depth-peeled second layer is not ported, SCENE.md ``layers``) and the scene's
+        # ``hair_layers`` of flyaway strips: the CPU twin (shading inputs; the image the tests compare with) draws what
+        # this one does; facts["layers"] and facts["hair_layers"] say so
+        scene = dataclasses.replace(scene, render=dataclasses.replace(scene.render, layers=1))
         self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
         start = time.perf_counter()
         self.scene, self.features = scene, features
@@ -335,7 +339,7 @@ class GLRenderer:
         self._light_side = (None, {})
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"], layers=1,
-                                hair_layers=1, bounce_on=self.bounce_on)
+                                hair_layers=scene.render.hair_layers, bounce_on=self.bounce_on)
 
     @property
     def frame_count(self):
@@ -413,7 +417,7 @@ class GLRenderer:
                             glow_forward=np.zeros(3) if glow is None else glow[1])
             uniforms.update(hairs_behind=int(self.features.hairs_behind))
             textures.update({f"fly_tex{v}": tex for v, (tex, _) in enumerate(flyaway)})
-        assert len(textures) <= ATLAS_UNITS[0], "a yarn entry's textures would share units with the atlases"
+        assert len(textures) <= HAIR_DEPTH_UNITS[0], "a yarn entry's textures would share units with the atlases"
         return uniforms, textures
 
     # --- per frame --------------------------------------------------------------------------------------------------
@@ -487,7 +491,7 @@ class GLRenderer:
             facts["warnings"].append(f"msaa {scene.render.msaa} is more than this GL driver's {ctx.max_samples} "
                                      f"samples: drawn with {samples}")
         colour = ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4")
-        depth = ctx.depth_renderbuffer((w, h), samples=samples)
+        depth = ctx.depth_texture((w, h), samples=samples)  # a texture: the flyaway layers' masks read it
         fbo = ctx.framebuffer(color_attachments=[colour], depth_attachment=depth)
         fbo.use()
         ctx.viewport = (0, 0, w, h)
@@ -526,15 +530,11 @@ class GLRenderer:
         for k, vao, count in draws:
             self._look_uniforms(self.regular, k)
             vao[0].render(ctx.LINES_ADJACENCY, vertices=count)
-        layers = []
-        if fly_entries:  # the flyaway layer over the regular one, against its depth (the module docstring)
-            layers = [ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4") for _ in range(2)]
-            fly_fbo = ctx.framebuffer(color_attachments=layers, depth_attachment=depth)
-            fly_fbo.use()
-            fly_fbo.depth_mask = False  # keep the regular pass's depth while clearing the colours
-            fly_fbo.clear(0.0, 0.0, 0.0, 0.0)
-            fly_fbo.depth_mask = True
+        layers, hair_depths = [], []  # per flyaway layer, nearest first: its two targets; its depth and peel target
+        if fly_entries:  # the flyaway layers over the regular one, peeled (the module docstring)
             _set(self.flyaway, "depth_tolerance", float(radius.max()))
+            _set(self.flyaway, "regular_depth", HAIR_DEPTH_UNITS[0])
+            _set(self.flyaway, "previous_layer", HAIR_DEPTH_UNITS[1])
             variants = self._variant_table(lines)
             variants.use(location=ATLAS_UNITS[3])
             _set(self.flyaway, "fly_variant", ATLAS_UNITS[3])
@@ -542,25 +542,40 @@ class GLRenderer:
             for tex in bounce[1:]:  # the neighbours' light on the hairs (Features.hair_bounce)
                 tex.use(location=ATLAS_UNITS[6])
                 _set(self.flyaway, "bounce_tex", ATLAS_UNITS[6])
-            for k, vao, count in fly_entries:
-                self._look_uniforms(self.flyaway, k)
-                _set(self.flyaway, "strip_half_width", self.looks[k][0]["flyaway_half_width"])
-                vao[3].render(ctx.LINES_ADJACENCY, vertices=count)
-            fly_fbo.release()
+            for layer in range(scene.render.hair_layers):
+                targets = [ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4") for _ in range(2)]
+                peeled = ctx.texture((w, h), 2, samples=samples, dtype="f4")  # out_peel: (depth, curve)
+                hair_depths += [ctx.depth_renderbuffer((w, h), samples=samples), peeled]
+                fly_fbo = ctx.framebuffer(color_attachments=[*targets, peeled], depth_attachment=hair_depths[-2])
+                fly_fbo.use()
+                fly_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                nothing = ctx.framebuffer(color_attachments=[peeled])
+                nothing.clear(2.0, -1.0, 0.0, 0.0)  # no strip: nothing lies beyond it
+                nothing.release()
+                fly_fbo.use()
+                depth.use(location=HAIR_DEPTH_UNITS[0])
+                hair_depths[-1 if layer == 0 else -3].use(location=HAIR_DEPTH_UNITS[1])
+                _set(self.flyaway, "peel", int(layer > 0))
+                for k, vao, count in fly_entries:
+                    self._look_uniforms(self.flyaway, k)
+                    _set(self.flyaway, "strip_half_width", self.looks[k][0]["flyaway_half_width"])
+                    vao[3].render(ctx.LINES_ADJACENCY, vertices=count)
+                fly_fbo.release()
+                layers.append(targets)
             variants.release()
         lap("shade")
 
         image = self._resolve(fbo, w, h)
-        if layers:
+        for targets in layers[::-1]:  # the K-th nearest first (SHADING.md §6)
             resolved = []
-            for layer in layers:
-                source = ctx.framebuffer(color_attachments=[layer])
+            for target in targets:
+                source = ctx.framebuffer(color_attachments=[target])
                 resolved.append(self._resolve(source, w, h))
                 source.release()
             fly_radiance, fly_cover = resolved
             image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
-        for obj in (fbo, colour, depth, light_atlas, *behind_atlas, lobe_atlas, *layers, *polyline, *bounce,
-                    *canopy_tex):
+        for obj in (fbo, colour, depth, light_atlas, *behind_atlas, lobe_atlas, *[t for ts in layers for t in ts],
+                    *hair_depths, *polyline, *bounce, *canopy_tex):
             obj.release()
         for _, arrays, _ in draws:
             for obj in arrays:

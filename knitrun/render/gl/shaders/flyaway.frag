@@ -1,11 +1,15 @@
-// Strip renderer, GL backend: the flyaway pass (strip_shading.shade_flyaway), on the wider flyaway strips. The depth
-// buffer is the regular pass's; a fragment writes its depth less the yarn radius, so it passes where no regular
-// strip is nearer than that radius (the CPU's mask) and the nearest flyaway strip of each sample wins. Two targets:
-// A·L_fly and A·(1 − τ) per channel, τ the hair's forward fraction ā_f(θ_o^f); their MSAA resolves are composited
-// over the regular image as C ← Σ w A L + (1 − min(1, Σ w A (1 − τ)))·C (SHADING.md §6).
+// Strip renderer, GL backend: a flyaway pass (strip_shading.shade_flyaway), on the wider flyaway strips, once per
+// flyaway layer. A fragment's depth is its own less the yarn radius; its sample mask keeps the samples where no
+// regular strip is nearer than that (the regular pass's depth: the CPU's mask) and, from the second layer on
+// (`peel`), where it lies beyond the previous layer's strip in the order (depth, curve), so that strips at one depth
+// fall into successive layers; the depth test keeps the nearest strip of each sample among those: the layer-th
+// nearest. Targets: A·L_fly and A·(1 − τ) per channel, τ the hair's forward fraction ā_f(θ_o^f), whose MSAA resolves
+// are composited over the regular image, the farthest layer first, as C ← Σ w A L + (1 − min(1, Σ w A (1 − τ)))·C
+// (SHADING.md §6); and the layer's (depth, curve) per sample, which the next layer peels beyond.
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_cover;
+layout(location = 2) out vec4 out_peel;  // (depth written, curve): what the next layer lies beyond
 
 uniform float flyaway_half_width;
 uniform float depth_tolerance;      // the largest regular yarn radius (pipeline: the flyaway mask's tolerance)
@@ -20,6 +24,9 @@ uniform vec3 glow_forward;
 uniform int hairs_behind;           // a share of the hairs seen over the body lie behind it (Features.hairs_behind)
 uniform sampler2D coverage_tex;     // the regular strip's coverage (regular.frag's), for that share
 uniform int texture_levels;
+uniform sampler2DMS regular_depth;  // the regular pass's depth per sample
+uniform sampler2DMS previous_layer; // the previous flyaway layer's out_peel per sample ((2, −1) where none)
+uniform int peel;                   // 1 from the second flyaway layer on
 const int VARIANT_OFFSET = 2;
 
 vec4 fly_fetch(int layer, ivec2 texel, int level) {
@@ -136,7 +143,19 @@ vec3 body_glow(float reach, float v_strip, float behind, vec3 n, vec3 b, vec3 w,
 
 void main() {
     StripPoint sp = strip_point();
-    gl_FragDepth = clamp((fin.depth - depth_tolerance) / far_plane, 0.0, 1.0);
+    float written = clamp((fin.depth - depth_tolerance) / far_plane, 0.0, 1.0);
+    gl_FragDepth = written;
+    int mask = 0;  // the samples where this strip may be the layer's (the header)
+    for (int s = 0; s < samples; ++s) {
+        bool kept = written < texelFetch(regular_depth, ivec2(gl_FragCoord.xy), s).r;
+        if (peel != 0) {
+            vec2 previous = texelFetch(previous_layer, ivec2(gl_FragCoord.xy), s).rg;
+            kept = kept && (written > previous.x || (written == previous.x && float(fin.curve) > previous.y));
+        }
+        if (kept) mask |= 1 << s;
+    }
+    gl_SampleMask[0] = mask;
+    out_peel = vec4(written, float(fin.curve), 0.0, 0.0);
     out_radiance = vec4(0.0);
     out_cover = vec4(0.0);
     if (!sp.drawn) return;
