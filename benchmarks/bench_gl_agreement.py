@@ -3,8 +3,8 @@ yarn-scale relative L1 between the two images, also as a ratio to the scene's fi
 against its other fiber instance, ``benchmarks/bench_floors.py``); frame ms of each renderer after a warm-up frame
 (the GL one with its set-up kept, the CPU one likewise). Targets: mean within 2 %, L1 at most a quarter of the floor.
 Then the GL image against the reference itself, as ``bench_compare.py`` measures the CPU renderer: its mean radiance
-over the reference's and its yarn-scale rel L1 over the instance floor (the GL backend draws one layer of regular
-strips, ``GLRenderer``, where the CPU renderer's default draws two; the scene's ``hair_layers`` of flyaway strips).
+over the reference's and its yarn-scale rel L1 over the instance floor (the scene's ``layers`` of regular strips and
+``hair_layers`` of flyaway strips on both backends since knit's stop 73).
 
     .venv/bin/python benchmarks/bench_gl_agreement.py --pack out/bench/cotton1_standard.h5 \\
         --reference-dir out/bench/refs2 [--scenes a,b] [--ablation papers_xi | axis_shadows+no_parallax]

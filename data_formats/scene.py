@@ -55,8 +55,8 @@ RENDER_FIELDS = {
     "srbf_count": (16, 1, 64, "J, spherical Gaussians fitted to an environment light"),
     "shadow_map_size": (2048, 64, 16384, "yarn-level shadow-map resolution (a power of two)"),
     "frame": (0, 0, 2**31 - 1, "frame of the yarn curves to draw (0-based)"),
-    "layers": (2, 1, 2, "layers of regular strips the CPU strip renderer composites per sample (2: the yarn behind a "
-                        "strip shows through its partial coverage)"),
+    "layers": (2, 1, 2, "layers of regular strips the strip renderer composites per sample (2: the yarn behind a "
+                        "strip shows through its partial coverage; both backends)"),
     "hair_layers": (3, 1, 8, "flyaway strips the strip renderer composites per sample, the nearest first (3: the "
                              "hairs of three yarns where their strips overlap; both backends)"),
 }

@@ -1,9 +1,14 @@
 // Strip renderer, GL backend: the regular-fiber pass (strip_shading.shade_regular and the pipeline's view phase),
-// one fragment per pixel and primitive; the MSAA resolve averages the samples of
-// α·L + (1 − α)·background, which is the CPU renderer's resolve Σ w α L + (1 − Σ w α)·background.
+// one fragment per pixel and primitive, writing (α·L, α) per sample; the MSAA resolves of it and of out_front give
+// Σ w α L, Σ w α and the front strips' coverage c1, from which gl_renderer composes SHADING.md §6's resolve. Drawn
+// twice with render.layers = 2: the front strips (the depth test keeps the nearest), then with ``behind`` the
+// strips behind them (strip_raster.rasterize_behind: the sample mask keeps the samples where the fragment lies more
+// than the front strip's radius behind it, its floor in out_front, and the depth test the nearest of those).
 
-out vec4 out_colour;
-uniform vec3 background;
+layout(location = 0) out vec4 out_colour;
+layout(location = 1) out vec4 out_front;  // front pass: (1, the peel floor: view depth + radius, 0, 0)
+uniform int behind;                       // 1: the pass of the strips behind the front ones
+uniform sampler2DMS front_floor;          // the front pass's out_front per sample ((0, 3e38) where no strip)
 
 // the regular-fiber textures of the entry
 uniform sampler2D tangent_tex;   // coverage-premultiplied strip-frame tangent (t, b, n), mip chain of the pack
@@ -99,7 +104,16 @@ void main() {
     if (parallax != 0 && sp.drawn)
         axial_parallax(sp);
     gl_FragDepth = clamp(fin.depth / far_plane, 0.0, 1.0);
-    if (!sp.drawn) { out_colour = vec4(background, 1.0); return; }  // edge-on: not drawn, the background shows
+    out_front = vec4(1.0, fin.depth + radius, 0.0, 0.0);
+    int mask = -1;  // every sample the strip covers; behind the front strips, those beyond their floor
+    if (behind != 0) {
+        mask = 0;
+        for (int s = 0; s < samples; ++s)
+            if (fin.depth > texelFetch(front_floor, ivec2(gl_FragCoord.xy), s).g) mask |= 1 << s;
+    }
+    gl_SampleMask[0] = mask;  // written on every path (else undefined)
+    out_colour = vec4(0.0);
+    if (!sp.drawn) return;  // edge-on: not drawn, what lies behind shows
     vec3 t = sp.t, n = sp.n, b = sp.b, wo = sp.wo;
     float u = sp.u, v = sp.v;
     // textures
@@ -174,5 +188,5 @@ void main() {
         rgb += bounce_at(fin.segment, bounce_s);
     vec2 detail = sample_mip(detail_tex, detail_levels, level, u, v).rg;
     rgb = rgb * detail.r + ambient * detail.g;
-    out_colour = vec4(alpha * rgb + (1.0 - alpha) * background, 1.0);
+    out_colour = vec4(alpha * rgb, alpha);
 }
