@@ -16,12 +16,13 @@ textures with the axial parallax, tilts the fibers by the curve's bend and stret
 yarns scatter onto each yarn. The flyaway layer lowers the yarn-scale error on six of the seven example scenes (its
 hairs in their own yarn's shadow, and the regular fibers not already too bright: with the paper's ξ the lone yarn's
 regular fibers alone are 15–16 % brighter than the reference traced without hairs under the sky and back-lit;
-BENCHMARKS.md, "Issue 13: hairs in their own yarn's shadow, and the closed ξ with flyaways as the default", "Issue 13:
-ξ closed on the strip renderer"). Measured at knit's stop 73 (``closed`` → ``full``, over the instance floor): the
-straight yarn under the sky 1.09 → 0.98×, back-lit 1.67 → 1.16×, the patches 1.27 → 1.20×, 1.65 → 1.34×, 1.25 →
-1.18×, 1.63 → 1.59× (directional, sky, grazing, simulated); on the front-lit straight yarn it raises the error, 0.81 →
-0.87× (both under the floor; the ensemble's 0.88 → 1.00×), where two fiber draws' hairs differ by 1.66× in single
-scattering (BENCHMARKS.md, "Issue 13: the bounce on the GPU, the texture tilt, the flyaway layer (stop 73)").
+BENCHMARKS.md, "Issue 13: hairs in their own yarn's shadow, and the closed ξ with flyaways as the default", "Issue 13: ξ
+closed on the strip renderer"). Measured at knit's stop 73 (``closed`` → ``full``, over the instance floor): the
+straight yarn under the sky 1.09 → 0.98×, back-lit 1.67 → 1.16×, the patches 1.27 → 1.20×, 1.65 → 1.34×, 1.25 → 1.18×,
+1.63 → 1.59× (directional, sky, grazing, simulated); on the front-lit straight yarn it raises the error, 0.81 → 0.87×
+(both under the floor; the ensemble's 0.88 → 1.00×), where two fiber draws' hairs differ by 1.66× in single scattering
+(BENCHMARKS.md, "Issue 13: the GL backend draws the default model, the bounce on the GPU, the texture tilt, the flyaway
+layer (stop 73)").
 
 The ξ closed at every view, the surface lookups, the parallax and the bounce became the default together in stop 49
 (BENCHMARKS.md, "Issue 13: the default model of stop 49"): against the model without them

@@ -24,7 +24,7 @@ What runs where
   the first sample of the CPU's pattern that lies on its curve's strip (the CPU shades a pixel once per curve, at its
   first covered sample). With ``render.layers`` = 2 (the default) pass 2 runs again for the strips behind: a sample
   mask keeps the samples where a fragment lies beyond the front strip's floor (``strip_raster.rasterize_behind``'s
-  rule), the depth test the nearest of them (until knit's stop 73 this backend drew one layer: the patches 1.5–2.5 %
+  rule), the depth test the nearest of them (until knit's stop 73 this backend drew one layer: the patches 1.5–3 %
   darker). Pass 3: the MSAA resolves, composed by SHADING.md §6 (``_regular_image``). At the front strips' edges a
   strip behind is shaded at its first sample on the strip, where the CPU shades it at its first sample behind the
   front (0.7 % of a test image per pixel, 0.36 % at the yarn scale).
