@@ -321,7 +321,8 @@ def test_the_bounce_sums_on_the_gpu_are_the_numba_kernels():
     for a, b in zip(ours, theirs):
         assert a.shape == b.shape and np.all(np.isfinite(a))
         assert np.abs(a - b).max() < 2e-3 * np.abs(b).max()
-    no_light = lights._replace(direction=np.zeros((0, 3)), irradiance=np.zeros((0, 3)), direct=np.zeros((0, 41 * 5)))
+    no_light = lights._replace(direction=np.zeros((0, 3)), irradiance=np.zeros((0, 3)),
+                               direct=np.zeros((0, len(yarns.points))))
     assert all(np.all(x == 0) for x in gpu_vertex_bounce(ctx, gl_renderer._source, gl_renderer._set, yarns,
                                                          no_light))
 

@@ -62,20 +62,19 @@ curves and the lights alone, the canopy and the lights' visibility at the bounce
 read-back, which waits for the GPU to draw it), is kept while they stay: a viewer's orbit about a still frame
 computes neither again.
 
-The flyaway layers (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway
-textures) once per layer of ``render.hair_layers`` K, each fragment with its depth less the largest yarn radius;
-its sample mask keeps the samples where no regular strip is nearer than that radius (the regular pass's depth, a
-multisampled depth texture) and, from the second layer on, where it lies beyond the previous layer's flyaway strip
-(that layer's depth texture: depth peeling), and the depth test keeps the nearest such strip of each sample: the K
-nearest flyaway strips of a sample, as ``strip_raster.rasterize_before`` finds them (until knit's stop 73 this
-backend drew K = 1, its patches 2.5–5 % darker than the CPU's default of three, BENCHMARKS.md);
-``shaders/flyaway.frag`` shades each as ``shade_flyaway`` does into two targets, A·L and A·(1 − τ), whose resolves are
-composited over the regular image as the CPU's resolve does.
+The flyaway layers (``Features.flyaways``): pass 2b draws the flyaway strips (half-width of the pack's flyaway textures)
+once per layer of ``render.hair_layers`` K, each fragment with its depth less the largest yarn radius; its sample mask
+keeps the samples where no regular strip is nearer than that radius (the regular pass's depth, a multisampled depth
+texture) and, from the second layer on, where it lies beyond the previous layer's flyaway strip in the order (depth,
+curve) (a target that layer wrote: depth peeling, strips at one depth in successive layers), and the depth test keeps
+the nearest such strip of each sample: the K nearest flyaway strips of a sample, as ``strip_raster.rasterize_before``
+finds them (until knit's stop 73 this backend drew K = 1, its patches 2.5–5 % darker than the CPU's default of three,
+BENCHMARKS.md); ``shaders/flyaway.frag`` shades each as ``shade_flyaway`` does into two targets, A·L and A·(1 − τ),
+whose resolves are composited over the regular image as the CPU's resolve does.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import time
@@ -579,7 +578,9 @@ class GLRenderer:
                 _clear(ctx, peeled, (2.0, -1.0, 0.0, 0.0))  # no strip: nothing lies beyond it
                 fly_fbo.use()
                 depth.use(location=PEEL_UNITS[0])
-                hair_depths[-1 if layer == 0 else -3].use(location=PEEL_UNITS[1])
+                # the previous layer's (depth, curve); the first reads none, but its unit must not hold the target it
+                # draws into (a feedback loop): the front strips' texture stands in
+                (front if layer == 0 else hair_depths[-3]).use(location=PEEL_UNITS[1])
                 _set(self.flyaway, "peel", int(layer > 0))
                 for k, vao, count in fly_entries:
                     self._look_uniforms(self.flyaway, k)
@@ -590,9 +591,8 @@ class GLRenderer:
             variants.release()
         lap("shade")
 
-        image = self._regular_image(colour, front, behind[:1], background, w, h)
+        image = self._regular_image(colour, front, behind[0] if behind else None, background, w, h)
         for targets in layers[::-1]:  # the K-th nearest first (SHADING.md §6)
-            resolved = []
             fly_radiance, fly_cover = (self._resolve(target, w, h) for target in targets)
             image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
         for obj in (fbo, colour, front, depth, *behind, light_atlas, *behind_atlas, lobe_atlas,
@@ -729,14 +729,15 @@ class GLRenderer:
 
     def _regular_image(self, colour, front, behind, background, w, h):
         """The regular strips over the background by SHADING.md §6 from the resolves of ``colour`` (Σ w α L, s1 =
-        Σ w α of the front strips), ``front`` (their coverage c1) and, with render.layers = 2, ``behind`` ([the
-        strips behind them, (Σ_back w α L, Σ_back w α)]): C = Σ w α L + (c1 − s1)·X + (1 − c1)·background, X the
-        layer behind over the background averaged over the samples the front covers (the background without it)."""
+        Σ w α of the front strips), ``front`` (their coverage c1) and, with render.layers = 2, ``behind`` (the
+        strips behind them, (Σ_back w α L, Σ_back w α); None with one layer): C = Σ w α L + (c1 − s1)·X + (1 −
+        c1)·background, X the layer behind over the background averaged over the samples the front covers (the
+        background without it)."""
         regular, c1 = self._resolve(colour, w, h, 4), self._resolve(front, w, h, 1)
         bg = background.astype(np.float32)
         x = np.broadcast_to(bg, regular[..., :3].shape)
-        if behind:
-            back = self._resolve(behind[0], w, h, 4)
+        if behind is not None:
+            back = self._resolve(behind, w, h, 4)
             x = np.where(c1 > 0.0, (back[..., :3] + (c1 - back[..., 3:]) * bg) / np.where(c1 > 0.0, c1, 1.0), bg)
         return regular[..., :3] + (c1 - regular[..., 3:]) * x + (1.0 - c1) * bg
 

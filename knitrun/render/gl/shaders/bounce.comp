@@ -1,6 +1,6 @@
 // Strip renderer, GL backend: the yarn-level bounce at the polyline points (yarn_bounce._vertex_bounce, the model of
 // the yarn_bounce module docstring), one invocation per receiving point, its sums its own. The inputs are the CPU's
-// (yarn_bounce.BounceYarns, yarn_bounce._senders: the segments sorted by the cell of their midpoint on a uniform
+// (yarn_bounce.BounceYarns, yarn_bounce.sender_segments: the segments sorted by the cell of their midpoint on a uniform
 // grid of cell `cell`); the phase tables are read by the pack's trilinear rule (yarn_bounce.phase_at, axis_cell).
 // Single precision throughout; gl_bounce.py holds the buffers' layouts.
 
@@ -132,7 +132,7 @@ void main() {
         return;
     }
     float q = total / (4.0 * PI);
-    float f = q < 1e-3 ? q * (1.0 - q * (0.5 - q / 6.0)) : 1.0 - exp(-q);  // −expm1(−q), exact in single precision
+    float f = q < 1e-3 ? q * (1.0 - q * (0.5 - q / 6.0)) : 1.0 - exp(-q);  // −expm1(−q), accurate in single precision
     float share = 4.0 * PI * f / total;
     vec3 k = share / max(1.0 - clamp(receiver_scattered[i].rgb, 0.0, 1.0) * f, vec3(1e-6));
     bounce[i] = vec4(s * k, f);
