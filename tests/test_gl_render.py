@@ -314,8 +314,8 @@ def test_the_bounce_sums_on_the_gpu_are_the_numba_kernels():
     from knitrun.render.yarn_bounce import vertex_bounce
 
     yarns, lights = _knit_like_yarns(np.random.default_rng(7))
-    ctx = gl_renderer.gl_context()
-    ours = gpu_vertex_bounce(ctx, gl_renderer._source, gl_renderer._set, yarns, lights)
+    program = gl_renderer._programs(gl_renderer.gl_context())[3]
+    ours = gpu_vertex_bounce(program, yarns, lights)
     theirs = vertex_bounce(yarns, lights)
     assert (theirs[1] > 0).mean() > 0.9 and theirs[0].max() > 0
     for a, b in zip(ours, theirs):
@@ -323,8 +323,7 @@ def test_the_bounce_sums_on_the_gpu_are_the_numba_kernels():
         assert np.abs(a - b).max() < 2e-3 * np.abs(b).max()
     no_light = lights._replace(direction=np.zeros((0, 3)), irradiance=np.zeros((0, 3)),
                                direct=np.zeros((0, len(yarns.points))))
-    assert all(np.all(x == 0) for x in gpu_vertex_bounce(ctx, gl_renderer._source, gl_renderer._set, yarns,
-                                                         no_light))
+    assert all(np.all(x == 0) for x in gpu_vertex_bounce(program, yarns, no_light))
 
 
 def test_the_bounce_runs_on_the_gpu_or_the_cpu_to_the_same_image(tmp_path, pack):

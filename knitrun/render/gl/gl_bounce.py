@@ -29,15 +29,6 @@ from knitrun.render.yarn_bounce import REACH_RADII, BounceLights, BounceYarns, s
 LOCAL_SIZE = 64  # invocations per work group (bounce.comp's local_size_x)
 
 
-def _program(ctx, source):
-    """``shaders/bounce.comp`` compiled once per context (``source`` builds a shader's text from its files)."""
-    program = getattr(ctx, "_knit_bounce", None)
-    if program is None:
-        program = ctx.compute_shader(source("bounce.comp"))
-        ctx._knit_bounce = program
-    return program
-
-
 def _rows(*columns) -> np.ndarray:
     """(N, 4) float32 rows of the columns (each (N,) or (N, k)), zero-padded to four."""
     parts = [np.asarray(c, np.float64).reshape(len(c), -1) for c in columns]
@@ -46,10 +37,9 @@ def _rows(*columns) -> np.ndarray:
     return out
 
 
-def gpu_vertex_bounce(ctx, source, set_uniform, yarns: BounceYarns, lights: BounceLights,
-                      reach_radii: float = REACH_RADII) -> tuple:
-    """(B (P, 3), f (P,), I (P, 3)) as ``yarn_bounce.vertex_bounce`` gives them, computed by ``shaders/bounce.comp``
-    on ``ctx``; ``source`` and ``set_uniform`` are the GL backend's shader-text and uniform helpers."""
+def gpu_vertex_bounce(program, yarns: BounceYarns, lights: BounceLights, reach_radii: float = REACH_RADII) -> tuple:
+    """(B (P, 3), f (P,), I (P, 3)) as ``yarn_bounce.vertex_bounce`` gives them, computed by ``program``, the compiled
+    ``shaders/bounce.comp`` (``gl_renderer._programs``), on its context."""
     n = len(yarns.points)
     out, covered, arriving = np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3))
     if n < 2 or len(yarns.radius) == 0 or len(lights.direction) == 0:
@@ -66,19 +56,19 @@ def gpu_vertex_bounce(ctx, source, set_uniform, yarns: BounceYarns, lights: Boun
         _rows(senders.tangent, senders.curve), per_light.astype(np.float32),
         senders.cell_start.astype(np.int32), np.ascontiguousarray(yarns.phase, np.float32),
     ]
-    program = _program(ctx, source)
+    ctx = program.ctx
     buffers = [ctx.buffer(np.ascontiguousarray(a).tobytes()) for a in arrays]
     results = [ctx.buffer(reserve=16 * n) for _ in range(2)]
     try:
         for binding, buffer in enumerate(buffers + results):
             buffer.bind_to_storage_buffer(binding)
-        set_uniform(program, "n_points", n)
-        set_uniform(program, "n_lights", n_lights)
-        set_uniform(program, "light_dir", np.asarray(lights.direction, np.float32))
-        set_uniform(program, "dims", tuple(int(d) for d in senders.dims))
-        set_uniform(program, "origin", tuple(float(o) for o in senders.origin))
-        set_uniform(program, "cell", float(senders.cell))
-        set_uniform(program, "reach_radii", float(reach_radii))
+        directions = np.zeros((program["light_dir"].array_length, 3), np.float32)  # the array, padded
+        directions[:n_lights] = lights.direction
+        program["light_dir"].write(directions.tobytes())
+        program["n_points"].value, program["n_lights"].value = n, n_lights
+        program["dims"].value = tuple(int(d) for d in senders.dims)
+        program["origin"].value = tuple(float(o) for o in senders.origin)
+        program["cell"].value, program["reach_radii"].value = float(senders.cell), float(reach_radii)
         program.run(-(-n // LOCAL_SIZE))
         first = np.frombuffer(results[0].read(), np.float32).reshape(n, 4)
         second = np.frombuffer(results[1].read(), np.float32).reshape(n, 4)

@@ -197,7 +197,7 @@ def _source(*names) -> str:
 
 
 def _programs(ctx):
-    """(regular-fiber, shadow-map, flyaway programs), compiled once per context."""
+    """(regular-fiber, shadow-map, flyaway programs, the bounce's compute shader), compiled once per context."""
     cache = getattr(ctx, "_knit_programs", None)
     if cache is None:
         vertex, geometry = _source("strip.vert"), _source("strip.geom")
@@ -206,7 +206,7 @@ def _programs(ctx):
         depth = ctx.program(vertex_shader=vertex, geometry_shader=geometry, fragment_shader=_source("depth.frag"))
         flyaway = ctx.program(vertex_shader=vertex, geometry_shader=geometry,
                               fragment_shader=_source(*FRAGMENT_COMMON, "flyaway.frag"))
-        cache = (regular, depth, flyaway)
+        cache = (regular, depth, flyaway, ctx.compute_shader(_source("bounce.comp")))
         ctx._knit_programs = cache
     return cache
 
@@ -325,7 +325,7 @@ class GLRenderer:
         self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
         start = time.perf_counter()
         self.scene, self.features = scene, features
-        self.regular, self.depth, self.flyaway = _programs(self.ctx)
+        self.regular, self.depth, self.flyaway, self.bounce_program = _programs(self.ctx)
         self.looks = [self._upload_look(k) for k in range(len(self.cpu.looks))]
         fit = self.cpu.fit
         if fit is not None and len(fit.sharpness) > MAX_LOBES:
@@ -647,8 +647,7 @@ class GLRenderer:
         textures of the points, point i at (i mod POLYLINE_ROW, i // POLYLINE_ROW): (bounce RGB, rest arc length)
         for ``regular.frag``, then (the neighbours' light arriving, rest arc length) for ``flyaway.frag``."""
         cpu = self.cpu
-        solve = vertex_bounce if self.bounce_on == "cpu" else \
-            functools.partial(gpu_vertex_bounce, self.ctx, _source, _set)
+        solve = vertex_bounce if self.bounce_on == "cpu" else functools.partial(gpu_vertex_bounce, self.bounce_program)
         vertex, covered, arriving = pipeline.frame_bounce(lines, cpu.looks, camera, self.light_dir, self.light_e, at,
                                                           vis, beyond, solve)
         facts["yarn_bounce"] = pipeline.bounce_facts(vertex, covered)
