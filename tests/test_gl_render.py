@@ -314,7 +314,7 @@ def test_the_bounce_sums_on_the_gpu_are_the_numba_kernels():
     from knitrun.render.yarn_bounce import vertex_bounce
 
     yarns, lights = _knit_like_yarns(np.random.default_rng(7))
-    program = gl_renderer._programs(gl_renderer.gl_context())[3]
+    program = gl_renderer._programs(gl_renderer.gl_context())[3]  # the bounce's compute shader
     ours = gpu_vertex_bounce(program, yarns, lights)
     theirs = vertex_bounce(yarns, lights)
     assert (theirs[1] > 0).mean() > 0.9 and theirs[0].max() > 0

@@ -25,9 +25,9 @@ What runs where
   first covered sample). With ``render.layers`` = 2 (the default) pass 2 runs again for the strips behind: a sample
   mask keeps the samples where a fragment lies beyond the front strip's floor (``strip_raster.rasterize_behind``'s
   rule), the depth test the nearest of them (until knit's stop 73 this backend drew one layer: the patches 1.5–3 %
-  darker). Pass 3: the MSAA resolves, composed by SHADING.md §6 (``_regular_image``). At the front strips' edges a
-  strip behind is shaded at its first sample on the strip, where the CPU shades it at its first sample behind the
-  front (0.7 % of a test image per pixel, 0.36 % at the yarn scale).
+  darker). Pass 3: the MSAA resolves, composed by SHADING.md §6 on the GPU (``_composite``, ``composite.frag``), one
+  image read back. At the front strips' edges a strip behind is shaded at its first sample on the strip, where the
+  CPU shades it at its first sample behind the front (0.7 % of a test image per pixel, 0.36 % at the yarn scale).
 * Table lookups follow ASSET_PACK.md §4.3 by ``texelFetch`` and explicit weights (``axis_cell``), textures
   ``texture_sampling.sample_mip`` likewise: the GL image does not depend on a driver's filtering rules.
 
@@ -197,7 +197,8 @@ def _source(*names) -> str:
 
 
 def _programs(ctx):
-    """(regular-fiber, shadow-map, flyaway programs, the bounce's compute shader), compiled once per context."""
+    """(regular-fiber, shadow-map, flyaway programs, the bounce's compute shader, the composite program), compiled
+    once per context."""
     cache = getattr(ctx, "_knit_programs", None)
     if cache is None:
         vertex, geometry = _source("strip.vert"), _source("strip.geom")
@@ -206,7 +207,8 @@ def _programs(ctx):
         depth = ctx.program(vertex_shader=vertex, geometry_shader=geometry, fragment_shader=_source("depth.frag"))
         flyaway = ctx.program(vertex_shader=vertex, geometry_shader=geometry,
                               fragment_shader=_source(*FRAGMENT_COMMON, "flyaway.frag"))
-        cache = (regular, depth, flyaway, ctx.compute_shader(_source("bounce.comp")))
+        composite = ctx.program(vertex_shader=_source("composite.vert"), fragment_shader=_source("composite.frag"))
+        cache = (regular, depth, flyaway, ctx.compute_shader(_source("bounce.comp")), composite)
         ctx._knit_programs = cache
     return cache
 
@@ -325,7 +327,7 @@ class GLRenderer:
         self.cpu = pipeline.Renderer(scene, packs, features, samples_per_segment, use_cache, progress)
         start = time.perf_counter()
         self.scene, self.features = scene, features
-        self.regular, self.depth, self.flyaway, self.bounce_program = _programs(self.ctx)
+        self.regular, self.depth, self.flyaway, self.bounce_program, self.composite = _programs(self.ctx)
         self.looks = [self._upload_look(k) for k in range(len(self.cpu.looks))]
         fit = self.cpu.fit
         if fit is not None and len(fit.sharpness) > MAX_LOBES:
@@ -591,10 +593,7 @@ class GLRenderer:
             variants.release()
         lap("shade")
 
-        image = self._regular_image(colour, front, behind[0] if behind else None, background, w, h)
-        for targets in layers[::-1]:  # the K-th nearest first (SHADING.md §6)
-            fly_radiance, fly_cover = (self._resolve(target, w, h) for target in targets)
-            image = fly_radiance + (1.0 - np.minimum(fly_cover, 1.0)) * image
+        image = self._composite(colour, front, behind[0] if behind else None, layers, background, w, h)
         for obj in (fbo, colour, front, depth, *behind, light_atlas, *behind_atlas, lobe_atlas,
                     *[t for ts in layers for t in ts], *hair_depths, *polyline, *bounce, *canopy_tex):
             obj.release()
@@ -715,30 +714,53 @@ class GLRenderer:
                          np.uint8)
         return self.ctx.texture((width, len(lines.entry)), 1, table.tobytes(), dtype="u1")
 
-    def _resolve(self, target, w, h, components=3):
-        """The MSAA resolve of the multisampled colour ``target`` as an (h, w, ``components``) float32 image, row 0 at
-        the top."""
-        source = self.ctx.framebuffer(color_attachments=[target])
-        resolved = self.ctx.framebuffer(color_attachments=[self.ctx.renderbuffer((w, h), 4, dtype="f4")])
-        self.ctx.copy_framebuffer(resolved, source)
-        pixels = np.frombuffer(resolved.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
-        for obj in (resolved.color_attachments[0], resolved, source):
-            obj.release()
-        return np.ascontiguousarray(pixels[::-1, :, :components])
+    def _composite(self, colour, front, behind, layers, background, w, h):
+        """The frame (h, w, 3) float32, row 0 at the top, by SHADING.md §6 from the multisampled targets: ``colour``
+        (Σ w α L, s1 = Σ w α of the front strips), ``front`` (their coverage c1 in .r), ``behind`` (the strips behind
+        them, (Σ_back w α L, Σ_back w α); None with one layer) and ``layers`` (per flyaway layer, nearest first, its
+        (Σ w A L, Σ w A (1 − τ)) targets). Each target is resolved on the GPU and ``composite.frag`` composes them,
+        the farthest flyaway layer first; one image is read back."""
+        ctx, program = self.ctx, self.composite
+        resolved = []
 
-    def _regular_image(self, colour, front, behind, background, w, h):
-        """The regular strips over the background by SHADING.md §6 from the resolves of ``colour`` (Σ w α L, s1 =
-        Σ w α of the front strips), ``front`` (their coverage c1) and, with render.layers = 2, ``behind`` (the
-        strips behind them, (Σ_back w α L, Σ_back w α); None with one layer): C = Σ w α L + (c1 − s1)·X + (1 −
-        c1)·background, X the layer behind over the background averaged over the samples the front covers (the
-        background without it)."""
-        regular, c1 = self._resolve(colour, w, h, 4), self._resolve(front, w, h, 1)
-        bg = background.astype(np.float32)
-        x = np.broadcast_to(bg, regular[..., :3].shape)
-        if behind is not None:
-            back = self._resolve(behind, w, h, 4)
-            x = np.where(c1 > 0.0, (back[..., :3] + (c1 - back[..., 3:]) * bg) / np.where(c1 > 0.0, c1, 1.0), bg)
-        return regular[..., :3] + (c1 - regular[..., 3:]) * x + (1.0 - c1) * bg
+        def resolve(target):
+            tex = ctx.texture((w, h), 4, dtype="f4")
+            source, destination = ctx.framebuffer(color_attachments=[target]), ctx.framebuffer(color_attachments=[tex])
+            ctx.copy_framebuffer(destination, source)
+            source.release()
+            destination.release()
+            resolved.append(tex)
+            return tex
+
+        for unit, (name, target) in enumerate((("regular", colour), ("front", front),
+                                               ("behind", front if behind is None else behind))):
+            resolve(target).use(location=unit)
+            _set(program, name, unit)
+        images = [ctx.texture((w, h), 4, dtype="f4") for _ in range(2 if layers else 1)]
+        fbos = [ctx.framebuffer(color_attachments=[image]) for image in images]
+        vao = ctx.vertex_array(program, [])
+        ctx.disable(ctx.DEPTH_TEST)
+        _set(program, "background", background)
+        _set(program, "has_behind", int(behind is not None))
+        _set(program, "stage", 0)
+        fbos[0].use()
+        vao.render(ctx.TRIANGLES, vertices=3)
+        _set(program, "stage", 1)
+        for name, unit in (("fly_radiance", 3), ("fly_cover", 4), ("previous", 5)):
+            _set(program, name, unit)
+        current = 0
+        for targets in layers[::-1]:  # the K-th nearest first (SHADING.md §6)
+            resolve(targets[0]).use(location=3)
+            resolve(targets[1]).use(location=4)
+            images[current].use(location=5)
+            fbos[1 - current].use()
+            vao.render(ctx.TRIANGLES, vertices=3)
+            current = 1 - current
+        pixels = np.frombuffer(fbos[current].read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
+        ctx.enable(ctx.DEPTH_TEST)
+        for obj in (vao, *fbos, *images, *resolved):
+            obj.release()
+        return np.ascontiguousarray(pixels[::-1, :, :3])
 
     @staticmethod
     def _depth_range(camera, lo, hi, radius_max):
