@@ -732,9 +732,10 @@ class GLRenderer:
             resolved.append(tex)
             return tex
 
-        for unit, (name, target) in enumerate((("regular", colour), ("front", front),
-                                               ("behind", front if behind is None else behind))):
-            resolve(target).use(location=unit)
+        flat = [resolve(colour), resolve(front)]
+        flat.append(flat[1] if behind is None else resolve(behind))  # without it has_behind = 0: any texture serves
+        for unit, (name, tex) in enumerate(zip(("regular", "front", "behind"), flat)):
+            tex.use(location=unit)
             _set(program, name, unit)
         images = [ctx.texture((w, h), 4, dtype="f4") for _ in range(2 if layers else 1)]
         fbos = [ctx.framebuffer(color_attachments=[image]) for image in images]
