@@ -825,6 +825,24 @@ def test_resolve_weights_coverage_over_the_background():
     assert np.array_equal(layered, out)
 
 
+def test_resolve_composites_its_layers_the_farthest_first():
+    """``start`` of L layers (the flyaway layers, nearest first): each layer over the ones behind it. One pixel, a red
+    layer in front of a green one, both of coverage 0.8 passing on τ = 0.25 of what lies behind: red over (green over
+    blue); the other order would give green over (red over blue)."""
+    start = np.array([[0, 1], [1, 2]])  # layer 0 (nearest): point 0; layer 1: point 1
+    weight, alpha = np.ones(2), np.full(2, 0.8)
+    rgb = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    transmit = np.full((2, 3), 0.25)
+    under, out = np.array([[0, 0, 1.0]]), np.empty((1, 3))
+    resolve(start, weight, rgb, alpha, transmit, under, out)
+
+    def over(colour, behind):
+        return 0.8 * colour + (1.0 - 0.8 * 0.75) * behind
+
+    np.testing.assert_allclose(out[0], over(rgb[0], over(rgb[1], under[0])), rtol=1e-12)
+    assert np.abs(out[0] - over(rgb[1], over(rgb[0], under[0]))).max() > 0.1
+
+
 def test_the_second_layer_shows_through_the_front_only_where_the_front_is_transparent():
     """``resolve_behind`` then ``resolve``, per pixel (MSAA 2): the front at alpha 0.5 over the whole pixel with the
     back layer opaque behind it gives half of each; a front covering one sample opaquely, with the back layer behind
