@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from data_formats.errors import FormatError
+from data_formats.images import tonemap
 from data_formats.scene import load_scene
 from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from knitbake.compare.image_metrics import yarn_scale_metrics
@@ -415,6 +416,29 @@ def test_the_flyaway_layers_behind_the_nearest_are_peeled_as_the_cpu_draws_them(
         added_gl, added_cpu = gl - images[k - 1][0], cpu - images[k - 1][1]
         assert added_cpu.mean() > 1e-3 * cpu.mean() and added_gl.mean() > 1e-3 * gl.mean()
         assert abs(added_gl.mean() / added_cpu.mean() - 1) < 0.15
+
+
+def test_a_frame_drawn_into_a_framebuffer_is_the_tone_mapped_image(tmp_path, pack):
+    """``render(into=…)`` (the viewer's window): the composite pass tone-maps the frame into the framebuffer, nothing
+    read back, to within one 8-bit level of ``tonemap`` of the image ``render`` returns (a stop of exposure, to hold
+    the scale); a non-finite pixel raises as the read-back does."""
+    path = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.05, 0]], camera=ORTHO, lights=SUN)
+    renderer = gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)})
+    ctx, camera = renderer.ctx, scene_camera(renderer.scene)
+    target = ctx.texture((camera.width, camera.height), 4, dtype="f1")
+    fbo = ctx.framebuffer(color_attachments=[target])
+    drawn = renderer.render(into=fbo, exposure=1.0)
+    assert drawn.image is None and "resolve" in drawn.timings
+    shown = np.frombuffer(fbo.read(components=3), np.uint8).reshape(camera.height, camera.width, 3)[::-1]
+    expected = tonemap(renderer.render().image, 1.0)
+    assert expected.std() > 5 and (expected == 255).any()  # a picture, some of it clipped by the exposure
+    assert np.abs(shown.astype(int) - expected).max() <= 1
+    bad = np.full((camera.height, camera.width, 3), 0.5, np.float32)
+    bad[3, 4, 1] = np.nan
+    with pytest.raises(RuntimeError, match="non-finite"):
+        renderer._display_array(bad, fbo, 0.0)
+    fbo.release()
+    target.release()
 
 
 def _dense_hairs(pack, folder, coverage=0.9):

@@ -26,8 +26,10 @@ What runs where
   mask keeps the samples where a fragment lies beyond the front strip's floor (``strip_raster.rasterize_behind``'s
   rule), the depth test the nearest of them (until knit's stop 73 this backend drew one layer: the patches 1.5–3 %
   darker). Pass 3: the MSAA resolves, composed by SHADING.md §6 on the GPU (``_composite``, ``composite.frag``), one
-  image read back. At the front strips' edges a strip behind is shaded at its first sample on the strip, where the
-  CPU shades it at its first sample behind the front (0.7 % of a test image per pixel, 0.36 % at the yarn scale).
+  image read back; or, for a window (``render(into=…)``, the viewer), none: the same pass tone-maps it into the
+  window's framebuffer (``_display``). At the front strips' edges a strip behind is shaded at its first sample on
+  the strip, where the CPU shades it at its first sample behind the front (0.7 % of a test image per pixel, 0.36 % at
+  the yarn scale).
 * Table lookups follow ASSET_PACK.md §4.3 by ``texelFetch`` and explicit weights (``axis_cell``), textures
   ``texture_sampling.sample_mip`` likewise: the GL image does not depend on a driver's filtering rules.
 
@@ -110,6 +112,7 @@ PARALLAX_STEPS = 64  # segments the parallax walks at most each way (the CPU wal
 PEEL_UNITS = (20, 21)  # the peeled passes' masks: the front strips' floors (regular.frag's ``behind`` pass); the
 # regular depth and the previous flyaway layer's (depth, curve) (flyaway.frag)
 VARIANT_OFFSET = 2  # column of period index 0 in the flyaway variant table (flyaway.frag)
+NON_FINITE = "GL strip renderer produced a non-finite pixel (a bug: please report the scene)"
 
 
 BOUNCE_ON = ("auto", "gpu", "cpu")  # where the yarn-level bounce's sums may run (``GLRenderer``)
@@ -433,9 +436,12 @@ class GLRenderer:
 
     # --- per frame --------------------------------------------------------------------------------------------------
 
-    def render(self, frame: int | None = None, progress=None, camera: Camera | None = None) -> pipeline.RenderResult:
+    def render(self, frame: int | None = None, progress=None, camera: Camera | None = None, into=None,
+               exposure: float = 0.0) -> pipeline.RenderResult:
         """Draw ``frame`` (default: the scene's ``render.frame``) through ``camera`` (default: the scene's; the
-        viewer's orbit); timings per pass, as the CPU renderer's."""
+        viewer's orbit); timings per pass, as the CPU renderer's. With ``into`` (a moderngl framebuffer of the
+        camera's size: the viewer's window) the frame is drawn there tone-mapped at ``exposure`` stops (``_display``)
+        and not read back: the result's image is None."""
         scene, ctx = self.scene, self.ctx
         frame = self.cpu.frame_index(frame)
         timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
@@ -457,6 +463,9 @@ class GLRenderer:
         if len(lines.entry) == 0:
             lap("load")
             image = np.broadcast_to(background.astype(np.float32), (h, w, 3)).copy()
+            if into is not None:
+                self._display_array(image, into, exposure)
+                image = None
             return pipeline.RenderResult(image, timings, facts)
         tangent = vertex_tangents(lines.points, lines.offsets)
         draws = self._upload_segments(lines, tangent)
@@ -593,15 +602,15 @@ class GLRenderer:
             variants.release()
         lap("shade")
 
-        image = self._composite(colour, front, behind[0] if behind else None, layers, background, w, h)
+        image = self._composite(colour, front, behind[0] if behind else None, layers, background, w, h, into, exposure)
         for obj in (fbo, colour, front, depth, *behind, light_atlas, *behind_atlas, lobe_atlas,
                     *[t for ts in layers for t in ts], *hair_depths, *polyline, *bounce, *canopy_tex):
             obj.release()
         for _, arrays, _ in draws:
             for obj in arrays:
                 obj.release()
-        if not np.all(np.isfinite(image)):
-            raise RuntimeError("GL strip renderer produced a non-finite pixel (a bug: please report the scene)")
+        if image is not None and not np.all(np.isfinite(image)):
+            raise RuntimeError(NON_FINITE)
         lap("resolve")
         facts["residuals"] = {look.name: look.residuals for look in self.cpu.looks}
         return pipeline.RenderResult(image, timings, facts)
@@ -714,12 +723,13 @@ class GLRenderer:
                          np.uint8)
         return self.ctx.texture((width, len(lines.entry)), 1, table.tobytes(), dtype="u1")
 
-    def _composite(self, colour, front, behind, layers, background, w, h):
+    def _composite(self, colour, front, behind, layers, background, w, h, into=None, exposure=0.0):
         """The frame (h, w, 3) float32, row 0 at the top, by SHADING.md §6 from the multisampled targets: ``colour``
         (Σ w α L, s1 = Σ w α of the front strips), ``front`` (their coverage c1 in .r), ``behind`` (the strips behind
         them, (Σ_back w α L, Σ_back w α); None with one layer) and ``layers`` (per flyaway layer, nearest first, its
         (Σ w A L, Σ w A (1 − τ)) targets). Each target is resolved on the GPU and ``composite.frag`` composes them,
-        the farthest flyaway layer first; one image is read back."""
+        the farthest flyaway layer first; one image is read back, or with ``into`` none: the frame is drawn there
+        tone-mapped (``_display``) and None returned."""
         ctx, program = self.ctx, self.composite
         resolved = []
 
@@ -757,11 +767,49 @@ class GLRenderer:
             fbos[1 - current].use()
             vao.render(ctx.TRIANGLES, vertices=3)
             current = 1 - current
-        pixels = np.frombuffer(fbos[current].read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
+        if into is None:
+            pixels = np.frombuffer(fbos[current].read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
+            image = np.ascontiguousarray(pixels[::-1, :, :3])
+        else:
+            self._display(images[current], into, exposure)
+            image = None
         ctx.enable(ctx.DEPTH_TEST)
         for obj in (vao, *fbos, *images, *resolved):
             obj.release()
-        return np.ascontiguousarray(pixels[::-1, :, :3])
+        return image
+
+    def _display(self, image, into, exposure):
+        """Draw the linear frame ``image`` (a float texture, GL's rows upward) into the framebuffer ``into`` as
+        ``data_formats.images.tonemap`` writes it (``composite.frag``'s stage 2; the 8-bit target rounds, within one
+        level of NumPy's): what the viewer shows without reading the frame back, tone-mapping it on the CPU (40 ms a
+        1280 × 960 frame) and uploading it again. A non-finite pixel raises RuntimeError, as ``render``'s read-back
+        does (a four-byte flag the shader sets is read back)."""
+        ctx, program = self.ctx, self.composite
+        flag = ctx.buffer(np.zeros(1, np.uint32).tobytes())
+        flag.bind_to_storage_buffer(0)
+        vao = ctx.vertex_array(program, [])
+        ctx.disable(ctx.DEPTH_TEST)
+        image.use(location=5)
+        _set(program, "previous", 5)
+        _set(program, "stage", 2)
+        _set(program, "exposure_scale", 2.0 ** float(exposure))
+        into.use()
+        ctx.viewport = (0, 0, *image.size)
+        vao.render(ctx.TRIANGLES, vertices=3)
+        ctx.memory_barrier()  # the shader's write to the flag, before the read-back of it
+        bad = int(np.frombuffer(flag.read(), np.uint32)[0])
+        vao.release()
+        flag.release()
+        if bad:
+            raise RuntimeError(NON_FINITE)
+
+    def _display_array(self, image, into, exposure):
+        """``_display`` of an (h, w, 3) float32 frame, row 0 at the top (a frame with no yarn: the background)."""
+        h, w = image.shape[:2]
+        rgba = np.concatenate([image[::-1], np.ones((h, w, 1), np.float32)], axis=2)
+        tex = self.ctx.texture((w, h), 4, np.ascontiguousarray(rgba).tobytes(), dtype="f4")
+        self._display(tex, into, exposure)
+        tex.release()
 
     @staticmethod
     def _depth_range(camera, lo, hi, radius_max):

@@ -17,6 +17,7 @@ Esc, q                 quit
 
 The window's title shows the frame, the ablation and the last frame's time in ms (drawing and display). The image is
 the GL backend's linear HDR frame, tone-mapped as ``knitrun render`` writes PNGs (``data_formats.images.tonemap``)
+by the backend's composite pass straight into the window (``GLRenderer.render(into=…)``: no read-back, no upload)
 and shown at the scene camera's resolution. The renderer of each ablation is made on first use and kept (packs read
 and textures uploaded once per ablation).
 
@@ -35,7 +36,6 @@ import time
 import numpy as np
 
 from data_formats.errors import FormatError
-from data_formats.images import tonemap
 from knitrun.render.ablations import ABLATIONS
 from knitrun.render.camera import scene_camera
 
@@ -43,21 +43,6 @@ KEY_ABLATIONS = ("full", "plain_ds", "xi", "xi_shadowing", "no_tables", "factore
 ORBIT_RAD_PER_PX = 0.005
 ZOOM_PER_STEP = 0.9
 PLAY_FPS = 12.0
-
-_QUAD_VS = """#version 450 core
-out vec2 uv;
-void main() {
-    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    uv = vec2(p.x, 1.0 - p.y);  // image row 0 at the top
-    gl_Position = vec4(2.0 * p - 1.0, 0.0, 1.0);
-}
-"""
-_QUAD_FS = """#version 450 core
-in vec2 uv;
-uniform sampler2D image;
-out vec4 colour;
-void main() { colour = vec4(texture(image, uv).rgb, 1.0); }
-"""
 
 
 class DisplayUnavailable(FormatError):
@@ -146,9 +131,6 @@ class _Viewer:
         self.light_dir = renderer.light_dir.copy()
         self.up = np.asarray(self.camera.up, float) / np.linalg.norm(self.camera.up)
         self.dirty, self.last_ms, self.drag, self.want_shot = True, 0.0, None, False
-        self.program = ctx.program(vertex_shader=_QUAD_VS, fragment_shader=_QUAD_FS)
-        self.quad = ctx.vertex_array(self.program, [])
-        self.texture = ctx.texture((self.camera.width, self.camera.height), 3, dtype="f1")
 
     def renderer(self):
         if self.ablation not in self.renderers:
@@ -160,14 +142,7 @@ class _Viewer:
         start = time.perf_counter()
         renderer = self.renderer()
         renderer.light_dir = self.light_dir.copy()
-        image = renderer.render(self.frame, camera=self.camera).image
-        self.texture.write(np.ascontiguousarray(tonemap(image, self.exposure)).tobytes())
-        self.ctx.screen.use()
-        self.ctx.viewport = (0, 0, self.camera.width, self.camera.height)
-        self.ctx.disable(self.ctx.DEPTH_TEST)
-        self.texture.use(location=0)
-        self.program["image"] = 0
-        self.quad.render(self.ctx.TRIANGLES, vertices=3)
+        renderer.render(self.frame, camera=self.camera, into=self.ctx.screen, exposure=self.exposure)
         glfw.swap_buffers(self.window)
         self.last_ms = (time.perf_counter() - start) * 1e3
         glfw.set_window_title(self.window, f"knit view — frame {self.frame + 1}/{renderer.frame_count} — "
