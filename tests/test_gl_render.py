@@ -420,8 +420,8 @@ def test_the_flyaway_layers_behind_the_nearest_are_peeled_as_the_cpu_draws_them(
 
 def test_a_frame_drawn_into_a_framebuffer_is_the_tone_mapped_image(tmp_path, pack):
     """``render(into=…)`` (the viewer's window): the composite pass tone-maps the frame into the framebuffer, nothing
-    read back, to within one 8-bit level of ``tonemap`` of the image ``render`` returns (a stop of exposure, to hold
-    the scale); a non-finite pixel raises as the read-back does."""
+    read back, to within one 8-bit level of ``tonemap`` of the image ``render`` returns, at +1 stop of exposure (the
+    shader applies it: some pixels clip); a non-finite pixel raises as the read-back does."""
     path = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.05, 0]], camera=ORTHO, lights=SUN)
     renderer = gl_renderer.GLRenderer(load_scene(path), {"cotton1": str(pack)})
     ctx, camera = renderer.ctx, scene_camera(renderer.scene)

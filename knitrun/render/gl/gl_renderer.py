@@ -781,9 +781,9 @@ class GLRenderer:
     def _display(self, image, into, exposure):
         """Draw the linear frame ``image`` (a float texture, GL's rows upward) into the framebuffer ``into`` as
         ``data_formats.images.tonemap`` writes it (``composite.frag``'s stage 2; the 8-bit target rounds, within one
-        level of NumPy's): what the viewer shows without reading the frame back, tone-mapping it on the CPU (40 ms a
-        1280 × 960 frame) and uploading it again. A non-finite pixel raises RuntimeError, as ``render``'s read-back
-        does (a four-byte flag the shader sets is read back)."""
+        level of NumPy's): what the viewer shows without reading the frame back, tone-mapping it on the CPU and
+        uploading it again (152 ms a 1280 × 960 frame on llvmpipe, BENCHMARKS.md stop 74). A non-finite pixel raises
+        RuntimeError, as ``render``'s read-back does (a four-byte flag the shader sets is read back)."""
         ctx, program = self.ctx, self.composite
         flag = ctx.buffer(np.zeros(1, np.uint32).tobytes())
         flag.bind_to_storage_buffer(0)
