@@ -598,6 +598,34 @@ def test_the_canopy_and_the_bounces_light_are_kept_while_the_frame_and_the_light
     assert len(reads) == 3 and np.allclose(reads[-1], renderer.light_dir)
 
 
+def test_the_frames_polylines_and_vertex_arrays_are_kept_while_the_frame_stays(tmp_path, pack, monkeypatch):
+    """The polylines, the segments' vertex arrays and the polyline textures depend on the frame alone: an orbit draws
+    without building them again, to the image of a renderer that builds them afresh; another frame builds its own
+    (and draws what a fresh renderer draws of it)."""
+    built = []
+    original = gl_renderer.GLRenderer._frame_geometry
+    monkeypatch.setattr(gl_renderer.GLRenderer, "_frame_geometry",
+                        lambda self, frame: built.append((self, frame)) or original(self, frame))
+    path = write_scene(tmp_path, [straight()], camera=FRONT, lights=SUN, name="f")
+    curve = straight()
+    frames = np.stack([curve, curve + [0.0, 0.04, 0.0]])  # frame 1: the yarn moved up
+    write_yarn_curves(tmp_path / "f.h5", make_yarn_curves(frames, np.array([0, len(curve)], np.int64),
+                                                          yarn_types=["cotton1"], units="cm"))
+    scene = load_scene(path)
+    renderer = gl_renderer.GLRenderer(scene, {"cotton1": str(pack)})
+    renderer.render(0)
+    turned = dataclasses.replace(scene_camera(scene), position=np.array([0.2, -0.3, 1.0]))
+    kept = renderer.render(0, camera=turned)
+    assert [frame for who, frame in built if who is renderer] == [0]
+    assert np.array_equal(kept.image, gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}).render(0, camera=turned)
+                          .image)
+    moved = renderer.render(1, camera=turned)
+    assert [frame for who, frame in built if who is renderer] == [0, 1]
+    assert np.array_equal(moved.image, gl_renderer.GLRenderer(scene, {"cotton1": str(pack)}).render(1, camera=turned)
+                          .image)
+    assert not np.array_equal(moved.image, kept.image)
+
+
 def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
     many = "\n".join(SUN for _ in range(gl_renderer.MAX_LIGHTS + 1))
     with pytest.raises(FormatError, match="directional lights") as e:

@@ -350,6 +350,10 @@ class GLRenderer:
         # about a still frame reuses it. (frame, light directions) → {"canopy": the hair canopy at the polyline points,
         # "bounce_light": the lights' visibility at the bounce's points}
         self._light_side = (None, {})
+        # what depends on the frame alone, kept while it stays: (frame, (its polylines, the segments' vertex arrays,
+        # the polyline textures)); 45 ms of CPU work a frame on bench_render's 60K-point patch, which an orbit no
+        # longer pays (BENCHMARKS.md stop 74)
+        self._frame_side = (None, None)
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"],
                                 layers=scene.render.layers, hair_layers=scene.render.hair_layers,
@@ -455,7 +459,10 @@ class GLRenderer:
                 progress(name, now - clock[0])
             clock[0] = now
 
-        lines = pipeline._polylines(scene, self.cpu.curves, frame, self.cpu.samples_per_segment)
+        if self._frame_side[0] != frame:
+            self._release_frame_side()
+            self._frame_side = (frame, self._frame_geometry(frame))
+        lines, draws, polyline = self._frame_side[1]
         facts.update(curves=int(len(lines.entry)), points=int(len(lines.points)))
         camera = scene_camera(scene) if camera is None else camera
         w, h = camera.width, camera.height
@@ -467,10 +474,6 @@ class GLRenderer:
                 self._display_array(image, into, exposure)
                 image = None
             return pipeline.RenderResult(image, timings, facts)
-        tangent = vertex_tangents(lines.points, lines.offsets)
-        draws = self._upload_segments(lines, tangent)
-        polyline = _polyline_textures(ctx, lines, tangent) \
-            if self.features.parallax or self.features.fiber_bend else ()
         # the hair canopy at the polyline points, per light (pipeline.canopy_at_vertices); ones without it. It
         # depends on the frame's curves and the lights alone, so a viewer's orbit about a still frame reuses it
         # (83 ms a light on bench_render's 60K-point patch, BENCHMARKS.md stop 72)
@@ -604,11 +607,8 @@ class GLRenderer:
 
         image = self._composite(colour, front, behind[0] if behind else None, layers, background, w, h, into, exposure)
         for obj in (fbo, colour, front, depth, *behind, light_atlas, *behind_atlas, lobe_atlas,
-                    *[t for ts in layers for t in ts], *hair_depths, *polyline, *bounce, *canopy_tex):
+                    *[t for ts in layers for t in ts], *hair_depths, *bounce, *canopy_tex):
             obj.release()
-        for _, arrays, _ in draws:
-            for obj in arrays:
-                obj.release()
         if image is not None and not np.all(np.isfinite(image)):
             raise RuntimeError(NON_FINITE)
         lap("resolve")
@@ -675,6 +675,25 @@ class GLRenderer:
         data = np.zeros((len(canopy), -(-n // POLYLINE_ROW) * POLYLINE_ROW, 2), np.float32)
         data[:, :n, 0], data[:, :n, 1] = canopy, lines.rest
         return (_texture2d(self.ctx, data.reshape(-1, POLYLINE_ROW, 2)),)
+
+    def _frame_geometry(self, frame):
+        """(polylines, ``_upload_segments``' draws, ``_polyline_textures`` or ()) of ``frame``: what ``render`` keeps
+        while the frame stays (no draws or textures for a frame without yarns)."""
+        lines = pipeline._polylines(self.scene, self.cpu.curves, frame, self.cpu.samples_per_segment)
+        if len(lines.entry) == 0:
+            return lines, [], ()
+        tangent = vertex_tangents(lines.points, lines.offsets)
+        polyline = _polyline_textures(self.ctx, lines, tangent) \
+            if self.features.parallax or self.features.fiber_bend else ()
+        return lines, self._upload_segments(lines, tangent), polyline
+
+    def _release_frame_side(self):
+        """Release the kept frame's vertex arrays, buffers and textures (``_frame_side``)."""
+        if self._frame_side[1] is not None:
+            _, draws, polyline = self._frame_side[1]
+            for obj in (*polyline, *[o for _, arrays, _ in draws for o in arrays]):
+                obj.release()
+        self._frame_side = (None, None)
 
     def _upload_segments(self, lines, tangent):
         """One vertex array of segments with their neighbours (GL_LINES_ADJACENCY: previous point, the segment's two,
