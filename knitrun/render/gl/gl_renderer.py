@@ -354,6 +354,9 @@ class GLRenderer:
         # the polyline textures)); 45 ms of CPU work a frame on bench_render's 60K-point patch, which an orbit no
         # longer pays (BENCHMARKS.md stop 74)
         self._frame_side = (None, None)
+        # the camera-sized targets of the passes (multisampled buffers, their resolves, the composite's images), kept
+        # while the size and the samples stay: (w, h, samples), {name: object} (``_target``)
+        self._targets = (None, {})
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"],
                                 layers=scene.render.layers, hair_layers=scene.render.hair_layers,
@@ -513,10 +516,15 @@ class GLRenderer:
         if samples != scene.render.msaa:
             facts["warnings"].append(f"msaa {scene.render.msaa} is more than this GL driver's {ctx.max_samples} "
                                      f"samples: drawn with {samples}")
-        colour = ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4")  # (α L, α), regular.frag
-        front = ctx.texture((w, h), 4, samples=samples, dtype="f4")  # (coverage, peel floor): the layer behind's mask
-        depth = ctx.depth_texture((w, h), samples=samples)  # a texture: the flyaway layers' masks read it
-        fbo = ctx.framebuffer(color_attachments=[colour, front], depth_attachment=depth)
+        def target(name, make):
+            return self._target((w, h, samples), name, make)
+
+        colour = target("colour", lambda: ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4"))  # (α L, α)
+        # (coverage, peel floor): the layer behind's mask
+        front = target("front", lambda: ctx.texture((w, h), 4, samples=samples, dtype="f4"))
+        # a texture: the flyaway layers' masks read it
+        depth = target("depth", lambda: ctx.depth_texture((w, h), samples=samples))
+        fbo = target("fbo", lambda: ctx.framebuffer(color_attachments=[colour, front], depth_attachment=depth))
         fbo.use()
         ctx.viewport = (0, 0, w, h)
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -557,11 +565,12 @@ class GLRenderer:
         for k, vao, count in draws:
             self._look_uniforms(self.regular, k)
             vao[0].render(ctx.LINES_ADJACENCY, vertices=count)
-        behind = []  # with render.layers = 2: the strips behind the front ones (SHADING.md §6), (α L, α)
+        behind = None  # with render.layers = 2: the strips behind the front ones (SHADING.md §6), (α L, α)
         if scene.render.layers == 2:
-            behind = [ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4"),
-                      ctx.depth_renderbuffer((w, h), samples=samples)]
-            behind_fbo = ctx.framebuffer(color_attachments=[behind[0]], depth_attachment=behind[1])
+            behind = target("behind", lambda: ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4"))
+            behind_depth = target("behind_depth", lambda: ctx.depth_renderbuffer((w, h), samples=samples))
+            behind_fbo = target("behind_fbo", lambda: ctx.framebuffer(color_attachments=[behind],
+                                                                      depth_attachment=behind_depth))
             behind_fbo.use()
             behind_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             front.use(location=PEEL_UNITS[0])
@@ -569,8 +578,7 @@ class GLRenderer:
             for k, vao, count in draws:
                 self._look_uniforms(self.regular, k)
                 vao[0].render(ctx.LINES_ADJACENCY, vertices=count)
-            behind_fbo.release()
-        layers, hair_depths = [], []  # per flyaway layer, nearest first: its two targets; its depth and peel target
+        layers = []  # per flyaway layer, nearest first: its two targets
         if fly_entries:  # the flyaway layers over the regular one, peeled (the module docstring)
             _set(self.flyaway, "depth_tolerance", float(radius.max()))
             _set(self.flyaway, "regular_depth", PEEL_UNITS[0])
@@ -582,32 +590,35 @@ class GLRenderer:
             for tex in bounce[1:]:  # the neighbours' light on the hairs (Features.hair_bounce)
                 tex.use(location=ATLAS_UNITS[6])
                 _set(self.flyaway, "bounce_tex", ATLAS_UNITS[6])
+            # the previous layer's (depth, curve); the first reads none, but its unit must not hold the target it
+            # draws into (a feedback loop): the front strips' texture stands in
+            previous = front
             for layer in range(scene.render.hair_layers):
-                targets = [ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4") for _ in range(2)]
-                peeled = ctx.texture((w, h), 2, samples=samples, dtype="f4")  # out_peel: (depth, curve)
-                hair_depths += [ctx.depth_renderbuffer((w, h), samples=samples), peeled]
-                fly_fbo = ctx.framebuffer(color_attachments=[*targets, peeled], depth_attachment=hair_depths[-2])
+                targets = [target(f"fly{layer}_{i}", lambda: ctx.renderbuffer((w, h), 4, samples=samples, dtype="f4"))
+                           for i in range(2)]
+                # out_peel: (depth, curve)
+                peeled = target(f"fly{layer}_peel", lambda: ctx.texture((w, h), 2, samples=samples, dtype="f4"))
+                fly_depth = target(f"fly{layer}_depth", lambda: ctx.depth_renderbuffer((w, h), samples=samples))
+                fly_fbo = target(f"fly{layer}_fbo", lambda: ctx.framebuffer(color_attachments=[*targets, peeled],
+                                                                            depth_attachment=fly_depth))
                 fly_fbo.use()
                 fly_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
                 _clear(ctx, peeled, (2.0, -1.0, 0.0, 0.0))  # no strip: nothing lies beyond it
                 fly_fbo.use()
                 depth.use(location=PEEL_UNITS[0])
-                # the previous layer's (depth, curve); the first reads none, but its unit must not hold the target it
-                # draws into (a feedback loop): the front strips' texture stands in
-                (front if layer == 0 else hair_depths[-3]).use(location=PEEL_UNITS[1])
+                previous.use(location=PEEL_UNITS[1])
                 _set(self.flyaway, "peel", int(layer > 0))
                 for k, vao, count in fly_entries:
                     self._look_uniforms(self.flyaway, k)
                     _set(self.flyaway, "strip_half_width", self.looks[k][0]["flyaway_half_width"])
                     vao[3].render(ctx.LINES_ADJACENCY, vertices=count)
-                fly_fbo.release()
                 layers.append(targets)
+                previous = peeled
             variants.release()
         lap("shade")
 
-        image = self._composite(colour, front, behind[0] if behind else None, layers, background, w, h, into, exposure)
-        for obj in (fbo, colour, front, depth, *behind, light_atlas, *behind_atlas, lobe_atlas,
-                    *[t for ts in layers for t in ts], *hair_depths, *bounce, *canopy_tex):
+        image = self._composite(colour, front, behind, layers, background, target, into, exposure)
+        for obj in (light_atlas, *behind_atlas, lobe_atlas, *bounce, *canopy_tex):
             obj.release()
         if image is not None and not np.all(np.isfinite(image)):
             raise RuntimeError(NON_FINITE)
@@ -742,22 +753,23 @@ class GLRenderer:
                          np.uint8)
         return self.ctx.texture((width, len(lines.entry)), 1, table.tobytes(), dtype="u1")
 
-    def _composite(self, colour, front, behind, layers, background, w, h, into=None, exposure=0.0):
+    def _composite(self, colour, front, behind, layers, background, target, into=None, exposure=0.0):
         """The frame (h, w, 3) float32, row 0 at the top, by SHADING.md §6 from the multisampled targets: ``colour``
         (Σ w α L, s1 = Σ w α of the front strips), ``front`` (their coverage c1 in .r), ``behind`` (the strips behind
         them, (Σ_back w α L, Σ_back w α); None with one layer) and ``layers`` (per flyaway layer, nearest first, its
         (Σ w A L, Σ w A (1 − τ)) targets). Each target is resolved on the GPU and ``composite.frag`` composes them,
         the farthest flyaway layer first; one image is read back, or with ``into`` none: the frame is drawn there
-        tone-mapped (``_display``) and None returned."""
+        tone-mapped (``_display``) and None returned. ``target(name, make)``: the frame's kept targets
+        (``_target``)."""
         ctx, program = self.ctx, self.composite
-        resolved = []
+        (w, h), resolved = colour.size, []
 
-        def resolve(target):
-            tex = ctx.texture((w, h), 4, dtype="f4")
-            source, destination = ctx.framebuffer(color_attachments=[target]), ctx.framebuffer(color_attachments=[tex])
-            ctx.copy_framebuffer(destination, source)
-            source.release()
-            destination.release()
+        def resolve(source):
+            tex = target(f"resolved{len(resolved)}", lambda: ctx.texture((w, h), 4, dtype="f4"))
+            read, write = ctx.framebuffer(color_attachments=[source]), ctx.framebuffer(color_attachments=[tex])
+            ctx.copy_framebuffer(write, read)
+            read.release()
+            write.release()
             resolved.append(tex)
             return tex
 
@@ -766,8 +778,9 @@ class GLRenderer:
         for unit, (name, tex) in enumerate(zip(("regular", "front", "behind"), flat)):
             tex.use(location=unit)
             _set(program, name, unit)
-        images = [ctx.texture((w, h), 4, dtype="f4") for _ in range(2 if layers else 1)]
-        fbos = [ctx.framebuffer(color_attachments=[image]) for image in images]
+        images = [target(f"image{i}", lambda: ctx.texture((w, h), 4, dtype="f4")) for i in range(2 if layers else 1)]
+        fbos = [target(f"image{i}_fbo", lambda: ctx.framebuffer(color_attachments=[image]))
+                for i, image in enumerate(images)]
         vao = ctx.vertex_array(program, [])
         ctx.disable(ctx.DEPTH_TEST)
         _set(program, "background", background)
@@ -793,9 +806,24 @@ class GLRenderer:
             self._display(images[current], into, exposure)
             image = None
         ctx.enable(ctx.DEPTH_TEST)
-        for obj in (vao, *fbos, *images, *resolved):
-            obj.release()
+        vao.release()
         return image
+
+    def _target(self, size, name, make):
+        """The frame target ``name`` for ``size`` = (w, h, samples), made by ``make()`` the first time and kept for the
+        next frames of that size (every pass clears or overwrites what it draws into): making the multisampled
+        buffers, their resolves and the composite's images anew took 0.29 s of a 1280 × 960 frame on llvmpipe
+        (BENCHMARKS.md stop 74), and a GPU driver would allocate and free some hundred MB a frame. Another size
+        releases them all."""
+        kept_size, kept = self._targets
+        if kept_size != size:
+            for obj in kept.values():
+                obj.release()
+            kept = {}
+            self._targets = (size, kept)
+        if name not in kept:
+            kept[name] = make()
+        return kept[name]
 
     def _display(self, image, into, exposure):
         """Draw the linear frame ``image`` (a float texture, GL's rows upward) into the framebuffer ``into`` as
