@@ -626,6 +626,27 @@ def test_the_frames_polylines_and_vertex_arrays_are_kept_while_the_frame_stays(t
     assert not np.array_equal(moved.image, kept.image)
 
 
+def test_the_kept_targets_carry_nothing_from_one_frame_to_the_next(tmp_path, pack):
+    """The passes' targets are kept on the context between frames of one size (``GLRenderer._target``), shared by its
+    renderers: a scene drawn on the targets another scene (more yarns, more layers, the sky) drew into first is the
+    image it draws on targets made afresh (``release_targets``), bit for bit. Dense hairs (``_dense_hairs``), so that
+    every hair layer draws: with the hair layers' colour targets left uncleared between frames (their depth cleared)
+    it fails (measured once)."""
+    dense = _dense_hairs(pack, tmp_path)
+    busy = write_scene(tmp_path, [straight(), straight(z=-0.1) + [0, 0.03, 0], straight(z=0.05) @ ALONG_Y.T],
+                       camera=ORTHO, lights=SUN + "\n" + SKY, render="hair_layers = 4", name="busy")
+    plain = write_scene(tmp_path, [straight() + [0, -0.08, 0]], camera=ORTHO, lights=SUN, render="layers = 1",
+                        name="plain")
+    busy_renderer = gl_renderer.GLRenderer(load_scene(busy), {"cotton1": str(dense)})
+    renderer = gl_renderer.GLRenderer(load_scene(plain), {"cotton1": str(dense)})
+    gl_renderer.release_targets(renderer.ctx)
+    fresh = renderer.render().image
+    assert np.abs(fresh - fresh[0, 0]).max() > 0.1  # the yarn shows
+    busy_renderer.render()
+    assert np.array_equal(renderer.render().image, fresh)
+    assert len(renderer.ctx._knit_targets[1]) > 10  # the busy scene's targets were there to reuse
+
+
 def test_what_the_backend_cannot_draw_is_refused_in_one_line(tmp_path, pack):
     many = "\n".join(SUN for _ in range(gl_renderer.MAX_LIGHTS + 1))
     with pytest.raises(FormatError, match="directional lights") as e:

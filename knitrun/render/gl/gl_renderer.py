@@ -216,6 +216,14 @@ def _programs(ctx):
     return cache
 
 
+def release_targets(ctx):
+    """Release the frame targets the renderers of ``ctx`` keep (``GLRenderer._target``: ~1 GB of GPU memory at
+    1280 × 960 with the default layers); the next frame makes them again."""
+    for obj in getattr(ctx, "_knit_targets", (None, {}))[1].values():
+        obj.release()
+    ctx._knit_targets = (None, {})
+
+
 def _set(program, name, value):
     """Set a uniform if the compiler kept it (an unused uniform has no location); sequences fill a vector or an
     array of scalars."""
@@ -354,9 +362,6 @@ class GLRenderer:
         # the polyline textures)); 45 ms of CPU work a frame on bench_render's 60K-point patch, which an orbit no
         # longer pays (BENCHMARKS.md stop 74)
         self._frame_side = (None, None)
-        # the camera-sized targets of the passes (multisampled buffers, their resolves, the composite's images), kept
-        # while the size and the samples stay: (w, h, samples), {name: object} (``_target``)
-        self._targets = (None, {})
         self.setup_timings = dict(self.cpu.setup_timings, gl_setup=time.perf_counter() - start)
         self.setup_facts = dict(self.cpu.setup_facts, gl_renderer=self.ctx.info["GL_RENDERER"],
                                 layers=scene.render.layers, hair_layers=scene.render.hair_layers,
@@ -813,14 +818,15 @@ class GLRenderer:
         """The frame target ``name`` for ``size`` = (w, h, samples), made by ``make()`` the first time and kept for the
         next frames of that size (every pass clears or overwrites what it draws into): making the multisampled
         buffers, their resolves and the composite's images anew took 0.29 s of a 1280 × 960 frame on llvmpipe
-        (BENCHMARKS.md stop 74), and a GPU driver would allocate and free some hundred MB a frame. Another size
-        releases them all."""
-        kept_size, kept = self._targets
+        (BENCHMARKS.md stop 74), and a GPU driver would allocate and free some hundred MB a frame. They are kept on
+        the context, as the programs are (``_programs``): the renderers of one context draw one at a time (the
+        viewer's, one per ablation), and each would otherwise hold its own ~1 GB at 1280 × 960. Another size releases
+        them all."""
+        kept_size, kept = getattr(self.ctx, "_knit_targets", (None, {}))
         if kept_size != size:
-            for obj in kept.values():
-                obj.release()
+            release_targets(self.ctx)
             kept = {}
-            self._targets = (size, kept)
+            self.ctx._knit_targets = (size, kept)
         if name not in kept:
             kept[name] = make()
         return kept[name]
