@@ -21,8 +21,8 @@ from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
 from knitbake.stages import im_table as im
 from knitrun.render.ablations import ABLATIONS, Features
-from knitrun.render.pipeline import (PARALLAX_MAX_SIN, Renderer, parallax_shift, radius_mismatch, render,
-                                     strip_receivers)
+from knitrun.render.pipeline import (PARALLAX_MAX_SIN, SHADOW_BIAS_RADII, Renderer, parallax_shift,
+                                     radius_mismatch, render, strip_receivers)
 from knitrun.render.strip_shading import (HAIR_DEPTHS, _corrections, _hair_light, behind_share, body_glow,
                                           cylinder_solid_angle, resolve, resolve_behind, shade_regular, variant_of)
 from knitrun.render.shading_inputs import Corrections, Lights, Lobes, Look, Points, no_lights, no_lobes, no_rows
@@ -401,7 +401,7 @@ def test_the_axial_parallax_leaves_a_yarn_across_the_view_and_moves_a_tilted_ben
 
 def test_receivers_carry_their_offset_from_the_yarn_axis():
     """``strip_receivers``: a strip point lies v r along b = normalize(ω_o × t) from the axis, the tube surface
-    r √(1 − v²) further toward the camera; both biased by 1.5 r; a point looking along its yarn (ω_o × t = 0) has
+    r √(1 − v²) further toward the camera; both biased by ``SHADOW_BIAS_RADII`` r; a point looking along its yarn (ω_o × t = 0) has
     no lateral part."""
     points = {"weight": np.ones(3), "position": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
               "view_dir": np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [1.0, 0.0, 0.0]]),
@@ -415,7 +415,8 @@ def test_receivers_carry_their_offset_from_the_yarn_axis():
     np.testing.assert_allclose(surface.offset, lateral + height, atol=1e-9)
     np.testing.assert_allclose(strip.position, points["position"], atol=0)
     np.testing.assert_allclose(surface.position, points["position"] + height, atol=1e-9)
-    np.testing.assert_allclose(surface.bias, [0.045, 0.075, 0.045])
+    np.testing.assert_allclose(surface.bias, SHADOW_BIAS_RADII * np.array([0.03, 0.05, 0.03]))
+    np.testing.assert_allclose(strip.bias, surface.bias)
 
 
 def test_surface_shadows_light_the_front_of_a_yarn_whose_axis_plane_a_touching_neighbour_shadows(tmp_path, pack):
@@ -456,8 +457,7 @@ def test_a_lone_yarn_lit_along_its_length_is_not_shadowed_by_its_own_strip(tmp_p
 
 def test_a_lone_yarns_hairs_are_not_shadowed_by_its_own_strip(tmp_path, pack, monkeypatch):
     """A lone yarn lit from behind and from one side: its hairs on the far side lie behind its own strip in the
-    light's map, up to their strip's half-width (2.24 radii in the test pack) from the axis, beyond the 1.5 radii of
-    the bias. The kernels shadow a hair by its own yarn themselves (``strip_shading._hair_light``), so the map must
+    light's map, up to their strip's half-width (2.24 radii in the test pack) from the axis, beyond the bias. The kernels shadow a hair by its own yarn themselves (``strip_shading._hair_light``), so the map must
     not: the image is the one with every yarn-level lookup lit (measured before stop 62, when a hair's lookup had no
     margin from its own strip: one pixel 0.52 % of the peak darker, the mean 0.003 %)."""
     side = SUN.replace("direction = [0.3, 0.6, 1.0]", "direction = [0.2, 0.8, -0.5]")

@@ -124,6 +124,31 @@ def test_no_self_shadowing_on_the_tube_surface_as_the_light_turns_along_the_yarn
     assert np.all(alone == 1.0) if degrees < 45.0 else np.any(alone < 0.5)
 
 
+@pytest.mark.parametrize("degrees", [20.0, 35.0, 50.0])
+def test_a_touching_neighbour_shadows_where_the_ray_toward_the_light_crosses_its_tube(degrees):
+    """Two touching straight yarns (axes 2 r apart), the light turned by θ from the line between the axes: receivers
+    on the lit half of A's tube surface, biased as the renderer biases them (``pipeline.SHADOW_BIAS_RADII`` r plus
+    ``own_strip_depth``), are shadowed by the map where the ray toward the light meets B's tube, within 10 % of them
+    (exact ray–cylinder test). A bias of 1.5 r, knit's until stop 75, misclassified 34–47 % of them here: the
+    contact shadows where a leg passes under the next row (BENCHMARKS.md, stop 75)."""
+    from knitrun.render.pipeline import SHADOW_BIAS_RADII
+
+    theta = np.radians(degrees)
+    d = np.array([0.0, np.cos(theta), np.sin(theta)])
+    sm = shadow_map([0.0, 2 * R], size=512, direction=d)
+    phi = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+    offset = R * np.stack([np.zeros(64), np.cos(phi), np.sin(phi)], axis=1)
+    offset = offset[offset @ d > 0.0]  # the lit half: the far half is Ψ^Fiber's
+    receivers = np.array([0.3, 0.0, 0.0]) + offset
+    bias = SHADOW_BIAS_RADII * R + own_strip_depth(offset, np.tile([1.0, 0.0, 0.0], (len(offset), 1)), d)
+    shadowed = shadow_visibility(sm, receivers, bias, 0.0) < 0.5
+    to_axis = receivers[:, 1:] - [2 * R, 0.0]  # in the (y, z) plane, from B's axis
+    along = -(to_axis @ d[1:])
+    meets_b = (along > 0.0) & (np.linalg.norm(to_axis + along[:, None] * d[1:], axis=1) < R)
+    assert meets_b.mean() > 0.3  # the scene has contact shadows to find
+    assert np.mean(shadowed != meets_b) <= 0.1
+
+
 def test_penumbra_widens_with_distance_from_the_blocker():
     sm = shadow_map([1.0, -1.5], size=512)  # the second yarn only extends the box below the receivers
     zs = np.linspace(0.0, 0.4, 401)

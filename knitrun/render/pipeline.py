@@ -31,10 +31,11 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    nothing to the image, so the passes below skip it.
 4. ``shadow``: per directional light a yarn-level shadow map of ``render.shadow_map_size``² texels, filtered by PCF
    (a delta light); per SRBF lobe a map of a quarter of that size toward ω_j, filtered by PCSS with the lobe's
-   angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by 1.5 yarn
-   radii (the strip runs through the yarn axis; a yarn never shadows itself at yarn level, that is Ψ^Fiber's job),
-   every point's beyond its own yarn's strip toward each light (``Receivers``, ``receiver_bias``): a flyaway point's
-   too, since the kernels cross its own yarn's tube toward the light themselves (``strip_shading._hair_light``).
+   angular radius 1/√λ_j (capped at 0.5 rad) for T̃_j (``knitrun.render.shadow_map``). Receivers are biased by
+   ``SHADOW_BIAS_RADII`` = ½ yarn radius (the strip runs through the yarn axis; a yarn never shadows itself at yarn
+   level, that is Ψ^Fiber's job), every point's beyond its own yarn's strip toward each light (``Receivers``,
+   ``receiver_bias``): a flyaway point's too, since the kernels cross its own yarn's tube toward the light
+   themselves (``strip_shading._hair_light``).
    A flyaway point with a regular point of its curve in its pixel within ``SHARE_REACH`` = 0.1 pixel (``strip_shading.
    same_surface``: the same MSAA sample of the same strip plane) takes that point's visibilities instead of its own
    lookups (``facts["flyaway_points_shared"]``): 47 % of the covered flyaway points of ``bench_render``'s patch. The
@@ -124,7 +125,11 @@ from knitrun.shading.im_lookup import im_slices, no_im_table
 from knitrun.shading.srbf_cache import cached_fit
 from knitrun.sim.simulate import RADIUS_TOLERANCE
 
-SHADOW_BIAS_RADII = 1.5
+# yarn radii beyond a receiver's own strip (its margin for the map's texels and filter): a neighbour in contact (axes
+# 2 r apart) shadows a point of the tube's lit side once the ray toward the light crosses the neighbour's axis plane
+# more than this far on; 1.5 hid most contact shadows. The patches' error is flat from 1.0 down to 0.25 at every map
+# size, a lone yarn shadows itself at 0 (BENCHMARKS.md, "contact shadows", stop 75).
+SHADOW_BIAS_RADII = 0.5
 LOBE_SHADOW_DIVISOR = 4
 SHARE_REACH = 0.1  # pixels: a flyaway point this close to a regular point of its curve shares its shadow lookups
 RECEIVER_KEYS = ("position", "view_dir", "tangent", "v", "yarn")  # what ``strip_receivers`` reads of a point

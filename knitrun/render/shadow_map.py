@@ -14,11 +14,12 @@ Units and conventions:
   (h = ortho_height, τ = h / size the texel size); row 0 is the top (+up). Its centre, where the depth was taken, is
   x = −h/2 + (j + ½)τ, y = h/2 − (i + ½)τ. Continuous texel coordinates of view point (x, y): u = x/τ + size/2
   (columns), w = size/2 − y/τ (rows); texel centres at integer + ½.
-* A receiver at view depth z is occluded by a texel of depth d when d < z − bias. With bias 1.5·radius a receiver on
-  a yarn's axis is never shadowed by its own yarn: yarn-level shadows are between yarns, self-shadowing is
-  fiber-level (``ASSET_PACK.md`` §7). A receiver off the axis (on the tube's surface) lies ``own_strip_depth``
-  behind its own yarn's strip, which faces the light and so tilts as the light turns toward the yarn's axis: its
-  bias grows by that much (``knitrun.render.pipeline``), so its margin from its own strip stays 1.5·radius.
+* A receiver at view depth z is occluded by a texel of depth d when d < z − bias. The renderer's bias
+  (``knitrun.render.pipeline.SHADOW_BIAS_RADII``, ½ radius) keeps a receiver on a yarn's axis from its own yarn's
+  strip: yarn-level shadows are between yarns, self-shadowing is fiber-level (``ASSET_PACK.md`` §7). A receiver off
+  the axis (on the tube's surface) lies ``own_strip_depth`` behind its own yarn's strip, which faces the light and
+  so tilts as the light turns toward the yarn's axis: its bias grows by that much, so its margin from its own strip
+  stays the same.
 * ``behind`` (with ``layers`` = 2): the depth of the second yarn along each texel's ray, the nearest strip more
   than the first one's radius behind it (``strip_raster.rasterize_depth`` with ``behind_gap``: depth peeling by
   ``rasterize_behind``'s rule), +inf where there is none; the same PCSS on it (``behind_map``) gives the fraction
