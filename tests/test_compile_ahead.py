@@ -16,11 +16,11 @@ from knitrun.render import compile_ahead, pipeline
 from knitrun.render.ablations import ABLATIONS
 from knitrun.render.interreflection import _interreflect
 from knitrun.render.strip_raster import _peel_floor, _raster, _raster_depth
-from knitrun.render.strip_shading import (_resolve, flyaway_coverage, past_blockers, resolve_behind, same_surface,
-                                          shade_flyaway, shade_regular)
+from knitrun.render.strip_shading import (_resolve, flyaway_coverage, past_blockers, resolve_behind, shade_flyaway,
+                                          shade_regular)
 from tests.helpers import FRONT, SKY, SUN, straight, write_scene
 
-KERNELS = (shade_regular, shade_flyaway, _resolve, resolve_behind, flyaway_coverage, same_surface)
+KERNELS = (shade_regular, shade_flyaway, _resolve, resolve_behind, flyaway_coverage)
 
 
 def _scene(folder, lights, layers=2):

@@ -1065,49 +1065,6 @@ def test_a_hair_takes_each_kind_of_light_alone_as_beside_the_other(tmp_path, pac
         assert np.array_equal(part[1], alpha) and np.array_equal(part[2], transmit)
 
 
-def test_same_surface_pairs_a_point_with_its_pixels_point_of_the_same_curve_nearby():
-    """Pixel 0: curves 3 and 5 (regular) against 5 (beside 5's point), 3 (too far) and 7 (none); pixel 1: nothing
-    regular; pixel 2: curve 3 twice (the nearer of two positions within reach: the first)."""
-    start = np.array([0, 2, 2, 4])
-    curve = np.array([3, 5, 3, 3])
-    position = np.array([[0.0, 0, 0], [0, 0, 1], [0, 0, 2], [0, 0, 2.05]])
-    other_start = np.array([0, 3, 4, 5])
-    other_curve = np.array([5, 3, 7, 3, 3])
-    other_position = np.array([[0, 0.05, 1], [0, 0, 0.5], [0, 0, 0], [0, 0, 0], [0, 0, 2.02]])
-    from knitrun.render.strip_shading import same_surface
-
-    out = np.empty(5, np.int64)
-    same_surface(start, curve, position, other_start, other_curve, other_position, np.full(5, 0.1), out)
-    assert out.tolist() == [1, -1, -1, -1, 2]
-
-
-def test_flyaway_points_that_share_the_regular_points_shadow_lookups_move_the_image_little(tmp_path, pack,
-                                                                                            monkeypatch):
-    """Two crossing yarns under the sky (soft shadows of every lobe): the image with each flyaway point's own shadow
-    lookups and with those shared from the regular point at the same sample (``same_surface``) differ by less than
-    1e-6 of the peak anywhere (measured: not at all). Both on the strip plane (``axis_shadows``), a hair and the
-    regular point it shares with are the same receiver with the same margin from their own yarn's strip
-    (``strip_receivers``); until stop 62 the hair's own lookup had no such margin and the two differed by up to 0.25 %
-    of the peak (in blue). Pairing each with the first regular point of its pixel, whatever its curve and position,
-    moved a pixel by 0.53 % of the peak (stop 36). The default looks a regular point up on its tube's surface, and a
-    hair over its yarn's body then takes that lookup, nearer to where the hair lies than its own strip plane (2.7 % of
-    the peak at one pixel here, measured)."""
-    from knitrun.render import pipeline
-
-    path = write_scene(tmp_path, [straight(), straight(z=0.1)[:, [1, 0, 2]]], camera=FRONT, lights=SKY)
-    axis = Features(surface_shadows=False)
-    shared = _render(path, pack, features=axis)
-    assert 0 < shared.facts["flyaway_points_shared"] < shared.facts["flyaway_points_covered"]
-
-    def own(start, curve, position, other_start, other_curve, other_position, reach, out):
-        out[:] = -1
-
-    monkeypatch.setattr(pipeline, "same_surface", own)
-    alone = _render(path, pack, features=axis).image
-    worst = np.abs(shared.image - alone).max() / alone.max()
-    assert worst < 1e-6
-
-
 def test_a_yarn_without_flyaways_renders_without_a_flyaway_layer(tmp_path):
     spec = load_preset("cotton1")
     spec = dataclasses.replace(spec, geometry=dataclasses.replace(spec.geometry, fibers_per_ply=15),

@@ -5,9 +5,9 @@ On an empty kernel cache the strip renderer's first frame spends nearly all its 
 core, one kernel after another (``benchmarks/profile_compile.py``: 37 s for the example patch, ~15 s of it the
 ``raster`` pass's kernels and ~14 s the ``shade`` pass's). Which kernels a frame calls, and their argument types,
 depend on the scene (its layers and flyaways), not on the frame, so a second process can compile the
-``shade`` and ``resolve`` kernels, the flyaway coverage and ``same_surface`` (``pipeline.Renderer.compile_shading``:
-the passes run on a frame with no shading point) into the shared on-disk cache while this one loads the packs, fits
-the environment and rasterizes. Numba looks in its cache before it compiles, so when this process reaches those
+``shade`` and ``resolve`` kernels and the flyaway coverage (``pipeline.Renderer.compile_shading``: the passes run on
+a frame with no shading point) into the shared on-disk cache while this one loads the packs, fits the environment
+and rasterizes. Numba looks in its cache before it compiles, so when this process reaches those
 kernels it loads them; ``Renderer.render`` waits for the helper before the ``shade`` pass rather than compile the
 same kernels twice. The result is the same machine code either way: the images do not change.
 

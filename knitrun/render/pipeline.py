@@ -36,19 +36,16 @@ seconds; a ``Renderer``'s frames time the per-frame part, its ``setup_timings`` 
    level, that is Ψ^Fiber's job), every point's beyond its own yarn's strip toward each light (``Receivers``,
    ``receiver_bias``): a flyaway point's too, since the kernels cross its own yarn's tube toward the light
    themselves (``strip_shading._hair_light``).
-   A flyaway point with a regular point of its curve in its pixel within ``SHARE_REACH`` = 0.1 pixel (``strip_shading.
-   same_surface``: the same MSAA sample of the same strip plane) takes that point's visibilities instead of its own
-   lookups (``facts["flyaway_points_shared"]``): 47 % of the covered flyaway points of ``bench_render``'s patch. The
-   image moves by at most 0.4 % of its peak on the example scenes (BENCHMARKS.md, "Issue 15: the flyaway layer's
-   shadow lookups"); with a reach of a yarn radius 64 % would share, but a hair on a hard shadow's edge then took
-   the light of a sample up to a pixel away (15 % of the peak at one pixel of the grazing-light patch).
    A regular point looks its lights up on the tube surface the camera sees there (``Features.surface_shadows``, the
    default; ``strip_receivers``: the strip point r √(1 − v²) toward the camera) rather than on the strip plane through
    the axis, which lies up to a radius deeper: under a light from the fabric's side a receiver that deep falls into
    its neighbours' shadows (on the grazing patch the axis plane shadows one leg of every stitch that the reference
-   lights; the ablation ``axis_shadows`` looks up there). A flyaway point that shares a regular point's lookups
-   (above) then takes that surface lookup, nearer to where a hair over its yarn's body lies than its own strip plane
-   (with ``axis_shadows`` the two are the same receiver).
+   lights; the ablation ``axis_shadows`` looks up there). A flyaway point looks its lights up at its own strip point:
+   the hairs seen over a body lie in front of it and behind (``Features.hairs_behind``). Stops 36–74 a flyaway point
+   at the MSAA sample of a regular point of its curve took that point's surface lookups instead, which saved half
+   the hairs' lookups under the sky; with the bias of ½ radius that is no longer the same light, and the hairs' own
+   lookups are nearer the reference (on the grazing patch 0.977 of its mean and 1.15× the floor against 0.987 and
+   1.17×; BENCHMARKS.md, stop 75), as the GL backend's always were.
    With ``Features.interreflection`` each T̃_j becomes T̃_j / (1 − ρ (1 − T̃_j)), ρ the receiver's yarn hull albedo
    (``knitrun.render.interreflection``): the light the neighbours block and send on; and a directional light's V
    lets through the gap transmittance τ_Y of the blocker (``strip_shading.past_blockers``, in the kernels). With
@@ -115,7 +112,7 @@ from knitrun.render.shadow_map import behind_map, build_shadow_map, own_strip_de
 from knitrun.render.strip_raster import (rasterize_before, rasterize_behind, rasterize_visibility, vertex_tangent,
                                          vertex_tangents)
 from knitrun.render.strip_shading import (flyaway_coverage, hair_bounce, no_shading_points, past_blockers, resolve,
-                                          resolve_behind, same_surface, shade_flyaway, shade_regular, shading_points)
+                                          resolve_behind, shade_flyaway, shade_regular, shading_points)
 from knitrun.render.texture_sampling import no_texture
 from knitrun.render.yarn_bounce import (BounceLights, BounceYarns, bounce_at_points, lambert_phase, tube_optics,
                                         vertex_bounce)
@@ -131,7 +128,6 @@ from knitrun.sim.simulate import RADIUS_TOLERANCE
 # size, a lone yarn shadows itself at 0 (BENCHMARKS.md, "contact shadows", stop 75).
 SHADOW_BIAS_RADII = 0.5
 LOBE_SHADOW_DIVISOR = 4
-SHARE_REACH = 0.1  # pixels: a flyaway point this close to a regular point of its curve shares its shadow lookups
 RECEIVER_KEYS = ("position", "view_dir", "tangent", "v", "yarn")  # what ``strip_receivers`` reads of a point
 BOUNCE_SPACING_RADII = 1.5  # yarn radii between the polyline points the yarn-level bounce is computed at
 MAX_LOBE_ANGULAR_RADIUS = 0.5  # rad
@@ -679,21 +675,9 @@ class Renderer:
 
         # the receivers of each set of points: all regular points; the flyaway points the hairs cover (a point of zero
         # coverage adds nothing to the image, so it gets no shadow lookups and no shading; its visibility reads 1)
-        # that are not at the sample of a regular point of their curve (``SHARE_REACH``: such a point shares its
-        # lookups, module docstring)
         layers = [points] + ([behind_points] if behind_points is not None else [])  # regular fibers, front to back
         sets = layers + ([fly_points] if fly_points is not None else [])
-        where = [slice(None)] * len(layers)
-        facts["flyaway_points_shared"] = 0
-        if fly_points is not None:
-            partner = np.empty(len(fly_points["weight"]), np.int64)
-            for start in fly_points["layer_start"]:
-                same_surface(points["start"], points["curve"], points["position"], start,
-                             fly_points["curve"], fly_points["position"], SHARE_REACH * fly_points["footprint"],
-                             partner)
-            shared = np.flatnonzero(covered & (partner >= 0))
-            where.append(np.flatnonzero(covered & (partner < 0)))
-            facts["flyaway_points_shared"] = int(len(shared))
+        where = [slice(None)] * len(layers) + ([np.flatnonzero(covered)] if fly_points is not None else [])
         receivers = [strip_receivers(s, looks, features.surface_shadows) for s in layers] + \
             [strip_receivers({key: s[key][at] for key in RECEIVER_KEYS}, looks, False, flyaway=True)
              for s, at in zip(sets[len(layers):], where[len(layers):])]
@@ -742,9 +726,6 @@ class Renderer:
             for out, at, vis in zip(lobe_vis, where, _visibility(lines, radius, d, max(64, size // LOBE_SHADOW_DIVISOR),
                                                                  angular, receivers, self.shadow_depth)):
                 out[j, at] = vis
-        if fly_points is not None:
-            for vis in (light_vis, light_beyond, lobe_vis) if features.two_blockers else (light_vis, lobe_vis):
-                vis[-1][:, shared] = vis[0][:, partner[shared]]
         # the lobes' inter-reflection is light another yarn scattered first: multiple scattering
         albedo = np.array([look.yarn_albedo or 0.0 for look in looks]) \
             if features.interreflection and features.multiple_scattering else np.zeros(len(looks))
@@ -824,10 +805,10 @@ class Renderer:
         return image.reshape(h, w, 3).astype(np.float32)
 
     def compile_shading(self):
-        """Compile the kernels of the ``shade`` and ``resolve`` passes, the flyaway coverage and the shadow pass's
-        ``same_surface`` for this scene (its layers and flyaways decide which kernels a frame calls, its size does
-        not) by running them on a frame with no shading point: what ``compile_ahead``'s helper does while
-        the first frame compiles the rasterizer. Draws nothing, costs only the compilation (or the cache's load)."""
+        """Compile the kernels of the ``shade`` and ``resolve`` passes and the flyaway coverage for this scene (its
+        layers and flyaways decide which kernels a frame calls, its size does not) by running them on a frame with no
+        shading point: what ``compile_ahead``'s helper does while the first frame compiles the rasterizer. Draws
+        nothing, costs only the compilation (or the cache's load)."""
         camera = scene_camera(self.scene)
         lines = _no_polylines()
         pixels = camera.height * camera.width

@@ -8,8 +8,7 @@ that covers them, and each group is one shading point with the attributes of its
 (samples in the group)/k. ``shading_points`` builds them from the rasterizer's visibility buffer
 (``strip_raster.StripVisibility``) and interpolates the G-buffer attributes at them alone, in pixel order (pixel p
 owns the points start[p]:start[p+1], so the resolve runs in parallel over pixels without races); an optional
-per-sample mask drops samples (the flyaway layer's depth test against the regular layer). ``same_surface`` pairs
-a flyaway point with the regular point of its pixel and curve, whose yarn-level shadow lookups it can share.
+per-sample mask drops samples (the flyaway layer's depth test against the regular layer).
 
 Regular fibers (``shade_regular``), per point, angles by ``ASSET_PACK.md`` §3
 ----------------------------------------------------------------------------
@@ -270,24 +269,6 @@ def no_shading_points(pixels: int):
             "view_dir": np.empty((0, 3)), "footprint": np.empty(0), "yarn": np.empty(0, np.int32),
             "segment": np.empty(0, np.int32), "arclength": np.empty(0, np.float32), "v": np.empty(0, np.float32),
             "tangent": np.empty((0, 3)), "curve": np.empty(0, np.int32)}
-
-
-@njit(parallel=True, cache=True)
-def same_surface(start, curve, position, other_start, other_curve, other_position, reach, out):
-    """out[q] for each point q of another set of shading points (``other_*``, e.g. the flyaway layer's): the point
-    of this set in the same pixel with the same curve and a position within reach[q] (scene units) of q's, or −1
-    where there is none. Both sets are in pixel order (``shading_points``); a pixel has a handful of points."""
-    for p in prange(start.shape[0] - 1):
-        for q in range(other_start[p], other_start[p + 1]):
-            out[q] = -1
-            for r in range(start[p], start[p + 1]):
-                if curve[r] != other_curve[q]:
-                    continue
-                d2 = ((position[r, 0] - other_position[q, 0]) ** 2 + (position[r, 1] - other_position[q, 1]) ** 2
-                      + (position[r, 2] - other_position[q, 2]) ** 2)
-                if d2 <= reach[q] * reach[q]:
-                    out[q] = r
-                    break
 
 
 # --- the strip frame (ASSET_PACK.md §3) ---------------------------------------------------------------------------

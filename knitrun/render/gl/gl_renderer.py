@@ -37,9 +37,7 @@ Differences from the CPU renderer, by design: single precision; the driver's sam
 CPU's are the Direct3D patterns: the same x and y values at 4×, in other pairs), so edges that are not along the
 image axes cover other samples; a primitive shades one fragment per pixel (a pixel two segments of one curve share
 is shaded twice, each weighted by its own coverage); the shadow maps are rasterised by the driver; the nearest depth
-of a shadow map is the nearest projected polyline point; a flyaway fragment looks its lights up at its own strip
-point, where the CPU's flyaway point over a regular point of its curve takes that point's lookups on the tube
-surface (``pipeline.SHARE_REACH``; 0.07 % of the grazing patch's mean, BENCHMARKS.md, stop 71).
+of a shadow map is the nearest projected polyline point.
 ``tests/test_gl_render.py`` holds the two renderers together (per pixel on axis-aligned orthographic scenes, else at
 the yarn scale).
 
