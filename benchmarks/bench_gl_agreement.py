@@ -50,9 +50,9 @@ def main():
     print("|---|---|---|---|---|---|---|---|")
     for name in args.scenes.split(","):
         scene = load_scene(EXAMPLES / f"{name}.toml")
-        renderer = GLRenderer(scene, {"cotton1": args.pack}, features)
-        gl, gl_ms = timed(renderer.render)
-        cpu, cpu_ms = timed(renderer.cpu.render)
+        with GLRenderer(scene, {"cotton1": args.pack}, features) as renderer:
+            gl, gl_ms = timed(renderer.render)
+            cpu, cpu_ms = timed(renderer.cpu.render)
         diameter = yarn_diameter_px(scene)
         ref = Path(args.reference_dir)
         reference = read_exr(ref / f"{name}.exr")

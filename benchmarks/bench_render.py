@@ -87,6 +87,8 @@ def time_scene(folder, pack, rows, width, height, light, frames, backend="cpu", 
         result = draw()
         runs.append((time.perf_counter() - t0, result.timings))
     total, timings = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
+    if backend == "gl":
+        renderer.release()
     return total, timings, result.facts, setup
 
 

@@ -316,7 +316,11 @@ class GLRenderer:
     between frames. ``bounce_on`` says where the yarn-level bounce's sums run: "gpu" (``gl_bounce``, a compute
     shader), "cpu" (the Numba kernel) or "auto" (the default): the GPU unless the context is a software rasteriser
     (``software_renderer``), on which the Numba kernel is the faster. FormatError (one line) for what this backend
-    cannot draw, GLUnavailable without GL."""
+    cannot draw, GLUnavailable without GL.
+
+    The GL objects it makes (the yarn entries' textures, the sky's cluster weights, the kept frame's arrays) live
+    until ``release()`` (or the end of a ``with`` block); the context's programs and frame targets stay with the
+    context (``release_targets``)."""
 
     def __init__(self, scene, packs=None, features: Features = Features(), samples_per_segment: int = 4,
                  use_cache: bool = True, progress=None, ctx=None, bounce_on: str = "auto"):
@@ -368,6 +372,23 @@ class GLRenderer:
     @property
     def frame_count(self):
         return self.cpu.frame_count
+
+    def release(self):
+        """Release the GL objects this renderer holds; it draws nothing after. Until stop 75 nothing did: a process
+        that made renderers on one context (the tests, ``render``, ``bench_gl_agreement``) kept every renderer's
+        textures until it exited."""
+        self._release_frame_side()
+        objects = {id(o): o for _, textures in self.looks for o in textures.values()}
+        objects[id(self.cluster_weights)] = self.cluster_weights
+        for obj in objects.values():
+            obj.release()
+        self.looks = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
 
     @property
     def warnings(self):
@@ -452,6 +473,8 @@ class GLRenderer:
         viewer's orbit); timings per pass, as the CPU renderer's. With ``into`` (a moderngl framebuffer of the
         camera's size: the viewer's window) the frame is drawn there tone-mapped at ``exposure`` stops (``_display``)
         and not read back: the result's image is None."""
+        if self.looks is None:
+            raise RuntimeError("this GLRenderer was released (GLRenderer.release): make another to draw")
         scene, ctx = self.scene, self.ctx
         frame = self.cpu.frame_index(frame)
         timings, facts = {}, {"warnings": list(self.warnings), **self.setup_facts, "frame": frame}
@@ -967,8 +990,8 @@ def render(scene, packs=None, features: Features = Features(), samples_per_segme
            use_cache: bool = True) -> pipeline.RenderResult:
     """One frame of ``scene`` on the GL backend (``pipeline.render``'s counterpart): timings include the set-up
     (``load``, ``srbf_fit``, ``gl_setup``)."""
-    renderer = GLRenderer(scene, packs, features, samples_per_segment, use_cache, progress)
-    result = renderer.render(progress=progress)
+    with GLRenderer(scene, packs, features, samples_per_segment, use_cache, progress) as renderer:
+        result = renderer.render(progress=progress)
     setup = dict(renderer.setup_timings)
     setup["load"] = setup.get("load", 0.0) + result.timings.pop("load", 0.0)
     result.timings = {**setup, **result.timings}
