@@ -17,8 +17,16 @@ toward the camera; how the two tilts correlate there: how much of the fiber's di
 fiber's tangent less t_f against the texture's own tangent spread (Toksvig, ``strip_shading.tangent_spread``), which the
 shading widens the lobes by.
 
+With ``--second-draw`` each ray is met with a second fiber draw too, the instance floor's (fiber seed + 1), and a
+second table asks how far a draw's fiber tilts are predictable at all, and where: per group and per class of the
+fiber bend's κ·o at the point (``strip_shading.fiber_bend``: the outside of a bend tighter than 1.25 radii, the
+outside of a gentler one, nearly straight, the inside), the correlation of the two draws' tilts (b, n), of t_f's
+with each draw's (their mean), and the tilts' rms. Where the draws agree and t_f does not, the fibers' direction is
+set by the yarn's geometry in a way the texture and the fiber bend do not model.
+
     .venv/bin/python benchmarks/probe_glints.py --pack out/bench/cotton1_standard_66.h5 \\
-        --compare-dir out/compare66b [--scene simulated_patch_directional] [--worst 0.05] [--sample 3000]
+        --compare-dir out/compare66b [--scene simulated_patch_directional] [--worst 0.05] [--sample 3000] \\
+        [--second-draw]
 """
 
 from __future__ import annotations
@@ -42,6 +50,8 @@ from knitrun.render.strip_shading import fiber_bend, tangent_spread
 from knitrun.render.texture_sampling import mip_level, sample_mip
 from knitrun.shading.fiber_bcsdf import P_ALPHA_R
 
+BEND_CLASSES = (("outside, R < 1.25 r", -np.inf, -0.8), ("outside", -0.8, -0.4), ("nearly straight", -0.4, 0.1),
+                ("inside", 0.1, np.inf))  # κ·o of the fiber bend at the point: −κ·o = r/R on a bend's outside, v = 0
 LIT = 0.02  # lit pixels: the filtered reference above this share of its largest value (``probe_regions.LIT``)
 NEAR_DEG = (2.0, 5.0)  # specular mismatches counted as glinting
 
@@ -59,16 +69,16 @@ def missed_pixels(reference, strips, d: float, fraction: float) -> np.ndarray:
     return out.reshape(ref.shape)
 
 
-def reference_fibers(scene):
+def reference_fibers(scene, seed: int):
     """The reference's regular and flyaway fibers of the scene's (single) yarn entry as segments (start, end,
-    radius), drawn as ``build_reference`` draws them with the scene's seed."""
+    radius), drawn as ``build_reference`` draws them with fiber seed ``seed``."""
     if len(scene.yarns) != 1:
         raise SystemExit("probe_glints: a scene of one yarn entry")
     entry = scene.yarns[0]
     curves = read_curves(entry.curves, scene.units)
     drawn = _only_curves(curves, np.isin(curves.yarn_type, entry.yarn_type_indices))
     fibers = sweep_fibers(drawn, scene.render.frame, {i: entry.spec for i in entry.yarn_type_indices},
-                          {i: entry.radius for i in entry.yarn_type_indices}, seed=scene.render.seed)
+                          {i: entry.radius for i in entry.yarn_type_indices}, seed=seed)
     ends = np.ones(fibers.points.shape[0], bool)
     ends[fibers.offsets[1:] - 1] = False  # a fiber's last point starts no segment
     start = np.flatnonzero(ends)
@@ -110,6 +120,29 @@ def pixel_ray(camera, row: int, col: int):
     return np.asarray(camera.position, float), ray / np.linalg.norm(ray)
 
 
+def print_agreement(agreement) -> None:
+    """The second table of ``--second-draw`` (module docstring): ``agreement`` maps a group's name to rows (κ·o, then
+    in degrees the tilts (b, n) of the first draw's fiber, of the second draw's and of t_f)."""
+    def corr(x, y):
+        return np.corrcoef(x, y)[0, 1] if len(x) > 2 and x.std() > 0 and y.std() > 0 else np.nan
+
+    print("\n| pixels | bend (κ·o) | pixels met by both draws | tilt correlation (b, n): draw–draw | t_f–draw | "
+          "tilt rms (b, n): fibers | t_f |")
+    print("|---|---|---|---|---|---|---|")
+    for name, r in agreement.items():
+        for label, low, high in (("all", -np.inf, np.inf), *BEND_CLASSES):
+            k = (r[:, 0] >= low) & (r[:, 0] < high)
+            if k.sum() < 30:
+                continue
+            x = r[k]
+            draw = [corr(x[:, 1 + a], x[:, 3 + a]) for a in (0, 1)]
+            model = [0.5 * (corr(x[:, 1 + a], x[:, 5 + a]) + corr(x[:, 3 + a], x[:, 5 + a])) for a in (0, 1)]
+            fibers = np.sqrt(0.5 * (x[:, [1, 2]] ** 2 + x[:, [3, 4]] ** 2).mean(axis=0))
+            print(f"| {name} | {label} | {k.sum()} | {draw[0]:.2f}, {draw[1]:.2f} | {model[0]:.2f}, {model[1]:.2f} | "
+                  f"{fibers[0]:.1f}°, {fibers[1]:.1f}° | {np.sqrt((x[:, 5] ** 2).mean()):.1f}°, "
+                  f"{np.sqrt((x[:, 6] ** 2).mean()):.1f}° |")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pack", required=True, help="the asset pack of the scene's yarn")
@@ -118,6 +151,8 @@ def main(argv=None) -> int:
                         "light and one yarn entry")
     parser.add_argument("--worst", type=float, default=0.05, help="the fraction of lit pixels taken as worst")
     parser.add_argument("--sample", type=int, default=3000, help="lit pixels drawn at random for comparison")
+    parser.add_argument("--second-draw", action="store_true", help="meet each ray with the instance floor's fiber "
+                        "draw too and say where the draws' tilts agree and t_f's do not (module docstring)")
     args = parser.parse_args(argv)
     scene = load_scene(Path("examples/scenes") / f"{args.scene}.toml")
     lights = [light for light in scene.lights if not isinstance(light, EnvironmentLight)]
@@ -141,8 +176,12 @@ def main(argv=None) -> int:
     heaviest = np.full(h * w, -1)
     order = np.argsort(raster["weight"], kind="stable")
     heaviest[pixel[order]] = order  # each pixel's heaviest point: the last of its points in ascending weight
-    a_all, b_all, radius_all = reference_fibers(scene)
+    a_all, b_all, radius_all = reference_fibers(scene, scene.render.seed)
     tree = cKDTree(0.5 * (a_all + b_all))
+    second = None
+    if args.second_draw:
+        a2, b2, radius2 = reference_fibers(scene, scene.render.seed + 1)
+        second = (cKDTree(0.5 * (a2 + b2)), a2, b2, radius2)
     # a fiber segment the ray crosses near the strip's point has its midpoint within 3 yarn radii plus half its length
     reach = 3.0 * scene.yarns[0].radius + 0.5 * np.linalg.norm(b_all - a_all, axis=1).max()
     alpha_r = kernel_look.params[P_ALPHA_R]
@@ -154,6 +193,7 @@ def main(argv=None) -> int:
         return abs(np.degrees(np.arcsin(np.clip(t @ to_light, -1, 1)) + np.arcsin(np.clip(t @ wo, -1, 1))
                               - 2.0 * alpha_r))
 
+    agreement = {}
     drawn = np.flatnonzero(heaviest >= 0)
     groups = {"missed": np.flatnonzero(missed & (heaviest >= 0)),
               "lit, at random": np.random.default_rng(0).choice(drawn, min(args.sample, drawn.size), replace=False)}
@@ -164,7 +204,7 @@ def main(argv=None) -> int:
           "correlation of the two (b, n) | fiber − t_f rms (b, n) | texture spread rms |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, pixels in groups.items():
-        rows = []
+        rows, draws = [], []
         for p in pixels:
             i, j = divmod(int(p), w)
             origin, ray = pixel_ray(camera, i, j)
@@ -181,9 +221,15 @@ def main(argv=None) -> int:
             sample_mip(look.tangent, 0, level, u, v, tex)
             sample_mip(look.coverage, 0, level, u, v, cov)
             along = fiber_bend(points.curvature, points.stretch, q, kernel_look.radius, v, n, b)
+            k_dot_o = float(points.curvature[q] @ (kernel_look.radius * (v * b + np.sqrt(max(0.0, 1.0 - v * v)) * n)))
             t_f = along * tex[0] * t + tex[1] * b + tex[2] * n
             t_f = t_f / np.linalg.norm(t_f) if np.linalg.norm(t_f) >= 1e-6 else t  # ``_texture_tangent``'s rule
             fiber = fiber if fiber @ t >= 0.0 else -fiber
+            if second is not None:
+                other = first_fiber_tangent(origin, ray, raster["position"][q], reach, *second)
+                if other is not None:
+                    other = other if other @ t >= 0.0 else -other
+                    draws.append((k_dot_o, *np.degrees([fiber @ b, fiber @ n, other @ b, other @ n, t_f @ b, t_f @ n])))
             rows.append((mismatch(fiber, -ray), mismatch(t, wo), mismatch(t_f, wo),
                          np.degrees(np.arccos(min(fiber @ t, 1.0))), np.degrees(np.arccos(min(t_f @ t, 1.0))),
                          np.degrees(fiber @ b - t_f @ b), np.degrees(fiber @ n - t_f @ n),
@@ -198,6 +244,10 @@ def main(argv=None) -> int:
               f"{' / '.join(f'{np.median(r[:, k]):.1f}°' for k in range(3))} | {quart[0]}° | {quart[1]}° | "
               f"{rms[3]:.1f}°, {rms[4]:.1f}° | {rms[5]:.1f}°, {rms[6]:.1f}° | {corr[0]:.2f}, {corr[1]:.2f} | "
               f"{rms[0]:.1f}°, {rms[1]:.1f}° | {rms[2]:.1f}° |")
+        if draws:
+            agreement[name] = np.array(draws)
+    if agreement:
+        print_agreement(agreement)
     return 0
 
 
