@@ -47,12 +47,21 @@ yarn's radius, and ``--no-flyaways`` draws the regular fibers alone in both (the
 its flyaways, the strips without the flyaway layer): which part of a scene's error a lone yarn in the scene's shape
 already has, and whether it follows the bends (BENCHMARKS.md, "Issue 13: one course alone", stop 65).
 
+``--ss-draws N`` traces N more fiber draws at one event (seed and fiber seed + 2 … + N + 1) and asks how far the
+reference's single scattering at the yarn scale is fixed by the yarns rather than by the draw: per scene and model,
+the rel L1 against the reference's single scattering, over its floor (the second instance's), of the mean of the
+other draws (the instance and the N; with a leave-one-out mean over all of them), and of the model's single
+scattering, as drawn and with its mean matched; and how concentrated each is: the share of it in the brightest 5 % and
+20 % of the reference's lit pixels (above ``LIT`` of the draws' mean's largest, luminance), its coefficient of
+variation there and its correlation with the draws' mean. A draws' mean as concentrated as one draw and nearer the
+reference than the floor says where single scattering lies is the geometry's, which a model could place.
+
 ``--out DIR`` keeps the images
 (``<scene>/{reference,instance}_{full,single}.exr``, ``strip_<model>_{full,single}.exr``).
 
     .venv/bin/python benchmarks/probe_split.py --pack out/bench/cotton1_standard.h5 [--scenes a,b] \\
         [--models full,no_tables,plain_ds] [--spp N] [--tilt-bins] [--loop-bins] [--layers] \\
-        [--curves K,L] [--scale S] [--no-flyaways] [--out DIR]
+        [--curves K,L] [--scale S] [--no-flyaways] [--ss-draws N] [--out DIR]
 
 The spp per scene is the one the ruler picked (the Monte Carlo floor at most half the instance floor at d:
 BENCHMARKS.md, "The ruler"), unless ``--spp`` is given.
@@ -85,6 +94,7 @@ from probe_error_scale import CRANE_CURVES, LOOP_BINS, front_strips, loop_phase 
 from probe_tilt import TILT_BINS, curve_tilts  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
+LIT = 0.01  # --ss-draws: lit pixels, the draws' mean single scattering above this share of its largest
 SCENES = {"straight_yarn_directional": 16, "straight_yarn_sky": 16, "straight_yarn_backlit": 16,
           "knit_patch_directional": 16, "knit_patch_sky": 64, "knit_patch_grazing": 16,
           "simulated_patch_directional": 32}  # name → the ruler's spp
@@ -187,6 +197,44 @@ def loop_rows(name, scene, pack, model, ref, inst, strip):
 LAYER_PARTS = ("regular SS", "regular MS", "flyaways' SS", "flyaways' MS")
 
 
+def draw_rows(name, d, reference, draws, models):
+    """``--ss-draws``' rows for one scene (module docstring): ``reference`` and each of ``draws`` (the instance first)
+    and ``models`` (name → image) single-scattering images (H, W, 3)."""
+    lum = np.asarray(LUMINANCE, np.float64)
+
+    def filtered(image):
+        return yarn_filter(image, d) @ lum
+
+    ref = filtered(reference)
+    others = [filtered(x) for x in draws]
+    mean = np.mean(others, axis=0)
+    lit = mean > LIT * mean.max()
+    order = np.argsort(ref[lit])[::-1]
+    top = [order[:max(1, len(order) * k // 100)] for k in (5, 20)]
+
+    def error(image, against=ref):
+        return np.abs(image - against).sum() / against.sum()
+
+    floor = error(others[0])
+
+    def row(label, image, errors):
+        values = image[lit]
+        shares = " / ".join(f"{values[t].sum() / values.sum():.2f}" for t in top)
+        return (f"| {name} | {label} | {errors} | {shares} | {values.std() / values.mean():.2f} | "
+                f"{np.corrcoef(values, mean[lit])[0, 1]:.2f} |")
+
+    rows = [row("reference", ref, "— | —"), row("other fiber instance (the floor)", others[0], "1.00× | —")]
+    if len(others) > 2:
+        loo = np.mean([error(np.mean(others[:k] + others[k + 1:], axis=0), others[k]) for k in range(len(others))])
+        rows.append(row(f"mean of the {len(others)} other draws", mean,
+                        f"{error(mean) / floor:.2f}× (leave one out: {loo / floor:.2f}×) | —"))
+    for model, image in models.items():
+        drawn = filtered(image)
+        matched = error(drawn * ref.sum() / drawn.sum())
+        rows.append(row(model, drawn, f"{error(drawn) / floor:.2f}× | {matched / floor:.2f}×"))
+    return rows
+
+
 def layer_parts(whole, regular):
     """The four parts of ``LAYER_PARTS`` (RGB means) from the (full, single) images of the whole light and of the
     light whose camera ray first meets a regular fiber."""
@@ -276,11 +324,15 @@ def main():
                         help="scale the curves about the look-at point, the camera S times as far and S times the "
                              "pixels per side (the same picture, every bend gentler)")
     parser.add_argument("--no-flyaways", action="store_true", help="the regular fibers alone, in both")
+    parser.add_argument("--ss-draws", type=int, default=0, help="trace N more fiber draws at one event: how much of "
+                        "the single scattering's place the yarns fix (module docstring)")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)
     if not (math.isfinite(args.scale) and args.scale > 0.0):
         parser.error(f"--scale: {args.scale} is not a positive number")
+    if args.ss_draws < 0:
+        parser.error(f"--ss-draws: {args.ss_draws} is negative")
     if args.layers and args.no_flyaways:
         parser.error("--layers splits the light by the flyaways: not with --no-flyaways")
     if args.loop_bins and (args.curves is not None or args.scale != 1.0):
@@ -296,7 +348,7 @@ def main():
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
           "| with the instance's SS | SS / its floor | MS / its floor |")
     print("|---" * 10 + "|")
-    tilt_tables, loop_tables, layer_tables = [], [], []
+    tilt_tables, loop_tables, layer_tables, draw_tables = [], [], [], []
     for name in names:
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
         scene = dataclasses.replace(scene, background=(0.0, 0.0, 0.0))
@@ -329,6 +381,11 @@ def main():
             layer_tables += layer_rows(name, (ref, ref_regular), (inst, inst_regular),
                                        {m: (strips[m], rendered(scene, args.pack, m, hair_light=False))
                                         for m in models})
+        if args.ss_draws:
+            more = [trace_reference(scene, spp, seed + k, 1, fiber_seed=seed + k, flyaways=flyaways)[0]
+                    for k in range(2, args.ss_draws + 2)]
+            draw_tables += draw_rows(name, d, ref[1], [inst[1], *(np.asarray(x, np.float64)[..., :3] for x in more)],
+                                     {m: single for m, (_, single) in strips.items()})
         if args.tilt_bins:
             at = curve_tilts(scene)
             populated = 0 if at is None else len(np.unique(np.digitize(at[2], TILT_BINS[1:-1])))
@@ -343,6 +400,13 @@ def main():
               + " |")
         print("|---" * 7 + "|")
         print("\n".join(tilt_tables))
+    if draw_tables:
+        print("\nSingle scattering at the yarn scale against the reference's: rel L1 over its floor (the instance's); "
+              "share in the brightest 5 % / 20 % of the lit pixels, coefficient of variation there, correlation with "
+              "the other draws' mean:\n")
+        print("| scene | image | rel L1 / floor | mean matched | top 5 % / 20 % | CV | correlation |")
+        print("|---" * 7 + "|")
+        print("\n".join(draw_tables))
     if layer_tables:
         print("\nEach half by the layer the camera ray meets first (RGB means; the model's and the instance's part "
               "over the reference's):\n")
