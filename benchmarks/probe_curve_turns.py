@@ -2,8 +2,9 @@
 
 Both renderers draw a PL curve as it is: the strips interpolate the vertex tangents along each segment, the reference
 sweeps its fibers along the straight segments with the frame interpolated between the vertices
-(``knitbake.fibers.fiber_sweep``). Where a polyline turns by tens of degrees at a vertex the two treatments part, and
-where it bends tighter than the radius (κ·r > 1) the swept tube folds on its inside. Per scene, of the polylines the
+(``knitbake.fibers.fiber_sweep``). Where a polyline turns gently the two agree (the fiber bend, SHADING.md §2); where
+it turns by tens of degrees at a vertex they need not, and where it bends tighter than the radius (κ·r > 1) the
+swept tube folds on its inside (BENCHMARKS.md, stop 76). Per scene, of the polylines the
 strip renderer draws (``pipeline._polylines``): the vertex spacing over the radius r, the turn at each inner vertex
 (the angle between its two segments), the discrete curvature there, κ·r = turn / (mean of the two segments' lengths)
 · r, and the share of vertices with κ·r > 1. Geometry only, no rendering: about a second a scene.
@@ -23,6 +24,7 @@ from knitrun.render import pipeline
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
 SCENES = "straight_yarn_directional,knit_patch_directional,simulated_patch_directional"
+SAMPLES_PER_SEGMENT = 4  # smooth curve types: the strip renderer's default sampling (``pipeline.Renderer``); PL as is
 
 
 def vertex_turns(points: np.ndarray, offsets: np.ndarray, radius: np.ndarray):
@@ -56,7 +58,7 @@ def main(argv=None) -> int:
     for name in args.scenes.split(","):
         scene = load_scene(EXAMPLES / f"{name}.toml")
         curves = [read_curves(entry.curves, scene.units) for entry in scene.yarns]
-        lines = pipeline._polylines(scene, curves, scene.render.frame, 4)
+        lines = pipeline._polylines(scene, curves, scene.render.frame, SAMPLES_PER_SEGMENT)
         radius = np.array([scene.yarns[k].radius for k in lines.entry])
         spacing, turn, bend = vertex_turns(lines.points, np.asarray(lines.offsets), radius)
         if len(turn) == 0:

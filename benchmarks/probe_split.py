@@ -402,8 +402,8 @@ def main():
         print("\n".join(tilt_tables))
     if draw_tables:
         print("\nSingle scattering at the yarn scale against the reference's: rel L1 over its floor (the instance's); "
-              "share in the brightest 5 % / 20 % of the lit pixels, coefficient of variation there, correlation with "
-              "the other draws' mean:\n")
+              "share in the reference's brightest 5 % / 20 % of the lit pixels, coefficient of variation there, "
+              "correlation with the other draws' mean:\n")
         print("| scene | image | rel L1 / floor | mean matched | top 5 % / 20 % | CV | correlation |")
         print("|---" * 7 + "|")
         print("\n".join(draw_tables))
