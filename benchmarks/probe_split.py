@@ -220,8 +220,8 @@ def draw_rows(name, d, reference, draws, models):
     def row(label, image, errors):
         values = image[lit]
         shares = " / ".join(f"{values[t].sum() / values.sum():.2f}" for t in top)
-        return (f"| {name} | {label} | {errors} | {shares} | {values.std() / values.mean():.2f} | "
-                f"{np.corrcoef(values, mean[lit])[0, 1]:.2f} |")
+        correlation = "—" if image is mean else f"{np.corrcoef(values, mean[lit])[0, 1]:.2f}"
+        return f"| {name} | {label} | {errors} | {shares} | {values.std() / values.mean():.2f} | {correlation} |"
 
     rows = [row("reference", ref, "— | —"), row("other fiber instance (the floor)", others[0], "1.00× | —")]
     if len(others) > 2:
