@@ -98,8 +98,9 @@ CLAMP = 8.0
 MSAA = 4
 
 
-def _scene(folder: Path, spec: YarnSpec, pack: Path):
-    """The correction stage's yarn as a scene (camera and light set per bin by ``_view``)."""
+def _scene(folder: Path, spec: YarnSpec, pack: Path, colour_scale: float = 1.0):
+    """The correction stage's yarn as a scene (camera and light set per bin by ``_view``), drawn in the grey
+    ``colour_scale``."""
     period = spec.geometry.ply_pitch
     z = np.linspace(-period, 2 * period, 31)
     points = np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=1)
@@ -107,7 +108,8 @@ def _scene(folder: Path, spec: YarnSpec, pack: Path):
                                                             yarn_types=[spec.name], units=spec.units))
     (folder / "yarn.toml").write_text(dumps_spec(spec))
     data = {"format": "knit-scene", "version": "1.0", "units": spec.units, "background": [0.0, 0.0, 0.0],
-            "yarns": [{"curves": "yarn.h5", "yarn": "yarn.toml", "pack": str(Path(pack).resolve())}],
+            "yarns": [{"curves": "yarn.h5", "yarn": "yarn.toml", "pack": str(Path(pack).resolve()),
+                       "color": [float(colour_scale)] * 3}],
             "camera": {"position": [1.0, 0.0, 0.0], "look_at": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0],
                        "ortho_height": 1.0, "width": 8, "height": 8},
             "lights": [{"type": "directional", "direction": [1.0, 0.0, 0.0], "irradiance": [1.0, 1.0, 1.0]}],
@@ -142,13 +144,29 @@ def trace_view_radiance(spec: YarnSpec, diagonal: tuple, rows: int, spp: int, ba
     fills those bins instead of tracing them again; or None to trace them too, on the grid ``shape`` (N_v, N_θ,
     N_φ)."""
     radiance, error = diagonal if diagonal is not None else (None, None)
-    n_v, n_theta, n_phi = radiance.shape[:3] if diagonal is not None else shape
+    samples = trace_view_samples(spec, radiance.shape[:3] if diagonal is not None else shape, rows, spp, batches,
+                                 seed, max_depth, progress, skip_diagonal=diagonal is not None)
+    mean, stderr = samples.mean(axis=0), samples.std(axis=0, ddof=1) / np.sqrt(batches)
+    for ell in range(mean.shape[1] if diagonal is not None else 0):
+        mean[:, -1 - ell, ell], stderr[:, -1 - ell, ell] = radiance[:, ell], error[:, ell]
+    return mean, stderr
+
+
+def trace_view_samples(spec: YarnSpec, shape: tuple, rows: int, spp: int, batches: int, seed: int,
+                       max_depth: int = MAX_DEPTH, progress=None, skip_diagonal=False, colour_scale: float = 1.0):
+    """(batches, N_v, N_θ, N_θ, N_φ, 3): each batch's estimate of ``trace_view_radiance``'s Ψ_* on the grid ``shape``
+    (N_v, N_θ, N_φ); ``skip_diagonal``: the bins θ_o = −θ_i left at 0. ``colour_scale`` k: the fibers' lobe albedos
+    A_R, A_TT, A_D times k (the yarn drawn in the grey k, as the reference tracer draws a scene colour). Batch b
+    traces the fibers of seed + b and every bin's paths from a seed of (seed, b, bin) alone, whatever ``max_depth``
+    and k: two traces of one bake differ only past the paths' first event (at one event in the grey k, exactly k
+    times the white's), so their difference per batch holds no noise of the first event (``colour_closure``)."""
+    n_v, n_theta, n_phi = shape
     samples = np.zeros((batches, n_v, n_theta, n_theta, n_phi, 3))
     per_batch = n_theta * n_theta * n_phi
     for b in range(batches):
-        geometry = yarn_tracer(spec, seed + b)
+        geometry = yarn_tracer(spec, seed + b, colour_scale)
         for k, ell, m, theta_i, theta_o, phi in _views(n_theta, n_phi):
-            if k + ell == n_theta - 1 and diagonal is not None:
+            if k + ell == n_theta - 1 and skip_diagonal:
                 continue
             cam = strip_camera(spec, theta_o, rows)
             lit = geometry.with_lights(yarn_direction(theta_i, -phi)[None], np.ones((1, 3)))
@@ -157,10 +175,7 @@ def trace_view_radiance(spec: YarnSpec, diagonal: tuple, rows: int, spp: int, ba
             samples[b, :, k, ell, m] = sums / np.maximum(pixels, 1)[:, None]
             if progress:
                 progress(b * per_batch + (k * n_theta + ell) * n_phi + m + 1, batches * per_batch)
-    mean, stderr = samples.mean(axis=0), samples.std(axis=0, ddof=1) / np.sqrt(batches)
-    for ell in range(n_theta if diagonal is not None else 0):
-        mean[:, n_theta - 1 - ell, ell], stderr[:, n_theta - 1 - ell, ell] = radiance[:, ell], error[:, ell]
-    return mean, stderr
+    return samples
 
 
 def diagonal_of(view: np.ndarray) -> np.ndarray:
@@ -171,21 +186,22 @@ def diagonal_of(view: np.ndarray) -> np.ndarray:
 
 
 def render_bins(pack: Path, spec: YarnSpec, shape: tuple, rows: int, progress=None, split=False,
-                single=False) -> np.ndarray:
+                single=False, colour_scale: float = 1.0) -> np.ndarray:
     """S (N_v, N_θ, N_θ, N_φ, 3): the strip renderer's mean radiance per v bin of the correction stage's camera,
     for each bin centre (θ_i, θ_o, φ), of the yarn drawn from ``pack`` (full model without flyaways, ξ from the
     pack's ``correction/xi_view``; ``split``: from its ``correction/xi_view_ss`` and ``_ms``; ``single``: single
-    scattering alone, ``Features.multiple_scattering`` False). The lone yarn has no neighbour to shadow it; its own
-    strip in the shadow maps does not either (``shadow_map.own_strip_depth``: up to θ_i = 80.4°). Until closure
-    version 4 it did, with the light more than ~48° from the yarn's normal plane, and ξ learnt it (the standard
-    pack's bins at θ_i = ±78.75° moved by 27–29 % on average: BENCHMARKS.md, "Issue 13: a yarn's own strip")."""
+    scattering alone, ``Features.multiple_scattering`` False), in the grey ``colour_scale``. The lone yarn has no
+    neighbour to shadow it; its own strip in the shadow maps does not either (``shadow_map.own_strip_depth``: up to
+    θ_i = 80.4°). Until closure version 4 it did, with the light more than ~48° from the yarn's normal plane, and ξ
+    learnt it (the standard pack's bins at θ_i = ±78.75° moved by 27–29 % on average: BENCHMARKS.md, "Issue 13: a
+    yarn's own strip")."""
     from knitrun.render.ablations import Features
     from knitrun.render.pipeline import Renderer
 
     n_v, n_theta, _, n_phi = shape
     out = np.zeros(tuple(shape) + (3,))
     with tempfile.TemporaryDirectory(prefix="knit-closure-") as tmp:
-        scene = _scene(Path(tmp), spec, pack)
+        scene = _scene(Path(tmp), spec, pack, colour_scale)
         # one straight yarn has no second yarn layer toward a light (V₂ = 1 at every point): the peeled map would
         # only double each view's cost (BENCHMARKS.md, stop 71)
         renderer = Renderer(scene, features=Features(flyaways=False, view_xi=True, split_xi=split,

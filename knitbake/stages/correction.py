@@ -32,6 +32,7 @@ get the value 1 and error 0.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -44,7 +45,7 @@ from knitbake.stages.stage_result import StageResult
 from knitbake.trace.path_tracer import MAX_DEPTH, TracerScene, camera_rays, render
 from knitrun.render.camera import Camera, tan_half_fov
 from knitrun.shading.dual_scattering import evaluate_ds, fiber_counts
-from knitrun.shading.fiber_bcsdf import params_from_optics
+from knitrun.shading.fiber_bcsdf import params_from_optics, tinted
 from knitrun.shading.fiber_frame import fiber_angles
 
 
@@ -57,15 +58,19 @@ _GEOMETRY_MEMO: dict = {}
 CAMERA_CLEARANCE = 3.0  # yarn radii between the axis and the nearest ray origin of ``strip_camera``
 
 
-def yarn_tracer(spec: YarnSpec, seed: int) -> TracerScene:
+def yarn_tracer(spec: YarnSpec, seed: int, colour_scale: float = 1.0) -> TracerScene:
     """Regular fibers of three periods, z ∈ [−P, 2P], as an unlit tracer scene (memoised per spec and seed, so
-    the correction and shadowing stages of one bake build each batch's geometry once)."""
+    the correction and shadowing stages of one bake build each batch's geometry once); ``colour_scale`` k: the
+    fibers' lobe albedos A_R, A_TT, A_D times k, the yarn in the grey k (as the reference tracer draws a colour)."""
     key = (dumps_spec(spec), seed)
     if key not in _GEOMETRY_MEMO:
         if len(_GEOMETRY_MEMO) >= 8:
             _GEOMETRY_MEMO.clear()
         _GEOMETRY_MEMO[key] = _build_yarn_tracer(spec, seed)
-    return _GEOMETRY_MEMO[key]
+    tracer = _GEOMETRY_MEMO[key]
+    if colour_scale == 1.0:
+        return tracer
+    return dataclasses.replace(tracer, params=np.stack([tinted(p, np.full(3, colour_scale)) for p in tracer.params]))
 
 
 def forget_yarn_tracers() -> None:

@@ -25,14 +25,14 @@ along it), weighted by solid angle (cos θ_o) times the tube's projected width (
     X = Σ_views w(θ_o) · mean over the strip image of L(θ_o)  /  Σ_views w(θ_o),    w(θ_o) = cos² θ_o
 
 **Against the colour** (``albedo_by_colour``, ``transmittance_by_colour``, ASSET_PACK.md §10): a scene colour c
-multiplies the fibers' lobe albedos A_R, A_TT, A_D per channel (``fiber_bcsdf.tinted``), and a path of n scattering
-events carries c^n, so ρ_Y and T_Y are polynomials in c, not c times the white yarn's (cotton1, standard: a yarn red
-in one channel, c = 0.25, has ρ_Y = 0.228 there, not 0.25 × 0.741 = 0.185: the light between the fibers keeps its
-colour). Both are baked with the lobe albedos of every channel scaled by k at the ``colour_scale`` axis' cell
-centres (``n_colours`` of them, 16 m + 1: 17 puts them at k = 0, 1/16, …, 1; linear interpolation between 9
-samples errs by up to 4 %, between 17 by up to 1.3 %, at k = 31/32), with the same fibers and paths at every k, so
-the curve in k is smooth. At k = 0 no path scatters and both are the light that crosses the tube between the
-fibers.
+multiplies the fibers' lobe albedos A_R, A_TT, A_D per channel (``fiber_bcsdf.tinted``, ``correction.yarn_tracer``),
+and a path of n scattering events carries c^n, so ρ_Y and T_Y are polynomials in c, not c times the white yarn's
+(cotton1, standard: a yarn red in one channel, c = 0.25, has ρ_Y = 0.228 there, not 0.25 × 0.741 = 0.185: the light
+between the fibers keeps its colour). Both are baked with the lobe albedos of every channel scaled by k at the
+``colour_scale`` axis' cell centres (``n_colours`` of them, 16 m + 1: 17 puts them at k = 0, 1/16, …, 1; linear
+interpolation between 9 samples errs by up to 4 %, between 17 by up to 1.3 %, at k = 31/32), with the same fibers
+and paths at every k, so the curve in k is smooth. At k = 0 no path scatters and both are the light that crosses the
+tube between the fibers.
 
 Paths are traced to ``max_depth`` scattering events (Russian roulette beyond), so both hold every order of
 scattering inside the yarn; an estimate above 1 (noise) is clipped to 1. ``batches`` independent batches (fiber
@@ -54,7 +54,6 @@ from knitbake.stages.stage_result import StageResult
 from knitbake.trace.env_light import env_from_image, uniform_env
 from knitbake.trace.path_tracer import MAX_DEPTH, render
 from knitrun.shading.equirect import texel_directions
-from knitrun.shading.fiber_bcsdf import tinted
 
 TABLE = "interreflection/albedo"
 TRANSMITTANCE_TABLE = "interreflection/transmittance"
@@ -85,9 +84,7 @@ def hull_radiance(spec: YarnSpec, environment, n_views=6, rows=16, spp=4, batche
     weight /= weight.sum()
     samples = np.empty((batches, 3))
     for b in range(batches):
-        tracer = yarn_tracer(spec, seed + b)
-        params = np.stack([tinted(p, np.full(3, colour_scale)) for p in tracer.params])
-        tracer = dataclasses.replace(tracer, background=None, params=params)
+        tracer = dataclasses.replace(yarn_tracer(spec, seed + b, colour_scale), background=None)
         views = np.empty((n_views, 3))
         for k, theta in enumerate(thetas):
             tracer = dataclasses.replace(tracer, env=environment(yarn_direction(float(theta), 0.0)))
