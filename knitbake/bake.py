@@ -14,6 +14,7 @@ also takes its input stages' results, ``run_stage``):
 | interreflection | ``interreflection/{albedo,transmittance}`` (the yarn tube's ρ_Y, T_Y) and ``*_by_colour`` | always |
 | closure | ``correction/{xi_view,xi_closed,radiance_view}`` (ξ closed on the renderer) | its inputs are baked |
 | | ``correction/*_ss``, ``*_ms`` (ξ closed apart) | closure setting ``split`` |
+| colour_closure | ``correction/xi_view_ms_by_colour`` (ξ_ms closed in greys) | the closure, with ``split`` |
 
 Quality presets (``QUALITY``) set every stage's resolution and sample counts. Every preset also closes ξ apart on
 single and multiple scattering (closure setting ``split``; the renderer's default, ``Features.split_xi``): the
@@ -23,7 +24,9 @@ closure's time. The standard and final presets close ξ on cells of 10.6° × 10
 to 23 % where the fibers' highlights end (BENCHMARKS.md, "Issue 13: where in a knit's shape the error starts"). The
 draft preset closes it on 20° × 72° cells (9 × 9 × 5) in 2 iterations (the others in 4; more moved nothing at the
 yarn scale): on 45° × 90° ones (4 × 4 × 4, until stop 58) the draft pack drew the example scenes at 0.70–1.16× the
-path tracer's brightness (BENCHMARKS.md, "the draft preset on 9 × 5 cells"). A
+path tracer's brightness (BENCHMARKS.md, "the draft preset on 9 × 5 cells"). With the split, every preset then
+closes ξ of multiple scattering in three greys (``colour_closure``, 2 iterations, the draft 1): the white yarn's left
+a red yarn's dark channels with 0.3–0.6 of the path tracer's multiple scattering (BENCHMARKS.md, stop 77). A
 scene (``scene_needs``) removes stages it does not need and sets the texture resolution from the largest on-screen
 yarn width. Each finished stage
 is cached under ``cache_dir()`` by a hash of its inputs (stage, stage version, yarn spec, its settings, seed; the
@@ -59,6 +62,7 @@ from data_formats.input_files import regular_file
 from data_formats.yarn_spec import YarnSpec, dumps_spec, fiber_bcsdf_attrs
 from knitbake.fibers.procedural_yarn import check_fiber_budget
 from knitbake.stages.closure import CLOSURE_INPUTS, bake_closure_stage, papers_xi_at_views
+from knitbake.stages.colour_closure import COLOUR_CLOSURE_INPUTS, bake_colour_closure_stage
 from knitbake.stages.correction import bake_correction_stage, bake_shadowing_stage
 from knitbake.stages.ds_precompute import bake_dual_scattering_stage
 from knitbake.stages.im_table import bake_environment_stage
@@ -68,7 +72,7 @@ from knitbake.stages.yarn_hull import bake_yarn_hull_stage
 from knitrun.render.camera import pixel_size, scene_camera
 
 STAGE_ORDER = ("dual_scattering", "correction", "shadowing", "textures", "flyaway", "environment", "interreflection",
-               "closure")
+               "closure", "colour_closure")
 
 QUALITY = {
     "draft": {
@@ -81,6 +85,7 @@ QUALITY = {
         "environment": {"shape": (12, 24, 12, 32)},
         "interreflection": {"n_views": 4, "rows": 8, "spp": 2, "batches": 2, "n_colours": 17},
         "closure": {"iterations": 2, "split": True},
+        "colour_closure": {"iterations": 1},
     },
     "standard": {
         "dual_scattering": {"n_theta": 64},
@@ -92,6 +97,7 @@ QUALITY = {
         "environment": {"shape": (24, 48, 24, 96)},
         "interreflection": {"n_views": 6, "rows": 16, "spp": 4, "batches": 3, "n_colours": 17},
         "closure": {"iterations": 4, "split": True},
+        "colour_closure": {"iterations": 2},
     },
     "final": {
         "dual_scattering": {"n_theta": 128},
@@ -103,6 +109,7 @@ QUALITY = {
         "environment": {"shape": (32, 64, 32, 128)},
         "interreflection": {"n_views": 8, "rows": 32, "spp": 8, "batches": 4, "n_colours": 17},
         "closure": {"iterations": 4, "split": True},
+        "colour_closure": {"iterations": 2},
     },
 }
 # Bump a stage's version when its code changes what it computes: old cache entries stop matching.
@@ -117,7 +124,8 @@ QUALITY = {
 # on no longer shadows the lone yarn by its own strip (shadow_map.own_strip_depth), the ξ stored is the one drawn last,
 # CLAMP 4 → 8; flyaway 3: the draw of flyaways nearest the yarn's coverage profile (textures.nearest_flyaway_draw);
 # correction 8, closure 5: paths as long as the references' (path_tracer.MAX_DEPTH, 32 events, not 16); closure 5
-# also: a part's bin that fails the per-row test takes its angle bin's v-summed ratio where that sum is measured
+# also: a part's bin that fails the per-row test takes its angle bin's v-summed ratio where that sum is measured;
+# colour_closure 1 (stop 77): ξ of multiple scattering closed on the yarn in greys k = 1/8, 1/4, 1/2
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 8, "shadowing": 3, "environment": 3,
                  "interreflection": 5, "textures": 2, "flyaway": 3, "closure": CLOSURE_STAGE_VERSION}
 
@@ -178,10 +186,12 @@ def _load_stage(path: Path) -> tuple[StageResult | None, str | None]:
     return StageResult(tables, errors, parsed["attrs"], parsed["counts"]), None
 
 
+# the stages that draw the strip renderer on their input stages' pack, and those inputs
+STAGE_INPUTS = {"closure": CLOSURE_INPUTS, "colour_closure": COLOUR_CLOSURE_INPUTS}
 STAGES = {"dual_scattering": bake_dual_scattering_stage, "correction": bake_correction_stage,
           "shadowing": bake_shadowing_stage, "textures": bake_regular_stage, "flyaway": bake_flyaway_stage,
           "environment": bake_environment_stage, "interreflection": bake_yarn_hull_stage,
-          "closure": bake_closure_stage}
+          "closure": bake_closure_stage, "colour_closure": bake_colour_closure_stage}
 
 
 def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None = None) -> list[str]:
@@ -196,9 +206,11 @@ def stages_for(spec: YarnSpec, only: list[str] | None = None, needs: dict | None
         unknown = [o for o in only if o not in STAGE_ORDER]
         if unknown:
             raise FormatError(f"--only {','.join(unknown)}: unknown table group (known: {', '.join(STAGE_ORDER)})")
-        stages = [s for s in stages if s in only or (s == "closure" and "correction" in only)]
+        stages = [s for s in stages if s in only or (s in ("closure", "colour_closure") and "correction" in only)]
     if "closure" in stages and not set(CLOSURE_INPUTS) <= set(stages):
         stages.remove("closure")  # a partial pack keeps the paper's ξ (ASSET_PACK.md §6)
+    if "colour_closure" in stages and "closure" not in stages:
+        stages.remove("colour_closure")  # it starts from the closure's ξ_ms
     return stages
 
 
@@ -300,7 +312,13 @@ def bake_plan(spec: YarnSpec, quality: str = "draft", only=None, needs=None, see
                            "rows": max(correction["rows"], correction["n_v"]),
                            "inputs": {s: {"settings": settings[s], "version": STAGE_VERSION[s]}
                                       for s in CLOSURE_INPUTS}}
+    closure = settings["closure"]
+    settings["colour_closure"] = {**{k: closure[k] for k in ("spp", "batches", "rows")}, **settings["colour_closure"],
+                                  "inputs": {s: {"settings": settings[s], "version": STAGE_VERSION[s]}
+                                             for s in COLOUR_CLOSURE_INPUTS}}
     stages = stages_for(spec, only, needs)
+    if not closure["split"] and "colour_closure" in stages:
+        stages.remove("colour_closure")  # it closes the split ξ_ms, which the closure then does not bake
     _check_fiber_windows(spec, stages)
     return settings, stages
 
@@ -310,7 +328,7 @@ def run_stage(spec: YarnSpec, stage: str, settings: dict, seed: int, use_cache: 
     """(result, summary row) of one stage: from the stage cache when a valid entry exists, else baked and cached.
     The row holds seconds, cached, tables, error_estimate (the largest of its tables) and, when an entry was
     damaged, cache_warning. Deterministic for a seed whatever the thread count, so any process may run it.
-    ``inputs`` (the closure only): stage → ``run_stage``'s (result, row) of each of ``CLOSURE_INPUTS``."""
+    ``inputs`` (the closures only): stage → ``run_stage``'s (result, row) of each of its ``STAGE_INPUTS``."""
     key = stage_key(stage, spec, settings, seed)
     path = cache_dir() / f"{stage}-{key}.npz"
     t0 = time.perf_counter()
@@ -318,9 +336,10 @@ def run_stage(spec: YarnSpec, stage: str, settings: dict, seed: int, use_cache: 
     cached = result is not None
     if result is None:
         extra = {}
-        if stage == "closure":
-            given = {s: inputs[s][0] for s in CLOSURE_INPUTS}
-            extra = {"inputs": given, "write_pack_to": _input_pack_writer(spec, seed, given)}
+        if stage in STAGE_INPUTS:
+            given = {s: inputs[s][0] for s in STAGE_INPUTS[stage]}
+            writer = _input_pack_writer(spec, seed, {s: given[s] for s in CLOSURE_INPUTS})
+            extra = {"inputs": given, "write_pack_to": writer}
         result = STAGES[stage](spec, settings, seed, progress, **extra)
         if use_cache:
             _save_stage(path, result)
@@ -400,5 +419,5 @@ def bake(spec: YarnSpec, output, quality: str = "draft", only=None, needs=None, 
             on_stage(stage, i, len(stages))
         results[stage] = run_stage(spec, stage, settings[stage], seed, use_cache,
                                    _lazy_progress(progress_factory, stage) if progress_factory else None,
-                                   inputs=results if stage == "closure" else None)
+                                   inputs=results if stage in STAGE_INPUTS else None)
     return write_baked_pack(spec, output, quality, settings, stages, needs, seed, results)

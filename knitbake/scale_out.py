@@ -37,8 +37,7 @@ import contextlib
 import os
 
 from data_formats.yarn_spec import YarnSpec
-from knitbake.bake import bake_plan, run_stage, write_baked_pack
-from knitbake.stages.closure import CLOSURE_INPUTS
+from knitbake.bake import STAGE_INPUTS, bake_plan, run_stage, write_baked_pack
 from knitbake.trace.path_tracer import MAX_DEPTH
 from knitbake.trace.reference import reference_batch, sample_batches
 
@@ -78,8 +77,8 @@ def submit_bake(client, spec: YarnSpec, output, quality: str = "draft", seed: in
     settings, stages = bake_plan(spec, quality, seed=seed, overrides=overrides)
     tag = os.urandom(4).hex()
     stage_futures = {}
-    for stage in stages:  # the closure (last) waits for its input stages' futures
-        inputs = {s: stage_futures[s] for s in CLOSURE_INPUTS} if stage == "closure" else None
+    for stage in stages:  # the closures (last) wait for their input stages' futures
+        inputs = {s: stage_futures[s] for s in STAGE_INPUTS[stage]} if stage in STAGE_INPUTS else None
         stage_futures[stage] = client.submit(run_stage, spec, stage, settings[stage], seed, use_cache, None, inputs,
                                              pure=False, key=f"{spec.name}-{stage}-{tag}")
     pack = client.submit(write_baked_pack, spec, str(output), quality, settings, stages, None, seed, stage_futures,

@@ -26,6 +26,7 @@ TINY = {
     "environment": {"shape": (3, 3, 4, 3)},
     "interreflection": {"n_views": 2, "rows": 4, "spp": 1, "batches": 2},
     "closure": {"iterations": 3},
+    "colour_closure": {"iterations": 1},
 }
 
 # --- asset packs --------------------------------------------------------------------------------------------------
@@ -45,7 +46,8 @@ def provenance():
             "sample_counts": {"correction/xi_M": {"batches": 4, "paths_per_batch": 1000}, "textures": 16}}
 
 
-SIZES = {"N_theta": 7, "N_v": 5, "N_phi": 8, "H": 8, "W": 16, "N_a": 3, "N_b": 4, "N_c": 2, "N_d": 5, "N_k": 6}
+SIZES = {"N_theta": 7, "N_v": 5, "N_phi": 8, "H": 8, "W": 16, "N_a": 3, "N_b": 4, "N_c": 2, "N_d": 5, "N_k": 6,
+         "N_kl": 3}
 FLY_HW = {"H": 4, "W": 8}
 
 

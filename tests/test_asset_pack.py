@@ -190,11 +190,11 @@ def test_unknown_major_version_fails_closed_higher_minor_accepted(tmp_path):
             f.attrs["schema_version"] = other
         _expect_bad(path, rf"unknown major version {other[0]}; this reader supports 2\.x")
     with h5py.File(path, "r+") as f:
-        f.attrs["schema_version"] = "2.7"
+        f.attrs["schema_version"] = "2.8"
         f.create_dataset("textures/new_thing", data=np.zeros(3))  # a member a later minor version added
         f.create_group("future_group")
     assert ap.validate(path) == []
-    assert ap.read_pack(path).schema_version == "2.7"
+    assert ap.read_pack(path).schema_version == "2.8"
     with h5py.File(path, "r+") as f:
         f.attrs["schema_version"] = "2.0"
     _expect_bad(path, r"textures/new_thing: unknown dataset")

@@ -78,10 +78,14 @@ def test_only_what_the_yarn_and_scene_need():
     assert "environment" not in stages_for(spec, needs={"environment": False})
     with pytest.raises(ValueError, match="unknown table group"):
         stages_for(spec, only=["xi"])
-    # the closure runs after, and only with, its four input stages
-    assert stages_for(spec)[-1] == "closure"
-    assert "closure" not in stages_for(spec, only=["correction", "shadowing"])
-    assert "closure" in stages_for(spec, only=["dual_scattering", "correction", "shadowing", "textures"])
+    # the closure runs after, and only with, its four input stages; the colour closure after it, and only with it
+    assert stages_for(spec)[-2:] == ["closure", "colour_closure"]
+    assert not {"closure", "colour_closure"} & set(stages_for(spec, only=["correction", "shadowing"]))
+    assert {"closure", "colour_closure"} <= set(stages_for(spec, only=["dual_scattering", "correction", "shadowing",
+                                                                       "textures"]))
+    # it closes the split ξ of multiple scattering: without the split (knitbake bake --whole-xi) there is none
+    assert "colour_closure" in bake_plan(spec, overrides=TINY)[1]
+    assert "colour_closure" not in bake_plan(spec, overrides={**TINY, "closure": {"split": False}})[1]
 
 
 def test_the_closures_cache_key_follows_its_input_stages():
@@ -93,6 +97,9 @@ def test_the_closures_cache_key_follows_its_input_stages():
         moved = bake_plan(spec, overrides={**TINY, stage: {**TINY[stage], **change}})[0]
         assert key(moved) != key(base), stage
     assert key(bake_plan(spec, overrides={**TINY, "environment": {"shape": (3, 3, 4, 4)}})[0]) == key(base)
+    # the colour closure's key follows the closure's settings too (it starts from the closure's ξ)
+    colour = lambda settings: stage_key("colour_closure", spec, settings["colour_closure"], 0)  # noqa: E731
+    assert colour(bake_plan(spec, overrides={**TINY, "closure": {"iterations": 2}})[0]) != colour(base)
 
 
 def test_scene_sets_texture_size_and_environment():

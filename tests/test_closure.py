@@ -3,6 +3,7 @@ path-traced radiance Ψ_* of the bake's yarn at every (θ_i, θ_o, φ) bin centr
 renderer reads the closed ξ by default where the pack has it, the diagonal-closed ξ of a schema-2.3 pack, and the
 paper's ξ when asked or where neither is there (``Features.closed_xi``)."""
 
+import dataclasses
 import shutil
 
 import h5py
@@ -12,7 +13,7 @@ import pytest
 from data_formats.asset_pack.schema import CLOSURE_STAGE_VERSION
 from data_formats.yarn_spec import load_preset
 from knitbake.bake import bake
-from knitbake.stages import closure
+from knitbake.stages import closure, colour_closure
 from knitrun.render import ablations
 from knitrun.render.ablations import Features
 from knitrun.render.pipeline import Renderer
@@ -32,7 +33,7 @@ def closed_pack(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("KNIT_CACHE_DIR", str(folder / "cache"))
         summary = bake(SPEC, folder / "cotton1.h5", overrides=SPLIT, only=list(closure.CLOSURE_INPUTS))
-    assert list(summary)[-1] == "closure" and not summary["closure"]["cached"]
+    assert list(summary)[-2:] == ["closure", "colour_closure"] and not summary["closure"]["cached"]
     return folder / "cotton1.h5"
 
 
@@ -72,6 +73,7 @@ def test_without_the_split_the_closure_bakes_the_one_xi_alone_and_the_same(close
     monkeypatch.setenv("KNIT_CACHE_DIR", str(closed_pack.parent / "cache"))
     summary = bake(SPEC, closed_pack.parent / "one.h5", overrides=WHOLE, only=list(closure.CLOSURE_INPUTS))
     assert not summary["closure"]["cached"] and all(row["cached"] for s, row in summary.items() if s != "closure")
+    assert "colour_closure" not in summary  # it closes the split ξ_ms
     with h5py.File(closed_pack) as a, h5py.File(closed_pack.parent / "one.h5") as b:
         assert not any(name.endswith(("_ss", "_ms")) for name in b["correction"])
         for name in ("xi_view", "xi_closed", "radiance_view"):
@@ -347,3 +349,81 @@ def test_the_renderer_reads_the_split_xi_by_default(closed_pack, tmp_path):
     renderer = Renderer(closure._scene(tmp_path, SPEC, old), features=Features(split_xi=True))
     assert renderer.looks[0].xi_single.shape[0] == 0
     assert "the pack has no ξ closed apart" in renderer.setup_facts["xi"][SPEC.name]
+
+
+# --- the colour closure (knitbake/stages/colour_closure.py) --------------------------------------------------------
+
+def _colour_inputs(closed_pack, monkeypatch):
+    """The colour closure's input stages of the fixture's bake, from its stage cache, and their pack writer."""
+    from knitbake import bake as bake_module
+
+    monkeypatch.setenv("KNIT_CACHE_DIR", str(closed_pack.parent / "cache"))
+    settings = bake_module.bake_plan(SPEC, overrides=SPLIT)[0]
+    inputs = {}
+    for stage in colour_closure.COLOUR_CLOSURE_INPUTS:
+        inputs[stage], row = bake_module.run_stage(SPEC, stage, settings[stage], 0)
+        assert row["cached"], stage
+    writer = bake_module._input_pack_writer(SPEC, 0, {s: inputs[s] for s in closure.CLOSURE_INPUTS})
+    return inputs, writer, settings["colour_closure"]
+
+
+def test_the_colour_closure_closes_multiple_scattering_where_the_white_xi_does_not(closed_pack, monkeypatch):
+    """In a grey k < 1 the strips with the white yarn's ξ_ms miss the path tracer's multiple scattering (Zinke's
+    estimate falls faster with the albedo than two scattering events do); closed in that grey they reach it."""
+    inputs, writer, settings = _colour_inputs(closed_pack, monkeypatch)
+    args = (SPEC, inputs, writer, settings["rows"])
+    _, _, _, white = colour_closure.close_by_colour(*args, 0, settings["spp"], settings["batches"], 0)
+    table, error, counts, closed = colour_closure.close_by_colour(*args, 2, settings["spp"], settings["batches"], 0)
+    assert white["closure_residual_rms"] > 0.3
+    assert closed["closure_residual_rms"] < 0.5 * white["closure_residual_rms"]
+    assert counts["bins_closed_k0.125"] > 0 and np.all(np.isfinite(table)) and np.all(np.isfinite(error))
+
+
+def test_the_colour_table_is_stored_beside_the_closures_white_xi_ms(closed_pack):
+    with h5py.File(closed_pack) as f:
+        table, white = f[colour_closure.TABLE][()], f["correction/xi_view_ms"][()]
+        assert f[colour_closure.TABLE].attrs["closure_version"] == CLOSURE_STAGE_VERSION
+    assert table.shape == (colour_closure.N_COLOURS,) + white.shape
+    assert np.all(np.isfinite(table)) and np.all(table >= 0)
+    assert not np.allclose(table[0], white)  # the darkest grey was closed on its own
+    np.testing.assert_allclose(colour_closure.colour_scales(), [0.125, 0.25, 0.5])
+
+
+def test_the_strips_single_scattering_is_linear_in_the_colour(closed_pack):
+    """The colour closure draws the strips' single scattering once, in white, and scales it by k (module docstring):
+    the BCSDF is linear in the lobe albedos."""
+    shape = (ROWS, 2, 2, 2)
+    white = closure.render_bins(closed_pack, SPEC, shape, ROWS, split=True, single=True)
+    grey = closure.render_bins(closed_pack, SPEC, shape, ROWS, split=True, single=True, colour_scale=0.25)
+    assert white.max() > 0
+    np.testing.assert_allclose(grey, 0.25 * white, rtol=1e-5, atol=1e-7 * white.max())
+
+
+def test_each_channel_reads_the_colour_table_at_its_own_colour():
+    from knitrun.render.yarn_look import ms_xi_in_colour
+
+    # the samples at k = 1/8, 1/4, 1/2 hold 1, 2, 3 and the white table (k = 1) 4
+    table = np.broadcast_to(np.arange(1.0, 4.0)[:, None, None, None, None, None], (3, 2, 3, 3, 2, 3)).copy()
+    white, span = np.full((2, 3, 3, 2, 3), 4.0), (-3.5, -0.5)
+    # on the samples, their values; between two, linear in 1/k (k = 2^-1.5: 1/k = 2√2 between 4 and 2; 0.75: 4/3
+    # between 2 and 1); beyond the ends, the ends (0 reads the darkest)
+    for colour, want in (((1.0, 0.25, 0.125), (4, 2, 1)), ((2 ** -1.5, 0.05, 3.0), (2 + (4 - 2 * 2 ** 0.5) / 2, 1, 4)),
+                         ((0.0, 0.75, 0.5), (1, 3 + 2 / 3, 3))):
+        got = ms_xi_in_colour(table, span, white, np.array(colour))
+        np.testing.assert_allclose(got[0, 0, 0, 0], want, err_msg=str(colour))
+
+
+def test_the_renderer_draws_multiple_scattering_with_the_xi_of_its_colour(closed_pack, tmp_path):
+    from knitrun.render.yarn_look import ms_xi_in_colour
+
+    scene = closure._scene(tmp_path, SPEC, closed_pack)
+    red = dataclasses.replace(scene, yarns=(dataclasses.replace(scene.yarns[0], color=(0.9, 0.25, 0.2)),))
+    with h5py.File(closed_pack) as f:
+        table, white = f[colour_closure.TABLE][()], f["correction/xi_view_ms"][()]
+    bare = Features(flyaways=False)
+    look = Renderer(red, features=bare).looks[0]
+    np.testing.assert_allclose(look.xi_view, ms_xi_in_colour(table, (-3.5, -0.5), white, np.array([0.9, 0.25, 0.2])))
+    assert "colour" in look.xi_from
+    np.testing.assert_allclose(Renderer(red, features=Features(flyaways=False, colour_xi=False)).looks[0].xi_view,
+                               white)
+    np.testing.assert_allclose(Renderer(scene, features=bare).looks[0].xi_view, white)  # white: the closure's own

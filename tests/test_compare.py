@@ -179,7 +179,8 @@ def test_cli_compare_writes_a_complete_report(tmp_path, pack):
     assert "## Verdict" in report and "instance floor" in report and "FLIP" in report
     assert "ply-scale contrast" in report and "with the Monte Carlo floor" in report
     assert summary["ablations"]["full"]["xi"] == {
-        "cotton1": "closed on the renderer at every view, apart on single and multiple scattering"}
+        "cotton1": "closed on the renderer at every view, apart on single and multiple scattering, multiple "
+                   "scattering's closed in the yarn's colour"}
     assert summary["ablations"]["whole_xi"]["xi"] == {"cotton1": "closed on the renderer at every view"}
     assert summary["ablations"]["papers_xi"]["xi"] == {"cotton1": "the paper's"}
     assert "Rows drawn without the tables they ask for" not in report

@@ -13,7 +13,7 @@ import numpy as np
 from ..conventions import HALF_PI, LENGTH_UNITS, PHI_RANGE, THETA_RANGE
 
 FORMAT_NAME = "knit-asset-pack"
-SCHEMA_VERSION = "2.6"
+SCHEMA_VERSION = "2.7"
 SCHEMA_MAJOR, SCHEMA_MINOR = (int(p) for p in SCHEMA_VERSION.split("."))
 # the closure stage version whose closed ξ (correction/xi_view, xi_closed) closes on knit's current renderer; each
 # closed table carries the version that baked it (attribute closure_version, ASSET_PACK.md §6) and knit's renderer
@@ -69,6 +69,9 @@ AXES = {a.name: a for a in (
     Axis("colour_scale", True, (-1.0 / 32.0, 33.0 / 32.0), "clamp", "1",
          "k: the factor on the fiber's lobe albedos A_R, A_TT, A_D in one channel (a scene colour's channel); 17 "
          "cells put the samples at k = 0, 1/16, …, 1"),
+    Axis("log2_colour_scale", True, (-3.5, -0.5), "clamp", "1",
+         "log2 k, k the factor on the fiber's lobe albedos in one channel (as colour_scale); 3 cells put the samples "
+         "at k = 1/8, 1/4, 1/2 (k = 1 is the white yarn's table)"),
     Axis("channel", False, None, None, "", "colour or vector channel"),
     Axis("variant", False, None, None, "", "flyaway texture variant 0, 1, 2"),
 )}
@@ -157,6 +160,11 @@ TABLES = (
               ("v", "theta_i", "theta_o", "phi", "channel"), "1",
               "ξ of multiple scattering, closed apart: the rest reproduces correction/radiance_view − "
               "correction/radiance_view_ss (since schema 2.5, §6)", value_range=(0.0, None)),
+    TableSpec("correction/xi_view_ms_by_colour", "correction", ("N_kl", "N_v", "N_theta", "N_theta", "N_phi", 3),
+              ("log2_colour_scale", "v", "theta_i", "theta_o", "phi", "channel"), "1",
+              "correction/xi_view_ms closed on the yarn whose fibers' lobe albedos are scaled by k: channel c at k is "
+              "the ξ of multiple scattering, in that channel, of the yarn drawn in a colour whose channel c is k (k < "
+              "1; at k = 1 it is correction/xi_view_ms) (since schema 2.7, §6)", value_range=(0.0, None)),
     TableSpec("correction/xi_closed_ss", "correction", ("N_v", "N_theta", "N_phi", 3),
               ("v", "theta_d", "phi", "channel"), "1",
               "the diagonal θ_o = −θ_i of correction/xi_view_ss (since schema 2.5, §6)", value_range=(0.0, None)),

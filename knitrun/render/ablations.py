@@ -102,6 +102,13 @@ the four patches' yarn-scale error over the instance floor falls from 1.47 / 1.6
 1.36 / 1.76× (directional, sky, grazing, simulated; BENCHMARKS.md, "Issue 13: ξ closed apart as the default (stop
 56)"). The ablation ``whole_xi`` shades with the one ξ.
 
+``colour_xi`` (with ``split_xi`` at every view) reads ξ of multiple scattering in the yarn's colour, channel by
+channel, from the pack's ``correction/xi_view_ms_by_colour`` (schema 2.7, baked by the ``colour_closure`` stage;
+``yarn_look.ms_xi_in_colour``): closed on the white yarn alone it left the dark channels of a coloured yarn with
+0.3–0.6 of the path tracer's multiple scattering (ASSET_PACK.md §6 "Against the colour"; BENCHMARKS.md, stop 77).
+The default on both backends since stop 77 (the GL backend takes each entry's table from the CPU renderer's looks);
+the ablation ``white_ms_xi`` reads the white yarn's in every colour.
+
 ``two_blockers`` counts up to two yarns between a point and a directional light instead of one: a depth-peeled
 second shadow layer (``shadow_map``, ``behind``) gives V₂, the fraction of the light that at most one yarn blocks,
 and the light passing between the fibers becomes V + (V₂ − V) τ_Y + (1 − V₂) τ_Y², the scattered rest crossing
@@ -196,6 +203,7 @@ class Features:
     hair_bounce: bool = True  # with yarn_bounce: onto its hairs too (strip_shading.hair_bounce)
     split_xi: bool = True  # ξ closed apart on single and multiple scattering (correction/xi_*_ss, _ms) where the pack
     # has it, else the one closed ξ
+    colour_xi: bool = True  # with split_xi: multiple scattering's ξ closed in the yarn's colour (xi_view_ms_by_colour)
     two_blockers: bool = True  # up to two yarns counted between a point and a directional light (second shadow layer)
     surface_shadows: bool = True  # regular points look their lights up on the tube surface seen, not the axis plane
     hair_glow: bool = True  # hairs beside and over a yarn lit by the light its body scatters (strip_shading.body_glow)
@@ -223,6 +231,7 @@ ABLATIONS = {
     "no_hair_bounce": Features(hair_bounce=False),
     "axis_shadows": Features(surface_shadows=False),
     "whole_xi": Features(split_xi=False),
+    "white_ms_xi": Features(colour_xi=False),
     "one_blocker": Features(two_blockers=False),
     "no_hair_glow": Features(hair_glow=False),
     "no_hairs_behind": Features(hairs_behind=False),
@@ -241,6 +250,7 @@ ABLATION_LABELS = {"plain_ds": "plain DS", "xi": "+ ξ correction", "xi_shadowin
                    "no_hair_bounce": "full without the yarn-level bounce on the hairs",
                    "axis_shadows": "full with shadows looked up on the strip's axis plane",
                    "whole_xi": "full with one ξ closed on single and multiple scattering together",
+                   "white_ms_xi": "full with multiple scattering's ξ closed on the white yarn alone",
                    "one_blocker": "full with one blocking yarn counted per ray",
                    "no_hair_glow": "full without the body's glow on its hairs",
                    "no_hairs_behind": "full with every hair seen over a body in front of it",

@@ -536,7 +536,8 @@ class Renderer:
                            corrections=features.xi or features.fiber_shadowing, full_tables=features.full_tables,
                            flyaways=features.flyaways, environment=environment, detail=features.fiber_detail,
                            transmission=features.interreflection, closed_xi=features.closed_xi,
-                           view_xi=features.view_xi, split_xi=features.split_xi)
+                           view_xi=features.view_xi, split_xi=features.split_xi,
+                           colour_xi=features.colour_xi)
                  for k, e in enumerate(scene.yarns)]
         for look in looks:
             if not features.xi:

@@ -9,7 +9,10 @@ flyaways, environment) and converts everything to the scene:
 * Colour: the entry's ``color`` multiplies the BCSDF lobe colours A_R, A_TT, A_D (as the reference path tracer does).
   f is linear in those colours, so I_M and the dual-scattering averages ā_f, ā_b scale with the colour while the
   shifts and widths stay; Ā_b, Δ̄_b, σ̄_b are recomputed from them (``dual_scattering.backscatter_terms``), exactly. The
-  correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked.
+  correction ξ and the shadowing Ψ^Fiber are ratios and visibilities and are used as baked, but for ξ of multiple
+  scattering where the pack has it closed in greys (``correction/xi_view_ms_by_colour``, schema 2.7): each channel
+  reads it at its colour (``ms_xi_in_colour``), since the dual-scattering estimate and the path tracer's multiple
+  scattering fall with the colour at different rates (ASSET_PACK.md §6 "Against the colour").
 * Hull albedo ρ_Y (``/interreflection/albedo``, read with an environment light or with ``transmission``) and
   transmittance T_Y in the entry's colour (``hull_colour``): each channel read off the pack's curve against the
   colour (``/interreflection/*_by_colour``, schema 2.6: ρ_Y and T_Y of the yarn whose fibers' lobe albedos are
@@ -35,6 +38,7 @@ flyaways, environment) and converts everything to the scene:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +66,7 @@ VIEW_XI = "correction/xi_view"  # optional (schema ≥ 2.4): ξ closed at every 
 # optional (schema ≥ 2.5): ξ closed apart on single (ss) and multiple (ms) scattering, on the diagonal and at every view
 SPLIT_XI = {"ss": "correction/xi_closed_ss", "ms": "correction/xi_closed_ms"}
 SPLIT_VIEW_XI = {"ss": "correction/xi_view_ss", "ms": "correction/xi_view_ms"}
+MS_BY_COLOUR = "correction/xi_view_ms_by_colour"  # optional (schema ≥ 2.7): xi_view_ms closed on coloured yarns
 ALBEDO_TABLE = "interreflection/albedo"  # optional: absent from packs of schema < 2.1
 TRANSMITTANCE_TABLE = "interreflection/transmittance"  # optional: absent from packs of schema < 2.2
 BY_COLOUR = {ALBEDO_TABLE: "interreflection/albedo_by_colour",  # optional: absent from packs of schema < 2.6
@@ -184,7 +189,7 @@ def fiber_detail_chain(ao_levels, coverage_levels, albedo: float = 0.0) -> list:
 
 def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=True, flyaways=True,
               environment=False, detail=True, transmission=True, closed_xi=True, view_xi=False,
-              split_xi=False) -> YarnLook:
+              split_xi=False, colour_xi=False) -> YarnLook:
     """Read ``pack_path`` for scene yarn ``entry`` (``data_formats.scene.YarnEntry``) in scene ``units``. Raises
     ``data_formats.errors.FormatError`` for an unreadable pack and ValueError (one line) for a pack that cannot
     serve the entry (another yarn, a missing table, an I_M parameterisation this renderer does not implement).
@@ -199,8 +204,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     schema ≥ 2.4) before the diagonal's; ``split_xi``: those closed apart on
     single and multiple scattering (``correction/xi_{closed,view}_{ss,ms}``, schema ≥ 2.5) instead, where the pack has
     them (multiple scattering's in ``xi_full``/``xi_view``, single's in ``xi_single``/``xi_single_view``);
-    ``YarnLook.xi_from`` says which ξ
-    was read."""
+    ``colour_xi`` (with the split ξ at every view): multiple scattering's from the pack's
+    ``correction/xi_view_ms_by_colour`` in the entry's colour (schema ≥ 2.7, ``ms_xi_in_colour``) where it has it;
+    ``YarnLook.xi_from`` says which ξ was read."""
     header = read_pack(pack_path, tables=[])
     spec = loads_spec(header.provenance["yarn_spec_toml"])
     if spec.name != entry.spec.name:
@@ -226,8 +232,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         warnings.append(f"{pack_path}: its ξ was closed by closure stage version {version or '< 4'}, older than "
                         f"this knit's (version {CLOSURE_STAGE_VERSION}; ASSET_PACK.md §6 says what each changed): "
                         f"re-bake the pack (knitbake bake reuses the stages that did not change)")
+    colour_xi = colour_xi and split == SPLIT_VIEW_XI and MS_BY_COLOUR in stored
     if split:
-        names += list(split.values())
+        names += list(split.values()) + ([MS_BY_COLOUR] if colour_xi else [])
     elif view_xi:
         names.append(VIEW_XI)
     elif closed_xi:
@@ -278,6 +285,9 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
     single, single_view = no_full_table(), no_view_table()
     if split and view_xi:
         tables[VIEW_XI], single_view = tables[split["ms"]], tables[split["ss"]]
+        if colour_xi:
+            tables[VIEW_XI] = ms_xi_in_colour(pack.tables[MS_BY_COLOUR], pack.info[MS_BY_COLOUR].axes[0].range,
+                                              tables[split["ms"]], colour)
     elif split:
         tables["correction/xi"], single = tables[split["ms"]], tables[split["ss"]]
     xi_from = ("none (switched off)" if not corrections else
@@ -286,7 +296,8 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
                 ("" if CLOSED_XI in stored or not full_tables else f" (the pack has no {CLOSED_XI})"))
                + (", apart on single and multiple scattering" if split else
                   " (the pack has no ξ closed apart on single and multiple scattering)"
-                  if split_xi and (view_xi or closed_xi) else ""))  # the paper's ξ has no split: nothing to say
+                  if split_xi and (view_xi or closed_xi) else "")  # the paper's ξ has no split: nothing to say
+               + (", multiple scattering's closed in the yarn's colour" if colour_xi else ""))
     fly = pack.mip_chain("textures/flyaway") if flyaways else []
     im = None
     if environment:
@@ -327,6 +338,27 @@ def load_look(pack_path, entry, units: str, *, corrections=True, full_tables=Tru
         hull_albedo=hull_albedo, hull_transmittance=hull_transmittance, hull_from=hull_from, tube_phase=phase,
         yarn_albedo=None if hull_albedo is None else float(hull_albedo @ LUMINANCE), im=im,
         residuals=residuals)
+
+
+def ms_xi_in_colour(by_colour, log2_range, white, colour) -> np.ndarray:
+    """ξ of multiple scattering (N_v, N_θ, N_θ, N_φ, 3) for a yarn drawn in the RGB ``colour``: channel c read at
+    k = colour[c] off the samples of ``by_colour`` (N_k, N_v, N_θ, N_θ, N_φ, 3; ``correction/xi_view_ms_by_colour``,
+    at the cell centres of the ``log2_colour_scale`` range ``log2_range``) and ``white`` (``correction/xi_view_ms``)
+    at k = 1; between the two samples k_0 < k ≤ k_1 that bracket it linear in 1/k (ASSET_PACK.md §6 "Against the
+    colour": where a path of two events dominates, the path tracer's multiple scattering falls as k² and the
+    dual-scattering estimate as k³, so the ξ that closes them grows as 1/k), clamped at the darkest sample and at 1 (a
+    channel of 0 reads the darkest, whose multiple scattering its colour then takes to 0)."""
+    n = len(by_colour)
+    lo, hi = log2_range
+    scales = [2.0 ** (lo + (i + 0.5) * (hi - lo) / n) for i in range(n)] + [1.0]
+    samples = [np.asarray(t, np.float64) for t in by_colour] + [np.asarray(white, np.float64)]
+    out = np.empty(samples[-1].shape)
+    for c in range(3):
+        k = min(max(float(colour[c]), scales[0]), 1.0)
+        i = next(j for j in range(1, n + 1) if k <= scales[j])
+        f = (1.0 / scales[i - 1] - 1.0 / k) / (1.0 / scales[i - 1] - 1.0 / scales[i])  # the weight on k_1 = scales[i]
+        out[..., c] = (1.0 - f) * samples[i - 1][..., c] + f * samples[i][..., c]
+    return out
 
 
 def hull_colour(pack, name: str, colour) -> np.ndarray:
