@@ -56,6 +56,11 @@ scattering, as drawn and with its mean matched; and how concentrated each is: th
 variation there and its correlation with the draws' mean. A draws' mean as concentrated as one draw and nearer the
 reference than the floor says where single scattering lies is the geometry's, which a model could place.
 
+``--color R,G,B`` draws every yarn of each scene in that colour (both images), and ``--channels`` adds, per scene and
+model, the whole, SS and MS over the reference's in each RGB channel: a colour's dark channels hold less multiple
+scattering, mostly of two events, and a model can miss it there while the bright channel is right (BENCHMARKS.md,
+"Issue 13: the multiple scattering of a coloured yarn", stop 77).
+
 ``--out DIR`` keeps the images
 (``<scene>/{reference,instance}_{full,single}.exr``, ``strip_<model>_{full,single}.exr``).
 
@@ -149,6 +154,21 @@ def split_rows(name, d, ref, inst, strips):
             cells += ["—"] * 4
         rows.append("| " + " | ".join(cells) + " |")
     return rows, floor
+
+
+def channel_rows(name, scene, ref, inst, strips):
+    """Markdown rows: per RGB channel, the instance's and each model's whole, SS and MS over the reference's (a
+    colour's dark channels hold less multiple scattering, which a model may get wrong apart from the bright one)."""
+    def ratios(full, single):
+        sums = [x.sum(axis=(0, 1)) for x in (full, single, full - single)]
+        refs = [x.sum(axis=(0, 1)) for x in (ref[0], ref[1], ref[0] - ref[1])]
+        return [" / ".join(f"{a / b:.3f}" if b > 0 else "—" for a, b in zip(part, whole))
+                for part, whole in zip(sums, refs)]
+
+    share = (ref[0] - ref[1]).sum(axis=(0, 1)) / np.maximum(ref[0].sum(axis=(0, 1)), 1e-300)
+    colour = " / ".join(f"{c:g}" for c in scene.yarns[0].color)
+    return ["| " + " | ".join([name, colour, label, *ratios(*images), " / ".join(f"{x:.3f}" for x in share)]) + " |"
+            for label, images in [("*other fiber instance*", inst), *strips.items()]]
 
 
 def tilt_rows(name, d, at, ref, strips):
@@ -326,6 +346,9 @@ def main():
     parser.add_argument("--no-flyaways", action="store_true", help="the regular fibers alone, in both")
     parser.add_argument("--ss-draws", type=int, default=0, help="trace N more fiber draws at one event: how much of "
                         "the single scattering's place the yarns fix (module docstring)")
+    parser.add_argument("--color", default=None, help="R,G,B: draw every yarn in this colour instead of the scene's")
+    parser.add_argument("--channels", action="store_true",
+                        help="each model's whole, SS and MS over the reference's per RGB channel")
     parser.add_argument("--out", type=Path, default=None, help="keep the images here")
     args = parser.parse_args()
     models, names = checked_models_and_scenes(parser, args)
@@ -341,6 +364,14 @@ def main():
         keep = None if args.curves is None else [int(c) for c in args.curves.split(",")]
     except ValueError:
         parser.error(f"--curves: {args.curves!r} is not a comma-separated list of curve indices")
+    colour = None
+    if args.color is not None:
+        try:
+            colour = tuple(float(c) for c in args.color.split(","))
+        except ValueError:
+            colour = ()
+        if len(colour) != 3 or not all(math.isfinite(c) and c >= 0.0 for c in colour):
+            parser.error(f"--color: {args.color!r} is not three finite numbers ≥ 0 (R,G,B)")
     flyaways = not args.no_flyaways
     scratch = tempfile.TemporaryDirectory(prefix="probe_split_")
     print("Over a black background; ratios of RGB means to the reference's (the compare weighs luminance); rel L1 at "
@@ -348,10 +379,12 @@ def main():
     print("| scene | model | mean ratio | SS mean ratio | MS mean ratio | rel L1 (d) / floor | with the instance's MS "
           "| with the instance's SS | SS / its floor | MS / its floor |")
     print("|---" * 10 + "|")
-    tilt_tables, loop_tables, layer_tables, draw_tables = [], [], [], []
+    tilt_tables, loop_tables, layer_tables, draw_tables, channel_tables = [], [], [], [], []
     for name in names:
         scene = load_scene(ROOT / "examples" / "scenes" / f"{name}.toml")
         scene = dataclasses.replace(scene, background=(0.0, 0.0, 0.0))
+        if colour is not None:
+            scene = dataclasses.replace(scene, yarns=tuple(dataclasses.replace(y, color=colour) for y in scene.yarns))
         if keep is not None or args.scale != 1.0:
             folder = Path(scratch.name) / name
             folder.mkdir()
@@ -375,6 +408,8 @@ def main():
                                           *((f"strip_{m}", s) for m, s in strips.items())]:
                 write_exr(folder / f"{label}_full.exr", full.astype(np.float32))
                 write_exr(folder / f"{label}_single.exr", single.astype(np.float32))
+        if args.channels:
+            channel_tables += channel_rows(name, scene, ref, inst, strips)
         if args.layers:
             *ref_regular, _ = traced(scene, spp, seed, seed, seen="regular")
             *inst_regular, _ = traced(scene, spp, seed + 1, seed + 1, seen="regular")
@@ -394,6 +429,12 @@ def main():
         if args.loop_bins and all(y.curves is not None and Path(y.curves).name == CRANE_CURVES for y in scene.yarns):
             loop_tables += loop_rows(name, scene, args.pack, models[0], ref, inst, strips[models[0]])
     scratch.cleanup()
+    if channel_tables:
+        print("\nPer channel (R / G / B) over the reference's: whole, SS, MS; the yarns' colour and the reference's "
+              "share of MS in each channel:\n")
+        print("| scene | colour | image | whole | SS | MS | reference's MS share |")
+        print("|---" * 7 + "|")
+        print("\n".join(channel_tables))
     if tilt_tables:
         print("\nYarn-scale SS / MS at the control points, by |ω_o · t|:\n")
         print("| scene | image | " + " | ".join(f"{lo:.1f}–{hi:.1f}" for lo, hi in zip(TILT_BINS[:-1], TILT_BINS[1:]))
