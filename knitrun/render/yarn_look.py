@@ -38,7 +38,6 @@ flyaways, environment) and converts everything to the scene:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
