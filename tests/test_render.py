@@ -20,6 +20,7 @@ from data_formats.yarn_curves import make_yarn_curves, write_yarn_curves
 from data_formats.yarn_spec import dumps_spec, load_preset
 from knitbake.bake import bake
 from knitbake.stages import im_table as im
+from knitrun.render import pipeline
 from knitrun.render.ablations import ABLATIONS, Features
 from knitrun.render.pipeline import (PARALLAX_MAX_SIN, SHADOW_BIAS_RADII, Renderer, parallax_shift,
                                      radius_mismatch, render, strip_receivers)
@@ -355,7 +356,7 @@ def test_the_axial_parallax_reads_the_centre_line_whose_surface_is_seen():
     """A straight yarn tilted by ψ toward the camera: the point at v is read r √(1 − v²) tan ψ further along (in rest
     length: half as far on a yarn stretched 2×), its tangent unchanged; across the view (ψ = 0) and at the strip's
     edges (|v| = 1) nothing moves; past the clamp the shift stops growing. On a ring seen edge-on the tangent turns
-    with the arc: the circle's tangent at the shifted arc length."""
+    with the arc: the circle's tangent at the shifted arc length (where the shift lands: the next test)."""
     r = 0.03
     for psi in (0.0, 0.4, 1.3):  # 1.3: beyond the clamp (sin ψ = 0.96)
         axis = np.array([math.cos(psi), 0.0, math.sin(psi)])
@@ -375,15 +376,39 @@ def test_the_axial_parallax_reads_the_centre_line_whose_surface_is_seen():
     seg = np.floor(at / (angle[1] - angle[0])).astype(int)
     tangent = np.stack([-np.sin(at), np.zeros_like(at), np.cos(at)], axis=1)
     got = _parallax_points(xyz, rest, seg, rho * at, np.zeros_like(at), tangent, [0, 0, 1], r)
-    sin_o = np.clip(np.cos(at), -PARALLAX_MAX_SIN, PARALLAX_MAX_SIN)
-    moved = at + r * sin_o / np.sqrt(1 - sin_o ** 2) / rho
-    np.testing.assert_allclose(got["arclength"], rho * moved, atol=1e-6)
+    moved = got["arclength"] / rho
+    assert np.all(np.abs(moved - at) > 0.02 * r / rho)
     expect = np.stack([-np.sin(moved), np.zeros_like(at), np.cos(moved)], axis=1)
     np.testing.assert_allclose(got["tangent"], expect, atol=2e-4)
     # a closed curve's closing segment (from its last vertex back to its first) keeps its attributes
     closing = _parallax_points(xyz, rest, [n - 1], [rest[-1] + 1e-4], [0.0], [[0.0, 0.0, 1.0]], [0, 0, 1], r)
     assert closing["segment"][0] == n - 1 and closing["arclength"][0] == np.float32(rest[-1] + 1e-4)
     np.testing.assert_array_equal(closing["tangent"], [[0.0, 0.0, 1.0]])
+
+
+def test_the_axial_parallax_meets_the_tube_where_the_ray_does_on_a_ring(monkeypatch):
+    """A ring of radius ρ = 0.2 (a torus of tube radius r = 0.03) in the x–z plane, seen edge-on from +z, v = 0: the
+    ray through the strip point at angle a meets the outer wall (ρ + r) on the half toward the camera and the inner
+    wall (ρ − r) on the far half, at the angle a' whose x is ρ cos a; the parallax's shift is ρ (a' − a). Its Newton
+    steps land within 1 % of it on both walls (measured ≤ 0.7 %), where the straight tube's shift alone (one step)
+    errs by 15–29 %."""
+    rho, r, n = 0.2, 0.03, 721
+    angle = np.linspace(0.0, 2 * np.pi, n)
+    xyz = np.stack([rho * np.cos(angle), np.zeros(n), rho * np.sin(angle)], axis=1)
+    at = np.array([0.6, 0.9, 1.4, 1.8, 2.5, 3.9, 4.3, 5.0, 5.5])
+    seg = np.floor(at / (angle[1] - angle[0])).astype(int)
+    tangent = np.stack([-np.sin(at), np.zeros_like(at), np.cos(at)], axis=1)
+    x = rho * np.cos(at)
+    z = np.where(np.sin(at) > 0, np.sqrt((rho + r) ** 2 - x ** 2), -np.sqrt((rho - r) ** 2 - x ** 2))
+    exact = np.mod(np.arctan2(z, x), 2 * np.pi) - at
+
+    def shift():
+        got = _parallax_points(xyz, rho * angle, seg, rho * at, np.zeros_like(at), tangent, [0, 0, 1], r)
+        return got["arclength"] / rho - at
+
+    assert np.all(np.abs(shift() - exact) < 0.01 * np.abs(exact))
+    monkeypatch.setattr(pipeline, "PARALLAX_PASSES", 1)
+    assert np.all(np.abs(shift() - exact) > 0.14 * np.abs(exact))
 
 
 def test_the_axial_parallax_leaves_a_yarn_across_the_view_and_moves_a_tilted_bent_one(tmp_path, pack):
@@ -463,7 +488,6 @@ def test_a_lone_yarns_hairs_are_not_shadowed_by_its_own_strip(tmp_path, pack, mo
     side = SUN.replace("direction = [0.3, 0.6, 1.0]", "direction = [0.2, 0.8, -0.5]")
     path = write_scene(tmp_path, [straight()], camera=FRONT, lights=side, name="side")
     mapped = _render(path, pack)
-    from knitrun.render import pipeline
 
     def lit_everywhere(lines, radius, direction, size, angular, receivers, depth_maps, two_layers=False):
         return [(np.ones(len(r.position)),) * 2 if two_layers else np.ones(len(r.position)) for r in receivers]

@@ -46,9 +46,9 @@ the lights up on the tube surface seen (the fragment's position moved r âˆš(1 âˆ
 ``pipeline.strip_receivers``); ``Features.parallax`` walks the frame's polylines (a texture of points, rest arc
 lengths, vertex tangents and yarn frame normals, ``_polyline_textures``) from the fragment's segment as
 ``pipeline.parallax_shift`` does, first to the segment its sample lies on (a fragment's sample may lie past its own
-segment's end), then by the shift, at most ``PARALLAX_STEPS`` segments each way; ``Features.fiber_bend`` reads
-the bend and stretch of the segment it ends on from the same texture (``pipeline.segment_bend``,
-``strip_shading.fiber_bend``);
+segment's end), then by each of the shift's Newton steps, at most ``PARALLAX_STEPS`` segments each way;
+``Features.fiber_bend`` reads the bend and stretch of the segment it ends on from the same texture
+(``pipeline.segment_bend``, ``strip_shading.fiber_bend``);
 ``Features.yarn_bounce``, the light the neighbouring yarns scatter onto each polyline point, is prepared on the
 CPU (``pipeline.frame_bounce``, the lights' visibility at the points looked up in this frame's light atlas read back,
 ``_read_light_maps``; until stop 72 the CPU twin drew them again, ~106 ms a light on 2 cores), its sums over the
@@ -180,6 +180,8 @@ def gl_constants() -> str:
         f"const float NO_YARN = {NO_YARN!r};",
         f"const float PCF_RADIUS = {PCF_RADIUS!r};",
         f"const float PARALLAX_MAX_SIN = {pipeline.PARALLAX_MAX_SIN!r};",
+        f"const int PARALLAX_PASSES = {pipeline.PARALLAX_PASSES};",
+        f"const float PARALLAX_MIN_SLOPE = {pipeline.PARALLAX_MIN_SLOPE!r};",
         f"const float MIN_ALONG = {strip_shading.MIN_ALONG!r};",
         f"const float OWN_STRIP_MAX = {OWN_STRIP_MAX!r};",
         f"const int PARALLAX_STEPS = {PARALLAX_STEPS};",

@@ -47,29 +47,44 @@ void walk(inout float at, inout int j, inout float len, int lo, int hi) {
     }
 }
 
-// the regular point read r √(1 − v²) tan θ_o further along its curve (pipeline.parallax_shift), walked in current
-// length: its tangent turned by the vertex tangents' change, its rest arc length, strip frame and view phase there.
+// the regular point read further along its curve where the ray meets the tube (pipeline.parallax_shift): the shift
+// δ by PARALLAX_PASSES Newton steps on R(δ) = e·(c(s + δ) − c(s)) − h tan θ'_o (e·t'), walked in current length: its
+// tangent turned by the vertex tangents' change, its rest arc length, strip frame and view phase there.
 // A fragment's sample may lie past its own segment's end (strip_point extends a segment's attributes to its
 // neighbours), where the CPU shades the neighbour's triangle: the point is first found on the segment it lies on.
 void axial_parallax(inout StripPoint sp) {
     vec2 bounds = texelFetch(curve_bounds, ivec2(fin.curve % POLYLINE_ROW, fin.curve / POLYLINE_ROW), 0).xy;
     int lo = int(bounds.x), hi = int(bounds.y), j = fin.segment;
-    if (j >= hi)
+    vec3 e = sp.t - dot(sp.t, sp.wo) * sp.wo;  // the yarn's direction in the image
+    if (j >= hi || !(length(e) > 0.0))
         return;
-    float sin_o = clamp(dot(sp.t, sp.wo), -PARALLAX_MAX_SIN, PARALLAX_MAX_SIN);
-    float shift = radius * sqrt(max(0.0, 1.0 - sp.v * sp.v)) * sin_o / sqrt(1.0 - sin_o * sin_o);
+    e = normalize(e);
     vec4 a = polyline_at(j, 0), b = polyline_at(j + 1, 0);
     float d_rest = b.w - a.w, len = distance(a.xyz, b.xyz);
     float at = d_rest > 0.0 ? (sp.s - a.w) / d_rest * len : 0.0;
     walk(at, j, len, lo, hi);
-    float f0 = len > 0.0 ? clamp(at / len, 0.0, 1.0) : 0.0;
-    vec3 h = mix(polyline_at(j, 1).xyz, polyline_at(j + 1, 1).xyz, f0);
-    at = f0 * len + shift;
-    walk(at, j, len, lo, hi);
-    float f = len > 0.0 ? clamp(at / len, 0.0, 1.0) : 0.0;
-    vec3 m = sp.t + mix(polyline_at(j, 1).xyz, polyline_at(j + 1, 1).xyz, f) - h;
-    if (length(m) > 0.0)
-        sp.t = normalize(m);
+    int i = j;
+    float len_i = len, f0 = len > 0.0 ? clamp(at / len, 0.0, 1.0) : 0.0;
+    vec3 h = mix(polyline_at(i, 1).xyz, polyline_at(i + 1, 1).xyz, f0);
+    float start = dot(e, mix(polyline_at(i, 0).xyz, polyline_at(i + 1, 0).xyz, f0));
+    float height = radius * sqrt(max(0.0, 1.0 - sp.v * sp.v));
+    float max_shift = height * PARALLAX_MAX_SIN / sqrt(1.0 - PARALLAX_MAX_SIN * PARALLAX_MAX_SIN);
+    vec3 t = sp.t;
+    float shift = 0.0, seen = 0.0, f = f0;
+    for (int pass = 0; pass < PARALLAX_PASSES; ++pass) {
+        float sin_o = clamp(dot(t, sp.wo), -PARALLAX_MAX_SIN, PARALLAX_MAX_SIN), slope = dot(t, e);
+        float residual = seen - height * sin_o / sqrt(1.0 - sin_o * sin_o) * slope;
+        shift = clamp(shift - residual / max(slope, PARALLAX_MIN_SLOPE), -max_shift, max_shift);
+        j = i;
+        len = len_i;
+        at = f0 * len + shift;
+        walk(at, j, len, lo, hi);
+        f = len > 0.0 ? clamp(at / len, 0.0, 1.0) : 0.0;
+        seen = dot(e, mix(polyline_at(j, 0).xyz, polyline_at(j + 1, 0).xyz, f)) - start;
+        vec3 m = sp.t + mix(polyline_at(j, 1).xyz, polyline_at(j + 1, 1).xyz, f) - h;
+        t = length(m) > 0.0 ? normalize(m) : sp.t;
+    }
+    sp.t = t;
     vec4 pj = polyline_at(j, 0), pk = polyline_at(j + 1, 0);
     sp.s = pj.w + f * (pk.w - pj.w);
     sp.segment = j;
