@@ -125,9 +125,11 @@ QUALITY = {
 # CLAMP 4 → 8; flyaway 3: the draw of flyaways nearest the yarn's coverage profile (textures.nearest_flyaway_draw);
 # correction 8, closure 5: paths as long as the references' (path_tracer.MAX_DEPTH, 32 events, not 16); closure 5
 # also: a part's bin that fails the per-row test takes its angle bin's v-summed ratio where that sum is measured;
-# colour_closure 1 (stop 77): ξ of multiple scattering closed on the yarn in greys k = 1/8, 1/4, 1/2
+# colour_closure 1 (stop 77): ξ of multiple scattering closed on the yarn in greys k = 1/8, 1/4, 1/2; 2 (stop 78):
+# the greys from the lightest, each darker one starting from the lighter two's ratio carried on
 STAGE_VERSION = {**{name: 1 for name in STAGE_ORDER}, "correction": 8, "shadowing": 3, "environment": 3,
-                 "interreflection": 5, "textures": 2, "flyaway": 3, "closure": CLOSURE_STAGE_VERSION}
+                 "interreflection": 5, "textures": 2, "flyaway": 3, "closure": CLOSURE_STAGE_VERSION,
+                 "colour_closure": 2}
 
 
 MAX_SEED = 2**62 - 1  # stages add batch and view offsets (< 2^20) to the seed and pass it to Numba as int64

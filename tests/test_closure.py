@@ -377,6 +377,34 @@ def test_the_colour_closure_closes_multiple_scattering_where_the_white_xi_does_n
     assert white["closure_residual_rms"] > 0.3
     assert closed["closure_residual_rms"] < 0.5 * white["closure_residual_rms"]
     assert counts["bins_closed_k0.125"] > 0 and np.all(np.isfinite(table)) and np.all(np.isfinite(error))
+    # each grey measured how far its start (the white's, then the lighter greys' ratio carried on) was from the
+    # bins it closed
+    assert len(closed["start_rms_log"]) == colour_closure.N_COLOURS and min(closed["start_rms_log"]) > 0
+
+
+def test_a_darker_grey_starts_from_the_lighter_greys_ratio_carried_on():
+    """``colour_closure.continuation``: with the white alone known, the white's ξ_ms and error; with ξ(1/2) = 2 ξ(1),
+    ξ(1/4) starts at 4 ξ(1) (the ratio carried on in log k) and ξ(1/8) from ξ(1/2) = 2 and ξ(1/4) = 3 at 4.5; a
+    start past ``CLAMP`` times the white's is clamped; the inputs' relative errors are weighed by their powers."""
+    white = np.array([1.0, 2.0, 0.0])
+    white_relative = np.array([0.01, 0.01, 0.01])
+    xi, relative = colour_closure.continuation(0.5, {}, {}, white, white_relative)
+    np.testing.assert_array_equal(xi, white)
+    np.testing.assert_array_equal(relative, white_relative)
+    half = {0.5: 2.0 * white}
+    xi, relative = colour_closure.continuation(0.25, half, {0.5: 0.05 * half[0.5]}, white, white_relative)
+    np.testing.assert_allclose(xi, 4.0 * white)
+    np.testing.assert_allclose(relative[:2], np.hypot(2 * 0.05, 0.01))  # ξ(1/2)² / ξ(1)
+    closed = {0.5: 2.0 * white, 0.25: 3.0 * white}
+    xi, relative = colour_closure.continuation(0.125, closed, {g: 0.0 * v for g, v in closed.items()}, white,
+                                               white_relative)
+    np.testing.assert_allclose(xi, 4.5 * white)
+    np.testing.assert_allclose(relative, 0.0)
+    closed = {0.5: 4.0 * white, 0.25: 7.0 * white}
+    xi, relative = colour_closure.continuation(0.125, closed, {g: 0.1 * v for g, v in closed.items()}, white,
+                                               white_relative)
+    np.testing.assert_allclose(xi, colour_closure.CLAMP * white)
+    assert np.all(np.isfinite(relative))
 
 
 def test_the_colour_table_is_stored_beside_the_closures_white_xi_ms(closed_pack):
