@@ -73,7 +73,8 @@ def colour_scales(n_colours: int = N_COLOURS) -> np.ndarray:
 
 def close_by_colour(spec, inputs: dict, write_pack_to, rows: int, iterations: int, spp: int, batches: int,
                     seed: int, progress=None) -> tuple[np.ndarray, np.ndarray, dict, dict]:
-    """(ξ_ms by colour (N_k, N_v, N_θ, N_θ, N_φ, 3), its error, counts, residual {max, rms}) (module docstring).
+    """(ξ_ms by colour (N_k, N_v, N_θ, N_θ, N_φ, 3), its error, counts, the table's attributes: the residual's max
+    and rms and ``start_rms_log`` per k) (module docstring).
     ``inputs``: stage → StageResult of ``COLOUR_CLOSURE_INPUTS``; ``write_pack_to(path, xi_view, split)`` as the
     closure's; ``rows``, ``spp``, ``batches``: the closure's."""
     closure = inputs["closure"]
@@ -157,7 +158,8 @@ def continuation(k, closed, closed_err, white, white_relative):
     standard the median over the white's was 2.1 at k = 1/2 and 3.5 at 1/4), and the carried ratio predicted the
     closed k = 1/4 at a median 1.03 and an rms log error of 0.34 (from the white's 1.31; ξ(1/2) alone 0.67;
     BENCHMARKS.md, stop 78). ``close_by_colour`` adds how far the start was from the bins it closed."""
-    samples = sorted([(1.0, white, white * white_relative)] + [(g, closed[g], closed_err[g]) for g in closed])
+    samples = sorted([(1.0, white, white * white_relative)] + [(g, closed[g], closed_err[g]) for g in closed],
+                     key=lambda sample: sample[0])
     lighter = [sample for sample in samples if sample[0] > k]
     if len(lighter) < 2:
         return white.copy(), white_relative

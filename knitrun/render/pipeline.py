@@ -273,7 +273,9 @@ def _projected(xyz, j, f, e0, e1, e2):
             + e2 * (xyz[j, 2] + f * (xyz[j + 1, 2] - xyz[j, 2])))
 
 
-PARALLAX_MIN_SLOPE = 0.1  # the Newton step's divisor e·t' at least this (a tangent turned out of the image)
+# the Newton step's divisor e·t' at least this (a tangent turned out of the image; a yarn seen within 6° of end-on
+# takes a first step shorter than the clamp's δ)
+PARALLAX_MIN_SLOPE = 0.1
 
 
 @njit(parallel=True, cache=True)
